@@ -1,5 +1,7 @@
 /* status.c — text of the status codes. */
 #include "tensor/status.h"
+#include <stdarg.h>
+#include <stdio.h>
 
 const char *lm_status_str(lm_status s)
 {
@@ -15,4 +17,15 @@ const char *lm_status_str(lm_status s)
     case LM_ERR_UNSUPPORTED: return "unsupported";
     }
     return "unknown status";
+}
+
+lm_status lm_err_set(lm_err *e, lm_status s, const char *fmt, ...)
+{
+    if (!e || e->status != LM_OK) return s;
+    e->status = s;
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(e->msg, sizeof e->msg, fmt, ap);
+    va_end(ap);
+    return s;
 }

@@ -20,4 +20,16 @@ typedef enum lm_status {
 /* Short constant text for a status ("shape error", ...). Never NULL. */
 const char *lm_status_str(lm_status s);
 
+/* An error report for code that has no lm_ctx (file readers, configuration, CLI):
+ * the first failure's status and a one-line message naming the file and the problem. */
+typedef struct lm_err {
+    lm_status status;
+    char msg[512];
+} lm_err;
+
+/* Record the first error into e (e may be NULL). Returns s, so: return lm_err_set(e, ...). */
+lm_status lm_err_set(lm_err *e, lm_status s, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+static inline void lm_err_clear(lm_err *e) { if (e) { e->status = LM_OK; e->msg[0] = 0; } }
+
 #endif
