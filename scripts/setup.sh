@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# setup.sh — everything a fresh Debian 12 machine needs, then a Release build in build/.
+# Installs (apt-get, only what is missing): compiler, CMake, OpenBLAS, jansson, OpenImageIO,
+# matio, OpenEXR, the OpenCL ICD loader + headers and PoCL (CPU OpenCL driver).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+pkgs=(build-essential cmake pkg-config libopenblas-dev libjansson-dev libopenimageio-dev
+      libmatio-dev libopenexr-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo)
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  sudo=""
+  [ "$(id -u)" -ne 0 ] && sudo="sudo"
+  echo "setup: installing ${missing[*]}"
+  $sudo apt-get update -q
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q --no-install-recommends "${missing[@]}"
+fi
+
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DLM_WERROR=ON > /dev/null
+cmake --build build -j"$(nproc)"
