@@ -1,0 +1,57 @@
+/* params.h — a model's parameters: named tensors in one contiguous block, gradients in a
+ * second block, so the optimizer is a flat loop and checkpoints are one write.
+ * Two phases: declare every parameter (lm_params_add returns a stable lm_tensor* whose data is
+ * set later), then lm_params_finalize allocates both blocks and zeroes them; initialise after.
+ * What it is not: an optimizer (train/) or a file format (models/safetensors.c). */
+#ifndef LM_PARAMS_H
+#define LM_PARAMS_H
+#include "tensor/tensor.h"
+
+#define LM_PARAM_NAME_MAX 96
+
+typedef struct lm_param {
+    char name[LM_PARAM_NAME_MAX]; /* PyTorch-style dotted name, e.g. "body.0.body.1.weight" */
+    lm_tensor t;                   /* flags LM_PARAM (| LM_REQUIRES_GRAD when trainable) */
+    lm_tensor g;                   /* gradient view into the grad block */
+    int trainable;
+    size_t offset;                 /* in floats, into data/grad blocks */
+} lm_param;
+
+typedef struct lm_params {
+    lm_param **items;
+    int n, cap;
+    size_t total;                  /* floats over all parameters */
+    float *data, *grad;            /* contiguous blocks (after finalize) */
+    int finalized;
+} lm_params;
+
+void lm_params_init(lm_params *p);
+void lm_params_free(lm_params *p);
+/* Declare a parameter. Returns its tensor (data valid after finalize) or NULL with err set
+ * (duplicate name, bad shape, already finalized, out of memory). */
+lm_tensor *lm_params_add(lm_params *p, const char *name, int ndim, const int *shape,
+                         int trainable, lm_err *err);
+/* Allocate the blocks (zeroed) and point every tensor at its slice. */
+lm_status lm_params_finalize(lm_params *p, lm_err *err);
+lm_param *lm_params_find(const lm_params *p, const char *name);
+long lm_params_count(const lm_params *p, int trainable_only);
+void lm_params_zero_grad(lm_params *p);
+/* Make every trainable parameter (not) require grad; e.g. off for inference. */
+void lm_params_set_requires_grad(lm_params *p, int on);
+
+/* Initialisers (after finalize). */
+void lm_init_uniform(lm_tensor *t, lm_rng *r, float bound); /* U(-bound, bound) */
+void lm_init_normal(lm_tensor *t, lm_rng *r, float std);
+void lm_init_const(lm_tensor *t, float v);
+
+/* safetensors (little-endian F32 tensors after a JSON header), written atomically
+ * (temp file + rename). Metadata: optional string pairs (key, value), n_meta pairs. */
+lm_status lm_params_save(const lm_params *p, const char *path, const char *const *meta,
+                         int n_meta, lm_err *err);
+/* Load every tensor of p by name from a safetensors file; shapes must match; names in the file
+ * that p lacks are an error unless allow_extra; names p has that the file lacks are an error. */
+lm_status lm_params_load(lm_params *p, const char *path, int allow_extra, lm_err *err);
+/* Read one metadata value (malloc'd, caller frees) or NULL if absent. */
+char *lm_safetensors_meta(const char *path, const char *key, lm_err *err);
+
+#endif
