@@ -1,0 +1,113 @@
+/* layers.c — conv / linear layers with PyTorch-default initialisation; the demosaic front. */
+#include "models/layers.h"
+#include <math.h>
+#include <stdio.h>
+
+static lm_status declare_wb(lm_params *p, lm_tensor **w, lm_tensor **b, const char *name,
+                            int ndim, const int *wshape, int nbias, int trainable, lm_err *err)
+{
+    char buf[LM_PARAM_NAME_MAX + 16];
+    snprintf(buf, sizeof buf, "%s.weight", name);
+    *w = lm_params_add(p, buf, ndim, wshape, trainable, err);
+    if (!*w) return err ? err->status : LM_ERR_ARG;
+    *b = NULL;
+    if (nbias > 0) {
+        snprintf(buf, sizeof buf, "%s.bias", name);
+        *b = lm_params_add(p, buf, 1, &nbias, trainable, err);
+        if (!*b) return err ? err->status : LM_ERR_ARG;
+    }
+    return LM_OK;
+}
+
+lm_status lm_conv_declare(lm_params *p, lm_conv *l, const char *name, lm_conv_spec s,
+                          int trainable, lm_err *err)
+{
+    int g = s.groups > 0 ? s.groups : 1;
+    if (s.cin % g || s.cout % g)
+        return lm_err_set(err, LM_ERR_ARG, "%s: channels %d -> %d not divisible by groups %d",
+                          name, s.cin, s.cout, g);
+    l->cin = s.cin, l->cout = s.cout, l->kh = s.kh, l->kw = s.kw, l->transposed = 0;
+    l->o = (lm_conv2d_opts){s.stride, s.stride, s.pad_h, s.pad_w, 1, 1, g};
+    int ws[4] = {s.cout, s.cin / g, s.kh, s.kw};
+    return declare_wb(p, &l->w, &l->b, name, 4, ws, s.bias ? s.cout : 0, trainable, err);
+}
+
+lm_status lm_conv3_declare(lm_params *p, lm_conv *l, const char *name, int cin, int cout,
+                           lm_err *err)
+{
+    lm_conv_spec s = {cin, cout, 3, 3, 1, 1, 1, 1, 1};
+    return lm_conv_declare(p, l, name, s, 1, err);
+}
+
+lm_status lm_conv_transpose_declare(lm_params *p, lm_conv *l, const char *name, lm_conv_spec s,
+                                    lm_err *err)
+{
+    int g = s.groups > 0 ? s.groups : 1;
+    if (s.cin % g || s.cout % g)
+        return lm_err_set(err, LM_ERR_ARG, "%s: channels %d -> %d not divisible by groups %d",
+                          name, s.cin, s.cout, g);
+    l->cin = s.cin, l->cout = s.cout, l->kh = s.kh, l->kw = s.kw, l->transposed = 1;
+    l->o = (lm_conv2d_opts){s.stride, s.stride, s.pad_h, s.pad_w, 1, 1, g};
+    int ws[4] = {s.cin, s.cout / g, s.kh, s.kw};
+    return declare_wb(p, &l->w, &l->b, name, 4, ws, s.bias ? s.cout : 0, 1, err);
+}
+
+void lm_conv_init_default(lm_conv *l, lm_rng *r)
+{
+    int g = l->o.groups > 0 ? l->o.groups : 1;
+    int fan_in = (l->transposed ? l->cout / g : l->cin / g) * l->kh * l->kw;
+    float bound = 1.0f / sqrtf((float)fan_in);
+    lm_init_uniform(l->w, r, bound);
+    if (l->b) lm_init_uniform(l->b, r, bound);
+}
+
+lm_tensor *lm_conv_forward(lm_ctx *c, const lm_conv *l, lm_tensor *x)
+{
+    if (l->transposed) return lm_conv_transpose2d(c, x, l->w, l->b, &l->o, 0, 0);
+    return lm_conv2d(c, x, l->w, l->b, &l->o);
+}
+
+lm_status lm_linear_declare(lm_params *p, lm_linear_layer *l, const char *name, int in, int out,
+                            int bias, lm_err *err)
+{
+    l->in = in, l->out = out;
+    int ws[2] = {out, in};
+    return declare_wb(p, &l->w, &l->b, name, 2, ws, bias ? out : 0, 1, err);
+}
+
+void lm_linear_init_default(lm_linear_layer *l, lm_rng *r)
+{
+    float bound = 1.0f / sqrtf((float)l->in);
+    lm_init_uniform(l->w, r, bound);
+    if (l->b) lm_init_uniform(l->b, r, bound);
+}
+
+lm_tensor *lm_linear_forward(lm_ctx *c, const lm_linear_layer *l, lm_tensor *x)
+{
+    return lm_linear(c, x, l->w, l->b);
+}
+
+void lm_mosaic_default(lm_mosaic *m)
+{
+    /* system.md §2 map; tile phase t = row*4 + col:
+     * row 0: FarRed Green DeepRed RoyalBlue / row 1: Red Violet Lime UV /
+     * row 2: Amber Blue RedOrange Cyan. Channels in LED wavelength order: */
+    static const int phase[12][2] = {
+        {1, 3}, /* UV */        {1, 1}, /* Violet */   {0, 3}, /* RoyalBlue */
+        {2, 1}, /* Blue */      {2, 3}, /* Cyan */     {0, 1}, /* Green */
+        {1, 2}, /* Lime */      {2, 0}, /* Amber */    {2, 2}, /* RedOrange */
+        {1, 0}, /* Red */       {0, 2}, /* DeepRed */  {0, 0}, /* FarRed */
+    };
+    m->ty = 3;
+    m->tx = 4;
+    m->nch = 12;
+    for (int k = 0; k < 12; k++) {
+        m->phase_y[k] = phase[k][0];
+        m->phase_x[k] = phase[k][1];
+    }
+}
+
+lm_tensor *lm_mosaic_demosaic(lm_ctx *c, const lm_mosaic *m, lm_tensor *raw)
+{
+    return lm_mosaic_upsample(c, raw, m->ty, m->tx, m->nch, m->phase_y, m->phase_x);
+}

@@ -1,0 +1,62 @@
+/* layers.h — layers with parameters: 2-D/3-D convolution and linear, with PyTorch-default
+ * initialisation (models.md §1), declared into an lm_params under PyTorch module names.
+ * What it is not: networks (han.c, mcan.c, ...), which compose these with ops. */
+#ifndef LM_LAYERS_H
+#define LM_LAYERS_H
+#include "models/params.h"
+#include "tensor/ops.h"
+
+typedef struct lm_conv {
+    lm_tensor *w, *b;              /* b NULL without bias */
+    lm_conv2d_opts o;
+    int cin, cout, kh, kw;
+    int transposed;                /* ConvTranspose2d: w is Cin x Cout/g x kh x kw */
+} lm_conv;
+
+typedef struct lm_conv_spec {
+    int cin, cout, kh, kw;
+    int stride, pad_h, pad_w, groups;
+    int bias;
+} lm_conv_spec;
+
+/* Declare "<name>.weight" (and "<name>.bias"). Returns LM_OK or the error. */
+lm_status lm_conv_declare(lm_params *p, lm_conv *l, const char *name, lm_conv_spec s,
+                          int trainable, lm_err *err);
+/* 3x3, stride 1, pad 1, with bias (the default_conv of RCAN/HAN). */
+lm_status lm_conv3_declare(lm_params *p, lm_conv *l, const char *name, int cin, int cout,
+                           lm_err *err);
+lm_status lm_conv_transpose_declare(lm_params *p, lm_conv *l, const char *name, lm_conv_spec s,
+                                    lm_err *err);
+/* PyTorch default: U(+-1/sqrt(fan_in)) for weight and bias; fan_in = (cin/g)*kh*kw for conv,
+ * (cout/g)*kh*kw for transposed conv (PyTorch's quirk). */
+void lm_conv_init_default(lm_conv *l, lm_rng *r);
+lm_tensor *lm_conv_forward(lm_ctx *c, const lm_conv *l, lm_tensor *x);
+
+typedef struct lm_linear_layer {
+    lm_tensor *w, *b;              /* w: out x in */
+    int in, out;
+} lm_linear_layer;
+
+lm_status lm_linear_declare(lm_params *p, lm_linear_layer *l, const char *name, int in, int out,
+                            int bias, lm_err *err);
+void lm_linear_init_default(lm_linear_layer *l, lm_rng *r);
+lm_tensor *lm_linear_forward(lm_ctx *c, const lm_linear_layer *l, lm_tensor *x);
+
+/* The network input: how the raw mosaic maps to channels (system.md §6). Filled from the
+ * system description by data/; models only read it. */
+#define LM_MOSAIC_MAX_CH 64
+typedef struct lm_mosaic {
+    int ty, tx;                    /* tile rows, cols (3, 4) */
+    int nch;                       /* channels = LEDs (12) */
+    int phase_y[LM_MOSAIC_MAX_CH]; /* channel k (by LED wavelength) -> tile phase */
+    int phase_x[LM_MOSAIC_MAX_CH];
+} lm_mosaic;
+
+/* The paper's default: 3x4 tile, channels ordered by LED wavelength for the map of
+ * system.md §2 (UV, Violet, RoyalBlue, Blue, Cyan, Green, Lime, Amber, RedOrange, Red, DeepRed,
+ * FarRed). Used when no system description is given. */
+void lm_mosaic_default(lm_mosaic *m);
+/* raw B x 1 x H x W -> B x nch x H x W (phase-aware bilinear, differentiable). */
+lm_tensor *lm_mosaic_demosaic(lm_ctx *c, const lm_mosaic *m, lm_tensor *raw);
+
+#endif

@@ -1,0 +1,37 @@
+/* model.h — the common face of every reconstruction network: created by preset name, takes
+ * the raw coded patch (B x 1 x H x W) and returns B x 33 x H x W (33-channel target of
+ * system.md §3). The demosaic is part of the model (shared code, lm_mosaic_demosaic).
+ * What it is not: training or inference loops. */
+#ifndef LM_MODEL_H
+#define LM_MODEL_H
+#include "models/layers.h"
+
+#define LM_MODEL_OUT_CHANNELS 33
+
+typedef struct lm_model lm_model;
+struct lm_model {
+    char preset[64];
+    char family[16];               /* "han", "mcan", "srnet", "linear", ... */
+    lm_params params;
+    lm_mosaic mosaic;
+    int out_channels;
+    lm_tensor *(*forward)(lm_ctx *c, lm_model *m, lm_tensor *raw);
+    void (*init)(lm_model *m, lm_rng *r);   /* default initialisation, declaration order */
+    void (*free_impl)(lm_model *m);
+    void *impl;
+};
+
+/* Create by preset name (see lm_model_presets); mosaic NULL = lm_mosaic_default. Parameters
+ * are declared, allocated and initialised from `seed`. */
+lm_model *lm_model_create(const char *preset, const lm_mosaic *mosaic, uint64_t seed,
+                          lm_err *err);
+void lm_model_free(lm_model *m);
+lm_tensor *lm_model_forward(lm_ctx *c, lm_model *m, lm_tensor *raw);
+/* NULL-terminated list of preset names. */
+const char *const *lm_model_presets(void);
+
+/* ---- families (one file each) ---------------------------------------------------------- */
+typedef struct lm_han_cfg { int groups, blocks, feats, reduction; } lm_han_cfg;
+lm_status lm_han_build(lm_model *m, lm_han_cfg cfg, lm_err *err);
+
+#endif
