@@ -2,6 +2,7 @@
 #include "models/layers.h"
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
 
 static lm_status declare_wb(lm_params *p, lm_tensor **w, lm_tensor **b, const char *name,
                             int ndim, const int *wshape, int nbias, int trainable, lm_err *err)
@@ -98,6 +99,7 @@ void lm_mosaic_default(lm_mosaic *m)
         {1, 2}, /* Lime */      {2, 0}, /* Amber */    {2, 2}, /* RedOrange */
         {1, 0}, /* Red */       {0, 2}, /* DeepRed */  {0, 0}, /* FarRed */
     };
+    memset(m, 0, sizeof *m);
     m->ty = 3;
     m->tx = 4;
     m->nch = 12;

@@ -45,11 +45,16 @@ lm_tensor *lm_linear_forward(lm_ctx *c, const lm_linear_layer *l, lm_tensor *x);
 /* The network input: how the raw mosaic maps to channels (system.md §6). Filled from the
  * system description by data/; models only read it. */
 #define LM_MOSAIC_MAX_CH 64
+#define LM_MOSAIC_RESP_CH 33
 typedef struct lm_mosaic {
     int ty, tx;                    /* tile rows, cols (3, 4) */
     int nch;                       /* channels = LEDs (12) */
     int phase_y[LM_MOSAIC_MAX_CH]; /* channel k (by LED wavelength) -> tile phase */
     int phase_x[LM_MOSAIC_MAX_CH];
+    /* Optional: each channel's LED response on the 33-channel target grid (system.md §3),
+     * as SRNet's per-pixel response map needs; filled from the system description. */
+    int has_response;
+    float response[LM_MOSAIC_MAX_CH][LM_MOSAIC_RESP_CH];
 } lm_mosaic;
 
 /* The paper's default: 3x4 tile, channels ordered by LED wavelength for the map of

@@ -7,14 +7,20 @@
 typedef struct preset {
     const char *name;
     const char *family;
-    lm_han_cfg han;
+    lm_han_cfg han;  /* han */
+    int width;       /* mcan: feats; srnet: dim */
 } preset;
 
 static const preset presets[] = {
-    {"han-paper", "han", {10, 18, 128, 16}},
-    {"han-small", "han", {4, 6, 64, 16}},
-    {"han-g3b2c32", "han", {3, 2, 32, 8}},
-    {"han-tiny", "han", {2, 2, 16, 4}},
+    {"linear", "linear", {0, 0, 0, 0}, 0},
+    {"han-tiny", "han", {2, 2, 16, 4}, 0},
+    {"han-g3b2c32", "han", {3, 2, 32, 8}, 0},
+    {"han-small", "han", {4, 6, 64, 16}, 0},
+    {"han-paper", "han", {10, 18, 128, 16}, 0},
+    {"mcan-tiny", "mcan", {0, 0, 0, 0}, 16},
+    {"mcan", "mcan", {0, 0, 0, 0}, 64},
+    {"srnet-tiny", "srnet", {0, 0, 0, 0}, 8},
+    {"srnet", "srnet", {0, 0, 0, 0}, 32},
 };
 #define NPRESETS (int)(sizeof presets / sizeof presets[0])
 
@@ -57,6 +63,9 @@ lm_model *lm_model_create(const char *name, const lm_mosaic *mosaic, uint64_t se
     m->out_channels = LM_MODEL_OUT_CHANNELS;
     lm_status st = LM_ERR_ARG;
     if (!strcmp(ps->family, "han")) st = lm_han_build(m, ps->han, err);
+    else if (!strcmp(ps->family, "mcan")) st = lm_mcan_build(m, ps->width, err);
+    else if (!strcmp(ps->family, "srnet")) st = lm_srnet_build(m, ps->width, err);
+    else if (!strcmp(ps->family, "linear")) st = lm_linear_build(m, err);
     if (st == LM_OK) st = lm_params_finalize(&m->params, err);
     if (st != LM_OK) {
         lm_model_free(m);

@@ -33,5 +33,11 @@ const char *const *lm_model_presets(void);
 /* ---- families (one file each) ---------------------------------------------------------- */
 typedef struct lm_han_cfg { int groups, blocks, feats, reduction; } lm_han_cfg;
 lm_status lm_han_build(lm_model *m, lm_han_cfg cfg, lm_err *err);
+/* MCAN, 3x4 adaptation (models.md §3.2); feats = 64 in the paper-size model. */
+lm_status lm_mcan_build(lm_model *m, int feats, lm_err *err);
+/* SRNet 12 -> 33 with the response-map input (models.md §4); dim = 32 in the paper. */
+lm_status lm_srnet_build(lm_model *m, int dim, lm_err *err);
+/* Linear baseline: demosaic + 1x1 conv 12 -> 33. */
+lm_status lm_linear_build(lm_model *m, lm_err *err);
 
 #endif

@@ -1,0 +1,171 @@
+/* test_models.c — presets build with the exact parameter counts of models.md, forward shapes,
+ * finite-difference gradient checks of every tiny model, determinism of initialisation. */
+#include "models/model.h"
+#include "tests/check.h"
+#include <stdlib.h>
+
+/* A smooth synthetic response table (Gaussian per LED) for models that need one. */
+static void test_mosaic(lm_mosaic *m)
+{
+    lm_mosaic_default(m);
+    for (int k = 0; k < m->nch; k++)
+        for (int j = 0; j < LM_MOSAIC_RESP_CH; j++) {
+            float d = (float)(j - 2.5f * k - 3) / 3.0f;
+            m->response[k][j] = expf(-0.5f * d * d);
+        }
+    m->has_response = 1;
+}
+
+static void check_count(const char *preset, long total, long trainable)
+{
+    lm_mosaic mo;
+    test_mosaic(&mo);
+    lm_err e = {0};
+    lm_model *m = lm_model_create(preset, &mo, 1, &e);
+    CHECK_MSG(m != NULL, "%s: %s", preset, e.msg);
+    if (!m) return;
+    CHECK_MSG(lm_params_count(&m->params, 0) == total, "%s: %ld parameters, expected %ld", preset,
+              lm_params_count(&m->params, 0), total);
+    CHECK_MSG(lm_params_count(&m->params, 1) == trainable, "%s: %ld trainable, expected %ld",
+              preset, lm_params_count(&m->params, 1), trainable);
+    lm_model_free(m);
+}
+
+static void test_parameter_counts(void)
+{
+    check_count("han-tiny", 44223, 44223);
+    check_count("han-g3b2c32", 218135, 218135);
+    check_count("mcan", 887710, 887290);
+    check_count("srnet", 1867670, 1867670);
+    check_count("linear", 12 * 33 + 33, 12 * 33 + 33);
+}
+
+static void test_paper_han_count(void)
+{
+    check_count("han-paper", 57115999, 57115999);
+}
+
+static void test_unknown_preset(void)
+{
+    lm_err e = {0};
+    CHECK(lm_model_create("han-huge", NULL, 1, &e) == NULL);
+    CHECK(e.status == LM_ERR_ARG && strstr(e.msg, "han-huge") && strstr(e.msg, "han-tiny"));
+    lm_err_clear(&e);
+    CHECK(lm_model_create("srnet", NULL, 1, &e) == NULL); /* no response map */
+    CHECK(e.status == LM_ERR_ARG && strstr(e.msg, "response"));
+}
+
+static void test_init_deterministic(void)
+{
+    lm_err e = {0};
+    lm_model *a = lm_model_create("han-tiny", NULL, 42, &e), *b = lm_model_create("han-tiny", NULL, 42, &e),
+             *d = lm_model_create("han-tiny", NULL, 43, &e);
+    CHECK(a && b && d);
+    CHECK(!memcmp(a->params.data, b->params.data, a->params.total * sizeof(float)));
+    CHECK(memcmp(a->params.data, d->params.data, a->params.total * sizeof(float)) != 0);
+    /* gammas start at 0 as in the official code */
+    CHECK(lm_params_find(&a->params, "la.gamma")->t.data[0] == 0.0f);
+    CHECK(lm_params_find(&a->params, "csa.gamma")->t.data[0] == 0.0f);
+    lm_model_free(a), lm_model_free(b), lm_model_free(d);
+}
+
+static void forward_shape(const char *preset, int B, int H, int W)
+{
+    lm_mosaic mo;
+    test_mosaic(&mo);
+    lm_err e = {0};
+    lm_model *m = lm_model_create(preset, &mo, 3, &e);
+    CHECK_MSG(m != NULL, "%s", e.msg);
+    if (!m) return;
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_rng r;
+    lm_rng_seed(&r, 1);
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){B, 1, H, W}, &r, 0, 1);
+    lm_tensor *y = lm_model_forward(&c, m, x);
+    CHECK_CTX_OK(&c);
+    CHECK_MSG(y && y->shape[0] == B && y->shape[1] == 33 && y->shape[2] == H && y->shape[3] == W,
+              "%s output shape", preset);
+    long n = y ? lm_tensor_numel(y) : 0;
+    int finite = 1;
+    for (long i = 0; i < n; i++) finite &= isfinite(y->data[i]);
+    CHECK(finite);
+    /* wrong input sizes give an error, not a crash */
+    lm_tensor *bad = lm_tensor_zeros(&c, 4, (int[]){1, 1, 10, 16});
+    CHECK(lm_model_forward(&c, m, bad) == NULL);
+    CHECK_CTX_FAILED(&c, LM_ERR_SHAPE);
+    lm_ctx_free(&c);
+    lm_model_free(m);
+}
+
+static void test_forward_shapes(void)
+{
+    forward_shape("linear", 2, 12, 16);
+    forward_shape("han-tiny", 2, 66, 64);
+    forward_shape("mcan-tiny", 2, 66, 64);
+    forward_shape("srnet-tiny", 2, 66, 64);
+}
+
+typedef struct gc_user { lm_model *m; } gc_user;
+
+static lm_tensor *model_fn(lm_ctx *c, lm_tensor *const *in, int nin, void *u)
+{
+    (void)nin;
+    return lm_model_forward(c, ((gc_user *)u)->m, in[0]);
+}
+
+/* Gradient of the weighted output w.r.t. the raw input and a sample of every parameter. */
+static void gradcheck_model(const char *preset, int H, int W)
+{
+    lm_mosaic mo;
+    test_mosaic(&mo);
+    lm_err e = {0};
+    lm_model *m = lm_model_create(preset, &mo, 5, &e);
+    CHECK_MSG(m != NULL, "%s", e.msg);
+    if (!m) return;
+    /* non-zero attention scales so that LAM/CSAM paths are exercised */
+    lm_param *g1 = lm_params_find(&m->params, "la.gamma"), *g2 = lm_params_find(&m->params, "csa.gamma");
+    if (g1) g1->t.data[0] = 0.3f;
+    if (g2) g2->t.data[0] = 0.7f;
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_rng r;
+    lm_rng_seed(&r, 2);
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){2, 1, H, W}, &r, 0.1f, 1.0f);
+    lm_tensor_set_requires_grad(x, 1);
+    int np = m->params.n;
+    lm_tensor **in = malloc((size_t)(np + 1) * sizeof *in);
+    in[0] = x;
+    for (int i = 0; i < np; i++) in[i + 1] = &m->params.items[i]->t;
+    lm_gradcheck_opts o;
+    lm_gradcheck_default_opts(&o);
+    o.eps = 1e-2;
+    o.max_checks = 6;
+    o.atol = 5e-3;
+    o.rtol = 5e-2;
+    gc_user u = {m};
+    lm_params_zero_grad(&m->params);
+    CHECK_GRAD(&c, model_fn, in, np + 1, &u, &o);
+    free(in);
+    lm_ctx_free(&c);
+    lm_model_free(m);
+}
+
+static void test_gradcheck_models(void)
+{
+    gradcheck_model("linear", 6, 8);
+    gradcheck_model("han-tiny", 6, 8);
+    gradcheck_model("mcan-tiny", 6, 8);
+    gradcheck_model("srnet-tiny", 12, 16);
+}
+
+int main(int argc, char **argv)
+{
+    RUN(test_parameter_counts);
+    RUN(test_unknown_preset);
+    RUN(test_init_deterministic);
+    RUN(test_forward_shapes);
+    RUN(test_gradcheck_models);
+    if (argc < 2 || strcmp(argv[1], "--quick")) RUN(test_paper_han_count);
+    return check_summary();
+}
