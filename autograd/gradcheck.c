@@ -77,10 +77,15 @@ lm_status lm_gradcheck(lm_ctx *c, lm_gradcheck_fn fn, lm_tensor *const *in, int 
         if (!in[i] || in[i]->device != LM_DEVICE_CPU || !lm_tensor_is_contiguous(in[i]))
             return lm_ctx_fail(c, LM_ERR_ARG, "gradcheck: input %d must be a contiguous CPU "
                                               "tensor", i);
-        in[i]->grad = NULL;
+        if ((in[i]->flags & LM_PARAM) && in[i]->grad) /* parameters keep their grad block */
+            memset(in[i]->grad->data, 0, (size_t)lm_tensor_numel(in[i]) * sizeof(float));
+        else
+            in[i]->grad = NULL;
     }
     lm_rng rng;
     lm_rng_seed(&rng, o.seed);
+    lm_node *tape0 = c->tape; /* the check's own nodes are dropped at the end */
+    long len0 = c->tape_len;
     int was = lm_ctx_set_grad(c, 1);
     lm_tensor *y = fn(c, in, nin, user);
     if (!y || c->status) {
@@ -88,7 +93,8 @@ lm_status lm_gradcheck(lm_ctx *c, lm_gradcheck_fn fn, lm_tensor *const *in, int 
         return c->status ? c->status : lm_ctx_fail(c, LM_ERR_ARG, "gradcheck: fn returned NULL");
     }
     long ny = lm_tensor_numel(y);
-    lm_tensor *w = lm_tensor_uniform(c, y->ndim, y->shape, &rng, -1.0f, 1.0f);
+    lm_tensor *w = lm_tensor_new_on(c, LM_DEVICE_CPU, y->ndim, y->shape); /* weights on the host */
+    if (w) lm_rng_fill_uniform(&rng, w->data, ny, -1.0f, 1.0f);
     if (!w || lm_backward(c, y, w) != LM_OK) {
         lm_ctx_set_grad(c, was);
         return c->status;
@@ -113,6 +119,11 @@ lm_status lm_gradcheck(lm_ctx *c, lm_gradcheck_fn fn, lm_tensor *const *in, int 
         }
     }
     if (res) *res = r;
+    /* forget the check's nodes, so a later backward in this ctx does not run them again */
+    for (lm_node *nd = c->tape; nd && nd != tape0; nd = nd->prev)
+        if (!(nd->out->flags & LM_PARAM)) nd->out->grad = NULL;
+    c->tape = tape0;
+    c->tape_len = len0;
     if (c->status) return c->status;
     if (r.failed)
         return lm_ctx_fail(c, LM_ERR_NUMERIC,

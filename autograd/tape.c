@@ -14,10 +14,7 @@ lm_status lm_backward(lm_ctx *c, lm_tensor *out, const lm_tensor *seed)
         return lm_ctx_fail(c, LM_ERR_SHAPE, "backward: seed %s does not match output %s",
                            lm_shape_str(seed, a, sizeof a), lm_shape_str(out, b, sizeof b));
     }
-    lm_tensor *g = lm_grad(c, out);
-    if (!g) return c->status;
-    long n = lm_tensor_numel(out);
-    for (long i = 0; i < n; i++) g->data[i] += seed ? seed->data[i] : 1.0f;
+    if (lm_grad_seed(c, out, seed) != LM_OK) return c->status;
     int was = lm_ctx_set_grad(c, 0); /* backward itself records nothing */
     for (lm_node *nd = c->tape; nd && !c->status; nd = nd->prev) {
         if (nd->out->grad) nd->backward(c, nd);

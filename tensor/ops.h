@@ -123,7 +123,7 @@ lm_tensor *lm_layer_norm_channels(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tens
 lm_tensor *lm_l2_normalize(lm_ctx *c, lm_tensor *x, int axis, float eps);
 
 /* ---- losses (tensor/ops/loss.c) ----------------------------------------------------- */
-/* Mean over all elements; output shape {1}. target gets no gradient. */
+/* Mean over all elements; output shape {1}. The target gets a gradient too if it requires one. */
 lm_tensor *lm_l1_loss(lm_ctx *c, lm_tensor *pred, lm_tensor *target);
 lm_tensor *lm_mse_loss(lm_ctx *c, lm_tensor *pred, lm_tensor *target);
 

@@ -5,6 +5,10 @@
 #ifndef LM_STATUS_H
 #define LM_STATUS_H
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 typedef enum lm_status {
     LM_OK = 0,
     LM_ERR_SHAPE = -1,       /* incompatible or invalid shapes */
@@ -31,5 +35,9 @@ typedef struct lm_err {
 lm_status lm_err_set(lm_err *e, lm_status s, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 static inline void lm_err_clear(lm_err *e) { if (e) { e->status = LM_OK; e->msg[0] = 0; } }
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

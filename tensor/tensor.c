@@ -8,7 +8,9 @@
 
 extern void openblas_set_num_threads(int num_threads);
 
-static lm_backend cpu_backend = {"cpu", LM_DEVICE_CPU, NULL, NULL};
+static lm_backend cpu_backend = {.name = "cpu", .device = LM_DEVICE_CPU};
+
+lm_backend *lm_backend_cpu(void) { return &cpu_backend; }
 
 int lm_ctx_init(lm_ctx *c, int nthreads)
 {
@@ -26,6 +28,7 @@ int lm_ctx_init(lm_ctx *c, int nthreads)
 
 void lm_ctx_free(lm_ctx *c)
 {
+    if (c->backend && c->backend->release) c->backend->release(c->backend, c);
     lm_arena_free(&c->arena);
     memset(c, 0, sizeof *c);
 }
@@ -35,6 +38,16 @@ void lm_ctx_reset(lm_ctx *c)
     c->tape = NULL;
     c->tape_len = 0;
     lm_arena_reset(&c->arena);
+    if (c->backend->reset) c->backend->reset(c->backend, c);
+}
+
+void lm_ctx_set_backend(lm_ctx *c, lm_backend *b)
+{
+    if (!b) b = &cpu_backend;
+    if (b == c->backend) return;
+    if (c->backend->release) c->backend->release(c->backend, c);
+    c->dev_arena = NULL;
+    c->backend = b;
 }
 
 lm_status lm_ctx_fail(lm_ctx *c, lm_status s, const char *fmt, ...)
@@ -183,7 +196,32 @@ void lm_tensor_wrap(lm_tensor *t, float *data, int ndim, const int *shape)
     set_contiguous_strides(t);
 }
 
+/* A contiguous tensor in the ctx's device arena (no host memory: data is NULL). */
+static lm_tensor *device_tensor_new(lm_ctx *c, lm_device dev, int ndim, const int *shape, long n)
+{
+    if (dev != c->backend->device || !c->backend->alloc) {
+        lm_ctx_fail(c, LM_ERR_UNSUPPORTED, "backend %s cannot allocate tensors on device %d",
+                    c->backend->name, (int)dev);
+        return NULL;
+    }
+    lm_tensor *t = lm_ctx_alloc(c, sizeof *t);
+    if (!t) return NULL;
+    size_t off = 0;
+    void *buf = c->backend->alloc(c->backend, c, (size_t)n * sizeof(float), &off);
+    if (!buf) return NULL;
+    lm_tensor_wrap(t, NULL, ndim, shape);
+    t->dev = buf;
+    t->dev_off = off;
+    t->device = dev;
+    return t;
+}
+
 lm_tensor *lm_tensor_new(lm_ctx *c, int ndim, const int *shape)
+{
+    return lm_tensor_new_on(c, c->backend->device, ndim, shape);
+}
+
+lm_tensor *lm_tensor_new_on(lm_ctx *c, lm_device dev, int ndim, const int *shape)
 {
     if (c->status) return NULL;
     if (ndim < 0 || ndim > LM_MAX_DIMS) {
@@ -199,16 +237,40 @@ lm_tensor *lm_tensor_new(lm_ctx *c, int ndim, const int *shape)
         }
         n *= shape[i];
     }
-    if (c->backend->device != LM_DEVICE_CPU) {
-        lm_ctx_fail(c, LM_ERR_UNSUPPORTED, "backend %s cannot allocate tensors yet",
-                    c->backend->name);
-        return NULL;
-    }
+    if (dev != LM_DEVICE_CPU) return device_tensor_new(c, dev, ndim, shape, n);
     lm_tensor *t = lm_ctx_alloc(c, sizeof *t);
     float *d = t ? lm_ctx_alloc(c, (size_t)n * sizeof(float)) : NULL;
     if (!d) return NULL;
     lm_tensor_wrap(t, d, ndim, shape);
     return t;
+}
+
+int lm_tensor_read(lm_ctx *c, const lm_tensor *t, float *dst)
+{
+    if (c->status) return c->status;
+    if (!lm_tensor_is_contiguous(t))
+        return lm_ctx_fail(c, LM_ERR_ARG, "lm_tensor_read: tensor must be contiguous");
+    if (t->device == LM_DEVICE_CPU) {
+        memcpy(dst, t->data, (size_t)lm_tensor_numel(t) * sizeof(float));
+        return 0;
+    }
+    if (t->device != c->backend->device || !c->backend->read)
+        return lm_ctx_fail(c, LM_ERR_ARG, "lm_tensor_read: tensor is not on the ctx's device");
+    return c->backend->read(c->backend, c, t, dst);
+}
+
+int lm_tensor_write(lm_ctx *c, lm_tensor *t, const float *src)
+{
+    if (c->status) return c->status;
+    if (!lm_tensor_is_contiguous(t))
+        return lm_ctx_fail(c, LM_ERR_ARG, "lm_tensor_write: tensor must be contiguous");
+    if (t->device == LM_DEVICE_CPU) {
+        memcpy(t->data, src, (size_t)lm_tensor_numel(t) * sizeof(float));
+        return 0;
+    }
+    if (t->device != c->backend->device || !c->backend->write)
+        return lm_ctx_fail(c, LM_ERR_ARG, "lm_tensor_write: tensor is not on the ctx's device");
+    return c->backend->write(c->backend, c, t, src);
 }
 
 lm_tensor *lm_tensor_new_like(lm_ctx *c, const lm_tensor *t)
@@ -231,32 +293,55 @@ lm_tensor *lm_tensor_zeros(lm_ctx *c, int ndim, const int *shape)
     return lm_tensor_full(c, ndim, shape, 0.0f);
 }
 
+static int fill_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
+{
+    (void)c;
+    (void)nt;
+    lm_tensor_fill(t[0], *(const float *)params);
+    return 0;
+}
+static const lm_kernel K_FILL = {"fill", fill_cpu};
+
 lm_tensor *lm_tensor_full(lm_ctx *c, int ndim, const int *shape, float v)
 {
     lm_tensor *t = lm_tensor_new(c, ndim, shape);
-    if (t) lm_tensor_fill(t, v);
+    if (t && t->device == LM_DEVICE_CPU) lm_tensor_fill(t, v);
+    else if (t && lm_kernel_run(c, &K_FILL, &t, 1, &v)) return NULL;
     return t;
 }
 
 lm_tensor *lm_tensor_from(lm_ctx *c, int ndim, const int *shape, const float *src)
 {
     lm_tensor *t = lm_tensor_new(c, ndim, shape);
-    if (t) memcpy(t->data, src, (size_t)lm_tensor_numel(t) * sizeof(float));
+    if (t && lm_tensor_write(c, t, src)) return NULL;
     return t;
+}
+
+/* Random tensor: drawn on the host (device tensors through an arena scratch copy). */
+static lm_tensor *random_tensor(lm_ctx *c, int ndim, const int *shape, lm_rng *r, int normal,
+                                float a, float b)
+{
+    lm_tensor *t = lm_tensor_new(c, ndim, shape);
+    if (!t) return NULL;
+    long n = lm_tensor_numel(t);
+    lm_arena_mark m = lm_arena_get_mark(&c->arena);
+    float *h = t->device == LM_DEVICE_CPU ? t->data : lm_ctx_alloc(c, (size_t)n * sizeof(float));
+    if (!h) return NULL;
+    if (normal) lm_rng_fill_normal(r, h, n, a, b);
+    else lm_rng_fill_uniform(r, h, n, a, b);
+    int err = h != t->data ? lm_tensor_write(c, t, h) : 0;
+    if (h != t->data) lm_arena_rewind(&c->arena, m);
+    return err ? NULL : t;
 }
 
 lm_tensor *lm_tensor_uniform(lm_ctx *c, int ndim, const int *shape, lm_rng *r, float lo, float hi)
 {
-    lm_tensor *t = lm_tensor_new(c, ndim, shape);
-    if (t) lm_rng_fill_uniform(r, t->data, lm_tensor_numel(t), lo, hi);
-    return t;
+    return random_tensor(c, ndim, shape, r, 0, lo, hi);
 }
 
 lm_tensor *lm_tensor_normal(lm_ctx *c, int ndim, const int *shape, lm_rng *r, float mean, float std)
 {
-    lm_tensor *t = lm_tensor_new(c, ndim, shape);
-    if (t) lm_rng_fill_normal(r, t->data, lm_tensor_numel(t), mean, std);
-    return t;
+    return random_tensor(c, ndim, shape, r, 1, mean, std);
 }
 
 lm_tensor *lm_tensor_new1(lm_ctx *c, int d0) { return lm_tensor_new(c, 1, &d0); }
@@ -302,25 +387,52 @@ int lm_check_inputs(lm_ctx *c, const char *op, int n, ...)
     return ok;
 }
 
-static int fill_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
-{
-    (void)c;
-    (void)nt;
-    lm_tensor_fill(t[0], *(const float *)params);
-    return 0;
-}
-static const lm_kernel K_FILL = {"fill", fill_cpu};
-
 lm_tensor *lm_grad(lm_ctx *c, lm_tensor *t)
 {
     if (t->grad) return t->grad;
-    lm_tensor *g = lm_tensor_new(c, t->ndim, t->shape);
+    lm_tensor *g = lm_tensor_new_on(c, t->device, t->ndim, t->shape);
     if (!g) return NULL;
     float zero = 0.0f;
     lm_tensor *a[1] = {g};
     lm_kernel_run(c, &K_FILL, a, 1, &zero);
     t->grad = g;
     return g;
+}
+
+/* t[0] += t[1], same numel, contiguous (the device twin is the backend's "flat_add"). */
+static int seed_add_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
+{
+    (void)c, (void)nt, (void)params;
+    long n = lm_tensor_numel(t[0]);
+    for (long i = 0; i < n; i++) t[0]->data[i] += t[1]->data[i];
+    return 0;
+}
+static const lm_kernel K_SEED_ADD = {"flat_add", seed_add_cpu};
+
+lm_status lm_grad_seed(lm_ctx *c, lm_tensor *out, const lm_tensor *seed)
+{
+    lm_tensor *g = lm_grad(c, out);
+    if (!g) return c->status;
+    long n = lm_tensor_numel(g);
+    if (g->device == LM_DEVICE_CPU && seed && seed->device != LM_DEVICE_CPU)
+        return lm_ctx_fail(c, LM_ERR_ARG, "backward: seed on the device, output on the host");
+    if (g->device == LM_DEVICE_CPU) {
+        for (long i = 0; i < n; i++) g->data[i] += seed ? seed->data[i] : 1.0f;
+        return LM_OK;
+    }
+    lm_tensor *s = (lm_tensor *)seed;
+    if (!seed || seed->device == LM_DEVICE_CPU) { /* host values -> device copy */
+        s = lm_tensor_new_on(c, g->device, g->ndim, g->shape);
+        if (!s) return c->status;
+        if (seed) lm_tensor_write(c, s, seed->data);
+        else {
+            float one = 1.0f;
+            lm_kernel_run(c, &K_FILL, &s, 1, &one);
+        }
+    }
+    lm_tensor *t[2] = {g, s};
+    lm_kernel_run(c, &K_SEED_ADD, t, 2, NULL);
+    return c->status;
 }
 
 lm_node *lm_record(lm_ctx *c, const char *op, lm_backward_fn bw, lm_tensor *out,

@@ -58,7 +58,21 @@ typedef struct lm_backend {
     int (*run)(struct lm_backend *b, lm_ctx *c, const lm_kernel *k, lm_tensor *const *t, int nt,
                const void *params);
     void *impl;
+    /* Device memory (all NULL for the CPU backend). Tensors created while a device backend is
+     * the ctx's live in a per-ctx device arena (c->dev_arena) owned by that backend.
+     * alloc: room for `bytes` bytes; returns the buffer handle and sets *off (in elements);
+     *        NULL with the ctx error set on failure.
+     * reset: empty the ctx's device arena (lm_ctx_reset); release: free it (lm_ctx_free).
+     * write/read: copy a contiguous device tensor from/to host memory (blocking). */
+    void *(*alloc)(struct lm_backend *b, lm_ctx *c, size_t bytes, size_t *off);
+    void (*reset)(struct lm_backend *b, lm_ctx *c);
+    void (*release)(struct lm_backend *b, lm_ctx *c);
+    int (*write)(struct lm_backend *b, lm_ctx *c, lm_tensor *t, const float *src);
+    int (*read)(struct lm_backend *b, lm_ctx *c, const lm_tensor *t, float *dst);
 } lm_backend;
+
+/* The CPU backend (static; the default of every ctx). */
+lm_backend *lm_backend_cpu(void);
 
 int lm_kernel_run(lm_ctx *c, const lm_kernel *k, lm_tensor *const *t, int nt, const void *params);
 
@@ -87,6 +101,7 @@ struct lm_ctx {
     lm_backend *backend;              /* where new tensors live and kernels run */
     lm_status status;                 /* first error since the last clear */
     char msg[512];
+    void *dev_arena;                  /* device memory of a device backend (owned by it) */
 };
 
 /* Initialise a context: CPU backend, grad enabled, nthreads (0 = all cores). */
@@ -100,6 +115,9 @@ lm_status lm_ctx_fail(lm_ctx *c, lm_status s, const char *fmt, ...)
 static inline lm_status lm_ctx_status(const lm_ctx *c) { return c->status; }
 static inline const char *lm_ctx_message(const lm_ctx *c) { return c->status ? c->msg : ""; }
 void lm_ctx_clear_error(lm_ctx *c);
+/* Switch the backend new tensors and kernels use (NULL = CPU). Releases the device memory of
+ * the previous device backend, so call it before creating tensors. */
+void lm_ctx_set_backend(lm_ctx *c, lm_backend *b);
 /* Grad mode: returns the previous value. */
 int lm_ctx_set_grad(lm_ctx *c, int enabled);
 /* Arena scratch (aligned, uninitialised); sets the error and returns NULL on failure. */
@@ -115,6 +133,9 @@ lm_tensor *lm_scope_end(lm_ctx *c, lm_scope s, lm_tensor *keep);
 /* ---- tensors ------------------------------------------------------------------------- */
 /* New contiguous tensor in the ctx arena on the ctx backend; contents uninitialised. */
 lm_tensor *lm_tensor_new(lm_ctx *c, int ndim, const int *shape);
+/* Same, on a given device: LM_DEVICE_CPU (host arena, whatever the backend) or the ctx
+ * backend's device. */
+lm_tensor *lm_tensor_new_on(lm_ctx *c, lm_device dev, int ndim, const int *shape);
 lm_tensor *lm_tensor_zeros(lm_ctx *c, int ndim, const int *shape);
 lm_tensor *lm_tensor_full(lm_ctx *c, int ndim, const int *shape, float v);
 /* Copy of host data (len = numel). */
@@ -138,6 +159,10 @@ int lm_tensor_same_shape(const lm_tensor *a, const lm_tensor *b);
 const char *lm_shape_str(const lm_tensor *t, char *buf, size_t n);
 void lm_tensor_set_requires_grad(lm_tensor *t, int on);
 static inline int lm_requires_grad(const lm_tensor *t) { return t && (t->flags & LM_REQUIRES_GRAD); }
+/* Copy a contiguous tensor of any device to / from host memory (numel floats). Returns 0 or
+ * sets the ctx error and returns a negative lm_status. */
+int lm_tensor_read(lm_ctx *c, const lm_tensor *t, float *dst);
+int lm_tensor_write(lm_ctx *c, lm_tensor *t, const float *src);
 /* Fill a contiguous CPU tensor; for tests and initialisation. */
 void lm_tensor_fill(lm_tensor *t, float v);
 /* Element access for contiguous CPU tensors (bounds are the caller's responsibility). */
@@ -152,6 +177,9 @@ static inline float *lm_at4(const lm_tensor *t, int i0, int i1, int i2, int i3)
 int lm_check_inputs(lm_ctx *c, const char *op, int n, ...);
 /* Gradient of t, allocated zero-filled on first use (arena for intermediates). */
 lm_tensor *lm_grad(lm_ctx *c, lm_tensor *t);
+/* Seed of a backward pass on any device: grad(out) += seed (same shape, contiguous, on the host
+ * or on out's device), or += 1 when seed is NULL. Returns the ctx status. */
+lm_status lm_grad_seed(lm_ctx *c, lm_tensor *out, const lm_tensor *seed);
 /* If grad mode is on and any input requires grad: mark `out` as requiring grad and push a node
  * (params copied, `params_size` bytes). Returns the node or NULL if nothing was recorded. */
 lm_node *lm_record(lm_ctx *c, const char *op, lm_backward_fn bw, lm_tensor *out,

@@ -1,0 +1,284 @@
+/* image_oiio.cpp — the one C++ file: a C-callable shim around OpenImageIO (see image.h).
+ * What it is: open/read an image as float with its bit depth, and atomic writers for 8-bit RGB,
+ * 16-bit grey and float EXR. No exception crosses the C boundary.
+ * What it is not: a place for format logic (CAVE folders, frame sequences, spectral layouts
+ * live in C files that call this). */
+#include "data/image.h"
+
+#include <OpenImageIO/imageio.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <sys/stat.h>
+#include <vector>
+
+using OIIO::ImageInput;
+using OIIO::ImageOutput;
+using OIIO::ImageSpec;
+using OIIO::TypeDesc;
+
+/* The file must exist and be a regular file; the message names it. */
+static lm_status check_regular_file(const char *path, lm_err *e)
+{
+    struct stat st;
+    if (stat(path, &st) != 0) return lm_err_set(e, LM_ERR_IO, "%s: no such file", path);
+    if (S_ISDIR(st.st_mode))
+        return lm_err_set(e, LM_ERR_IO, "%s: is a directory, expected an image file", path);
+    return LM_OK;
+}
+
+/* OpenImageIO messages can span lines; keep the first line only. */
+static std::string first_line(std::string s)
+{
+    size_t p = s.find('\n');
+    if (p != std::string::npos) s.resize(p);
+    if (s.empty()) s = "unknown error";
+    return s;
+}
+
+/* A PNG must hold whole chunks up to IEND. Checked before OpenImageIO sees the file: its PNG
+ * reader leaks when libpng hits the end of a truncated file, and the message is clearer.
+ * Returns 1 if the file is a PNG cut short, 0 otherwise (including "not a PNG"). */
+static int png_truncated(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return 0;
+    unsigned char b[8];
+    int cut = 0;
+    if (fread(b, 1, 8, f) == 8 && std::memcmp(b, "\x89PNG\r\n\x1a\n", 8) == 0) {
+        fseek(f, 0, SEEK_END);
+        long size = ftell(f), pos = 8;
+        cut = 1;
+        while (pos + 12 <= size && fseek(f, pos, SEEK_SET) == 0 && fread(b, 1, 8, f) == 8) {
+            long len = (long)((unsigned long)b[0] << 24 | b[1] << 16 | b[2] << 8 | b[3]);
+            pos += 12 + len;
+            if (pos > size) break;
+            if (std::memcmp(b + 4, "IEND", 4) == 0) {
+                cut = 0;
+                break;
+            }
+        }
+    }
+    fclose(f);
+    return cut;
+}
+
+static void fill_header(const ImageSpec &sp, lm_image *img)
+{
+    img->width = sp.width;
+    img->height = sp.height;
+    img->channels = sp.nchannels;
+    int storage = (int)sp.format.size() * 8;
+    img->bits = sp.get_int_attribute("oiio:BitsPerSample", storage);
+    img->is_float = sp.format.is_floating_point();
+    for (int c = 0; c < sp.nchannels; c++) {
+        std::string n = c < (int)sp.channelnames.size() ? sp.channelnames[c] : std::string();
+        snprintf(img->names[c], LM_IMAGE_NAME_LEN, "%s", n.c_str());
+    }
+}
+
+static lm_status open_input(const char *path, std::unique_ptr<ImageInput> &in, lm_image *img,
+                            lm_err *e)
+{
+    std::memset(img, 0, sizeof *img);
+    lm_status s = check_regular_file(path, e);
+    if (s != LM_OK) return s;
+    if (png_truncated(path))
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: truncated PNG (file ends before IEND)", path);
+    ImageSpec config;
+    config.attribute("oiio:UnassociatedAlpha", 1); /* never premultiply PNG/TIFF alpha */
+    in = ImageInput::open(path, &config);
+    if (!in)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read image: %s", path,
+                          first_line(OIIO::geterror()).c_str());
+    const ImageSpec &sp = in->spec();
+    if (sp.depth > 1 || sp.width <= 0 || sp.height <= 0 || sp.nchannels <= 0 ||
+        (double)sp.width * sp.height * sp.nchannels > 1e9)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: unsupported image size %d x %d x %d (depth %d)",
+                          path, sp.width, sp.height, sp.nchannels, sp.depth);
+    img->names = (char(*)[LM_IMAGE_NAME_LEN])calloc((size_t)sp.nchannels, LM_IMAGE_NAME_LEN);
+    if (!img->names) return lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", path);
+    fill_header(sp, img);
+    return LM_OK;
+}
+
+extern "C" lm_status lm_image_info(const char *path, lm_image *img, lm_err *e)
+{
+    try {
+        std::unique_ptr<ImageInput> in;
+        lm_status s = open_input(path, in, img, e);
+        if (s != LM_OK) lm_image_free(img);
+        return s;
+    } catch (...) {
+        lm_image_free(img);
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read image (exception)", path);
+    }
+}
+
+/* Read all pixels; 8/16-bit unsigned samples are read natively and divided by 255/65535 so the
+ * scaling is exactly v / (2^n - 1); everything else is converted to float by OpenImageIO. */
+static lm_status read_pixels(const char *path, ImageInput &in, lm_image *img, lm_err *e)
+{
+    const ImageSpec &sp = in.spec();
+    size_t n = (size_t)sp.width * sp.height * sp.nchannels;
+    img->data = (float *)malloc(n * sizeof(float));
+    if (!img->data) return lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", path);
+    TypeDesc::BASETYPE bt = (TypeDesc::BASETYPE)sp.format.basetype;
+    bool native = sp.channelformats.empty() && (bt == TypeDesc::UINT8 || bt == TypeDesc::UINT16);
+    bool ok;
+    if (native) {
+        std::vector<unsigned char> raw(n * sp.format.size());
+        ok = in.read_image(0, 0, 0, sp.nchannels, sp.format, raw.data());
+        if (ok && bt == TypeDesc::UINT8)
+            for (size_t i = 0; i < n; i++) img->data[i] = (float)raw[i] / 255.0f;
+        else if (ok) {
+            const unsigned short *u = (const unsigned short *)(const void *)raw.data();
+            for (size_t i = 0; i < n; i++) img->data[i] = (float)u[i] / 65535.0f;
+        }
+    } else {
+        ok = in.read_image(0, 0, 0, sp.nchannels, TypeDesc::FLOAT, img->data);
+    }
+    if (!ok)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: truncated or corrupt image: %s", path,
+                          first_line(in.geterror()).c_str());
+    return LM_OK;
+}
+
+extern "C" lm_status lm_image_read(const char *path, lm_image *img, lm_err *e)
+{
+    lm_status s;
+    try {
+        std::unique_ptr<ImageInput> in;
+        s = open_input(path, in, img, e);
+        if (s == LM_OK) s = read_pixels(path, *in, img, e);
+    } catch (...) {
+        s = lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read image (exception)", path);
+    }
+    if (s != LM_OK) lm_image_free(img);
+    return s;
+}
+
+extern "C" void lm_image_free(lm_image *img)
+{
+    if (!img) return;
+    free(img->data);
+    free(img->names);
+    std::memset(img, 0, sizeof *img);
+}
+
+/* ---- writers ------------------------------------------------------------------------- */
+
+/* Write pixels (interleaved, type `fmt`) to a temporary file, then rename it onto path. The
+ * format is chosen from path's extension (the temporary name has none that OIIO knows). */
+static lm_status write_atomic(const char *path, ImageSpec &spec, const void *pixels, lm_err *e)
+{
+    char tmp[4096];
+    if (lm_tmp_path(tmp, sizeof tmp, path) != 0)
+        return lm_err_set(e, LM_ERR_ARG, "%s: path too long", path);
+    std::unique_ptr<ImageOutput> out = ImageOutput::create(path);
+    if (!out)
+        return lm_err_set(e, LM_ERR_UNSUPPORTED, "%s: cannot write this format: %s", path,
+                          first_line(OIIO::geterror()).c_str());
+    bool ok = out->open(tmp, spec);
+    if (ok) ok = out->write_image(spec.format, pixels);
+    if (ok) ok = out->close();
+    if (!ok) {
+        std::string msg = first_line(out->geterror());
+        out.reset();
+        remove(tmp);
+        return lm_err_set(e, LM_ERR_IO, "%s: write failed: %s", path, msg.c_str());
+    }
+    out.reset();
+    if (rename(tmp, path) != 0) {
+        remove(tmp);
+        return lm_err_set(e, LM_ERR_IO, "%s: cannot rename the temporary file into place", path);
+    }
+    return LM_OK;
+}
+
+/* Arguments of the integer writers; v holds w * h pixels of nch samples. */
+static lm_status check_args(const char *path, int w, int h, int nch, const float *v, lm_err *e)
+{
+    if (!path || w <= 0 || h <= 0 || !v)
+        return lm_err_set(e, LM_ERR_ARG, "%s: invalid image arguments (%d x %d)",
+                          path ? path : "(null)", w, h);
+    size_t n = (size_t)w * h * nch;
+    for (size_t i = 0; i < n; i++)
+        if (std::isnan(v[i])) {
+            size_t px = i / (size_t)nch;
+            return lm_err_set(e, LM_ERR_NUMERIC, "%s: NaN at (x=%d, y=%d), refusing to write",
+                              path, (int)(px % (size_t)w), (int)(px / (size_t)w));
+        }
+    return LM_OK;
+}
+
+template <typename T>
+static void quantise(const float *v, size_t n, float maxv, std::vector<T> &q)
+{
+    q.resize(n);
+    for (size_t i = 0; i < n; i++) {
+        float x = v[i] < 0.0f ? 0.0f : (v[i] > 1.0f ? 1.0f : v[i]);
+        q[i] = (T)std::lround(x * maxv);
+    }
+}
+
+extern "C" lm_status lm_image_write_rgb8(const char *path, int width, int height,
+                                         const float *rgb, lm_err *e)
+{
+    lm_status s = check_args(path, width, height, 3, rgb, e);
+    if (s != LM_OK) return s;
+    size_t n = (size_t)width * height * 3;
+    try {
+        std::vector<unsigned char> q;
+        quantise(rgb, n, 255.0f, q);
+        ImageSpec spec(width, height, 3, TypeDesc::UINT8);
+        return write_atomic(path, spec, q.data(), e);
+    } catch (...) {
+        return lm_err_set(e, LM_ERR_IO, "%s: write failed (exception)", path);
+    }
+}
+
+extern "C" lm_status lm_image_write_gray16(const char *path, int width, int height,
+                                           const float *v, lm_err *e)
+{
+    lm_status s = check_args(path, width, height, 1, v, e);
+    if (s != LM_OK) return s;
+    size_t n = (size_t)width * height;
+    try {
+        std::vector<unsigned short> q;
+        quantise(v, n, 65535.0f, q);
+        ImageSpec spec(width, height, 1, TypeDesc::UINT16);
+        spec.channelnames.assign(1, "Y");
+        return write_atomic(path, spec, q.data(), e);
+    } catch (...) {
+        return lm_err_set(e, LM_ERR_IO, "%s: write failed (exception)", path);
+    }
+}
+
+extern "C" lm_status lm_image_write_exr(const char *path, int width, int height, int nch,
+                                        const char *const *names, const float *data,
+                                        const char *const *attrs, lm_err *e)
+{
+    if (!path || width <= 0 || height <= 0 || nch <= 0 || !data || (nch > 1 && !names))
+        return lm_err_set(e, LM_ERR_ARG, "%s: invalid EXR arguments (%d x %d x %d)",
+                          path ? path : "(null)", width, height, nch);
+    try {
+        size_t plane = (size_t)width * height;
+        std::vector<float> inter(plane * nch);
+        for (int c = 0; c < nch; c++)
+            for (size_t i = 0; i < plane; i++) inter[i * nch + c] = data[c * plane + i];
+        ImageSpec spec(width, height, nch, TypeDesc::FLOAT);
+        spec.channelnames.clear();
+        for (int c = 0; c < nch; c++) spec.channelnames.push_back(names ? names[c] : "Y");
+        spec.alpha_channel = -1;
+        spec.attribute("compression", "zip");
+        for (int i = 0; attrs && attrs[i] && attrs[i + 1]; i += 2)
+            spec.attribute(attrs[i], attrs[i + 1]);
+        return write_atomic(path, spec, inter.data(), e);
+    } catch (...) {
+        return lm_err_set(e, LM_ERR_IO, "%s: write failed (exception)", path);
+    }
+}

@@ -1,0 +1,76 @@
+/* gemm_internal.h — private declarations shared by the matrix-product and convolution ops
+ * (tensor/ops/matmul.c, conv2d*.c, gemm_parallel.c). Not part of the public API: only ops
+ * and their tests include it.
+ *
+ * What it is: a thread-split single-precision GEMM on top of single-threaded CBLAS, the
+ * geometry of a 2-D convolution, and the CPU paths of conv2d (simple reference, tiled
+ * im2col + GEMM, depthwise direct) with their exact write semantics.
+ * What it is not: ops (no shape checks, no tape); callers pass valid, contiguous buffers. */
+#ifndef LM_GEMM_INTERNAL_H
+#define LM_GEMM_INTERNAL_H
+#include "tensor/tensor.h"
+
+/* ---- GEMM ------------------------------------------------------------------------------ */
+/* Row-major C = alpha op(A) op(B) + beta C with op(A) M x K, op(B) K x N (CBLAS semantics),
+ * split over lm_nthreads(c) threads by column (or row) blocks of C; each thread calls
+ * single-threaded sgemm on its block. Deterministic for a given thread count. */
+void lm_gemm_mt(lm_ctx *c, int ta, int tb, int M, int N, int K, float alpha, const float *A,
+                int lda, const float *B, int ldb, float beta, float *C, int ldc);
+
+/* `batch` products C_i = alpha op(A_i) op(B_i) + beta C_i with A_i = A + i*sa etc.
+ * sa or sb may be 0 (a matrix shared by the batch). sc == 0 means every product accumulates
+ * into the same C (a sum over the batch, in batch order); beta applies once, before. */
+void lm_gemm_batched(lm_ctx *c, int batch, int ta, int tb, int M, int N, int K, float alpha,
+                     const float *A, long sa, int lda, const float *B, long sb, int ldb,
+                     float beta, float *C, long sc, int ldc);
+
+/* ---- conv2d geometry and CPU paths ----------------------------------------------------- */
+/* Plain parameters of a conv2d kernel (no pointers: also read by device backends).
+ * x: B x Cin x H x W, w: Cout x Cin/groups x kh x kw, y: B x Cout x Ho x Wo. */
+typedef struct lm_conv_geom {
+    int B, Cin, H, W, Cout, Ho, Wo;
+    int kh, kw, sh, sw, ph, pw, dh, dw, groups;
+} lm_conv_geom;
+
+/* Which CPU implementation conv2d kernels use. AUTO: depthwise direct loops when each output
+ * channel reads one input channel, else the tiled im2col + GEMM path. SIMPLE: the whole-image
+ * im2col + GEMM reference (tests compare the two). */
+enum { LM_CONV_PATH_AUTO = 0, LM_CONV_PATH_SIMPLE = 1 };
+/* Select the path for later conv2d kernels (process-wide; for tests and benchmarks).
+ * Returns the previous setting. */
+int lm_conv2d_set_path(int path);
+
+/* Per path: fwd writes y = conv(x, w) + bias (bias may be NULL); bwd_x ADDS into dx;
+ * bwd_w ADDS into dw. Scratch comes from the ctx arena and is released before returning.
+ * Return 0, or a negative status with the ctx error set. */
+int lm_conv2d_tiled_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
+                        const float *bias, float *y);
+int lm_conv2d_tiled_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *w,
+                          float *dx);
+int lm_conv2d_tiled_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
+                          float *dw);
+/* Depthwise paths: valid only when Cin == groups (one input channel per group). */
+int lm_conv2d_dw_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
+                     const float *bias, float *y);
+int lm_conv2d_dw_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *w,
+                       float *dx);
+int lm_conv2d_dw_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
+                       float *dw);
+
+/* Range of output columns ox in [*lo, *hi) whose input column ox*s - p + j*d lies in [0, n). */
+static inline void lm_conv_valid_range(int n_out, int n_in, int s, int p, int off, int *lo,
+                                       int *hi)
+{
+    /* input index = ox*s + (off - p), off = j*d */
+    int a = p - off; /* need ox*s >= a */
+    int l = a <= 0 ? 0 : (a + s - 1) / s;
+    int b = n_in - 1 + p - off; /* need ox*s <= b */
+    int h = b < 0 ? 0 : b / s + 1;
+    if (l > n_out) l = n_out;
+    if (h > n_out) h = n_out;
+    if (h < l) h = l;
+    *lo = l;
+    *hi = h;
+}
+
+#endif
