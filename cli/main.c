@@ -1,44 +1,24 @@
-/* main.c — the `lumosaic` program: subcommand dispatch, --help, version.
- * Subcommands land here as their issues are built (simulate, train, infer, eval, info). */
+/* main.c — the `lumosaic` program: subcommand dispatch and top-level help.
+ * Each subcommand is one cli/cmd_*.c file registered in the table below. */
 #include <stdio.h>
 #include <string.h>
+#include "cli/commands.h"
 
-#ifndef LM_VERSION
-#define LM_VERSION "unknown"
-#endif
+static const lm_command commands[] = {
+    {"version", lm_cmd_version, "print the version and build configuration"},
+    /* one line per command (keep alphabetical after version) */
+};
+#define NCOMMANDS (int)(sizeof commands / sizeof commands[0])
 
 static void usage(FILE *f)
 {
-    fprintf(f,
-            "usage: lumosaic <command> [options]\n"
-            "\n"
-            "Coded-exposure frames to 31-band hyperspectral video (400-700 nm).\n"
-            "\n"
-            "commands:\n"
-            "  version      print the version and build configuration\n"
-            "  help         show this help (also --help, -h)\n"
-            "\n"
-            "Run 'lumosaic <command> --help' for a command's options.\n");
-}
-
-extern char *openblas_get_config(void);
-
-static int cmd_version(int argc, char **argv)
-{
-    for (int i = 2; i < argc; i++) {
-        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
-            printf("usage: lumosaic version\n\nPrint the version and build configuration.\n");
-            return 0;
-        }
-        fprintf(stderr, "lumosaic version: unknown option '%s'\n", argv[i]);
-        return 2;
-    }
-    printf("lumosaic %s\n", LM_VERSION);
-#ifdef _OPENMP
-    printf("openmp %d\n", _OPENMP);
-#endif
-    printf("blas %s\n", openblas_get_config());
-    return 0;
+    fprintf(f, "usage: lumosaic <command> [options]\n\n"
+               "Coded-exposure frames to 31-band hyperspectral video (400-700 nm).\n\n"
+               "commands:\n");
+    for (int i = 0; i < NCOMMANDS; i++)
+        fprintf(f, "  %-10s %s\n", commands[i].name, commands[i].summary);
+    fprintf(f, "  %-10s %s\n", "help", "show this help (also --help, -h)");
+    fprintf(f, "\nRun 'lumosaic <command> --help' for a command's options.\n");
 }
 
 int main(int argc, char **argv)
@@ -52,7 +32,9 @@ int main(int argc, char **argv)
         usage(stdout);
         return 0;
     }
-    if (!strcmp(cmd, "version") || !strcmp(cmd, "--version")) return cmd_version(argc, argv);
+    if (!strcmp(cmd, "--version")) cmd = "version";
+    for (int i = 0; i < NCOMMANDS; i++)
+        if (!strcmp(cmd, commands[i].name)) return commands[i].run(argc - 1, argv + 1);
     fprintf(stderr, "lumosaic: unknown command '%s' (see 'lumosaic --help')\n", cmd);
     return 2;
 }

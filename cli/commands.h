@@ -1,0 +1,18 @@
+/* commands.h — the subcommands of the `lumosaic` program. Each lives in its own cli/cmd_*.c,
+ * parses its own options (every option has --help text), prints one-line errors to stderr and
+ * returns the process exit status (0 ok, 1 runtime failure, 2 bad usage or input). */
+#ifndef LM_CLI_COMMANDS_H
+#define LM_CLI_COMMANDS_H
+
+typedef int (*lm_cmd_fn)(int argc, char **argv); /* argv[0] is the subcommand name */
+
+typedef struct lm_command {
+    const char *name;
+    lm_cmd_fn run;
+    const char *summary;
+} lm_command;
+
+int lm_cmd_version(int argc, char **argv);
+/* Declarations of the other commands go here, one line each (alphabetical). */
+
+#endif
