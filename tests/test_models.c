@@ -171,6 +171,44 @@ static void test_gradcheck_models(void)
     gradcheck_model("srnet-tiny", 12, 16);
 }
 
+/* A training step (forward, loss, backward) allocates nothing from the system after the
+ * first steps: the arena coalesces into one block and is reused. */
+static void steps_allocate_nothing(const char *preset)
+{
+    lm_mosaic mo;
+    test_mosaic(&mo);
+    lm_err e = {0};
+    lm_model *m = lm_model_create(preset, &mo, 3, &e);
+    if (!m) return;
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_rng r;
+    lm_rng_seed(&r, 4);
+    long allocs[4];
+    for (int step = 0; step < 4; step++) {
+        lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){2, 1, 66, 64}, &r, 0, 1);
+        lm_tensor *t = lm_tensor_uniform(&c, 4, (int[]){2, 33, 66, 64}, &r, 0, 1);
+        lm_params_zero_grad(&m->params);
+        lm_tensor *loss = lm_l1_loss(&c, lm_model_forward(&c, m, x), t);
+        CHECK(lm_backward(&c, loss, NULL) == LM_OK);
+        allocs[step] = c.arena.sys_allocs;
+        lm_ctx_reset(&c);
+    }
+    CHECK_CTX_OK(&c);
+    CHECK_MSG(allocs[3] == allocs[2] && allocs[2] <= allocs[1] + 1,
+              "%s: system allocations per step %ld %ld %ld %ld", preset, allocs[0], allocs[1],
+              allocs[2], allocs[3]);
+    lm_ctx_free(&c);
+    lm_model_free(m);
+}
+
+static void test_training_steps_reuse_arena(void)
+{
+    steps_allocate_nothing("han-tiny");
+    steps_allocate_nothing("mcan-tiny");
+    steps_allocate_nothing("srnet-tiny");
+}
+
 int main(int argc, char **argv)
 {
     RUN(test_parameter_counts);
@@ -178,6 +216,7 @@ int main(int argc, char **argv)
     RUN(test_init_deterministic);
     RUN(test_forward_shapes);
     RUN(test_gradcheck_models);
+    RUN(test_training_steps_reuse_arena);
     if (argc < 2 || strcmp(argv[1], "--quick")) RUN(test_paper_han_count);
     return check_summary();
 }
