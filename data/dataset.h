@@ -17,9 +17,15 @@
 #ifndef LM_DATASET_H
 #define LM_DATASET_H
 #include <stdint.h>
+#include <stdio.h>
 #include "data/system.h"
 
-typedef enum lm_split { LM_SPLIT_TRAIN = 0, LM_SPLIT_VAL = 1, LM_SPLIT_TEST = 2 } lm_split;
+/* (Named lm_data_split, not lm_split: tensor/ops.h has the op lm_split.) */
+typedef enum lm_data_split {
+    LM_SPLIT_TRAIN = 0,
+    LM_SPLIT_VAL = 1,
+    LM_SPLIT_TEST = 2
+} lm_data_split;
 
 typedef struct lm_dataset_cfg {
     const char *const *paths;   /* scene files/folders, or folders of scenes */
@@ -31,29 +37,76 @@ typedef struct lm_dataset_cfg {
     int flips;                  /* random horizontal/vertical flips (training split only) */
     uint64_t seed;
     int workers;                /* threads preparing batches ahead (0 = synchronous) */
-    int cache_scenes;           /* scenes kept in memory (LRU); 0 = all */
+    int cache_scenes;           /* scenes kept in memory (LRU); 0 = all. Never exceeded: when
+                                 * every cached scene is in use by a worker, a scene is read for
+                                 * that one sample without being cached */
     int val_patches;            /* fixed validation/test samples per split (default 64) */
     float val_noise;            /* noise level k of validation/test samples (default 0) */
+    float synth_narrowband;     /* share of synthetic samples that are narrowband textureless
+                                 * patches; the rest are procedural scenes (default 0.5) */
 } lm_dataset_cfg;
 
 typedef struct lm_dataset lm_dataset;
 
 /* Defaults of system.md: 66 x 64, synth 0.33, noise U[0, 0.15], flips on, 2 workers. */
 void lm_dataset_default_cfg(lm_dataset_cfg *cfg);
-/* Lists and checks the scenes (reads headers, not pixels). Errors name the file. A split with
+/* Lists and checks the scenes (reads headers, not pixels: CAVE band 01 and EXR headers; a .mat
+ * file is read whole, matio offering no cheap header read). A folder is a CAVE scene if it
+ * holds band images (or its single sub-folder does, scene/scene/); otherwise it is a folder of
+ * scenes: its .mat/.exr files and CAVE scene folders, in name order. Scenes smaller than the
+ * patch are left out. Errors name the file. A split with
  * no scene borrows from the others only if fewer than 3 scenes exist (documented in the
  * message printed by lm_dataset_describe). */
 lm_dataset *lm_dataset_open(const lm_dataset_cfg *cfg, lm_err *err);
 void lm_dataset_close(lm_dataset *d);
-int lm_dataset_num_scenes(const lm_dataset *d, lm_split split);
+int lm_dataset_num_scenes(const lm_dataset *d, lm_data_split split);
 /* Training batch number `index` (0-based): raw is B x 1 x ph x pw (coded patches, bucket 1),
- * target B x 33 x ph x pw; host buffers owned by the caller. Same index, same numbers. */
+ * target B x 33 x ph x pw; host buffers owned by the caller. Same index, same numbers: item j
+ * is training sample index * B + j. With workers, batch index + 1 is prepared in the
+ * background after each call. Call from one thread at a time. */
 lm_status lm_dataset_batch(lm_dataset *d, long index, int batch, float *raw, float *target,
                            lm_err *err);
-/* Fixed validation/test sample i (0 <= i < val_patches), same layout as one batch item. */
-lm_status lm_dataset_eval_sample(lm_dataset *d, lm_split split, int i, float *raw, float *target,
-                                 lm_err *err);
-int lm_dataset_eval_count(const lm_dataset *d, lm_split split);
+/* Fixed validation/test sample i (0 <= i < lm_dataset_eval_count), same layout as one batch
+ * item: a real scene (scene i mod n of the split), a random tile-aligned position, no flip,
+ * noise val_noise drawn from a fixed stream. A split without scenes has no samples (count 0). */
+lm_status lm_dataset_eval_sample(lm_dataset *d, lm_data_split split, int i, float *raw,
+                                 float *target, lm_err *err);
+int lm_dataset_eval_count(const lm_dataset *d, lm_data_split split);
 void lm_dataset_describe(const lm_dataset *d, FILE *f);
+
+/* ---- introspection (tests, `lumosaic info`) ------------------------------------------- */
+/* The split of a scene name: a 64-bit hash of the name, bucket hash % 10: 0-7 train, 8 val,
+ * 9 test. A scene's name is its file name without extension, or for CAVE the name of the
+ * folder holding the band images. */
+lm_data_split lm_dataset_split_of(const char *scene_name);
+/* Name and path of scene i (0 <= i < lm_dataset_num_scenes(d, split)) of a split; NULL if out
+ * of range. */
+const char *lm_dataset_scene_name(const lm_dataset *d, lm_data_split split, int i);
+const char *lm_dataset_scene_path(const lm_dataset *d, lm_data_split split, int i);
+
+typedef enum lm_sample_kind {
+    LM_SAMPLE_SCENE = 0,       /* a patch of a real scene */
+    LM_SAMPLE_NARROWBAND = 1,  /* synthetic: textureless Gaussian spectrum */
+    LM_SAMPLE_PROCEDURAL = 2   /* synthetic: procedural scene */
+} lm_sample_kind;
+
+/* What sample i of a split is made of (drawn exactly as lm_dataset_batch /
+ * lm_dataset_eval_sample draw it; training sample i is item i % B of batch i / B). */
+typedef struct lm_dataset_sample_info {
+    lm_sample_kind kind;
+    int scene;            /* index in the split's scene list (LM_SAMPLE_SCENE), else -1 */
+    int y0, x0;           /* patch top-left in the scene (multiples of the tile), else 0 */
+    int flip_h, flip_v;   /* columns / rows reversed (applied to the cube before simulation) */
+    float noise_k;        /* Gaussian noise level k */
+} lm_dataset_sample_info;
+lm_status lm_dataset_sample_info_get(const lm_dataset *d, lm_data_split split, long i,
+                                     lm_dataset_sample_info *info, lm_err *err);
+
+/* Cache counters: scene loads (file reads) so far, scenes cached now, most ever cached. */
+typedef struct lm_dataset_stats {
+    long loads;
+    int cached, max_cached;
+} lm_dataset_stats;
+void lm_dataset_get_stats(lm_dataset *d, lm_dataset_stats *st);
 
 #endif

@@ -302,6 +302,11 @@ void lm_cl_backend_free(lm_backend *bb)
     free(b);
 }
 
+void lm_cl_backend_finish(lm_backend *bb)
+{
+    if (bb && bb->device == LM_DEVICE_OPENCL) clFinish(((lm_cl *)bb->impl)->queue);
+}
+
 lm_backend *lm_backend_open(const char *name, lm_err *e)
 {
     if (!name || !*name) name = getenv("LM_DEVICE");

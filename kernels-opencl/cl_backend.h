@@ -27,6 +27,9 @@ int lm_cl_platform_count(void);
 /* "device name (platform name)" of an OpenCL backend. */
 const char *lm_cl_backend_device_name(const lm_backend *b);
 
+/* Wait until every command queued on the backend's device has finished (benchmarks). */
+void lm_cl_backend_finish(lm_backend *b);
+
 /* Compile an extra OpenCL C source on the backend's device and discard it (diagnostics and
  * tests): LM_OK, or LM_ERR_BACKEND with the build log printed to stderr and quoted in e. */
 lm_status lm_cl_compile_check(lm_backend *b, const char *src, lm_err *e);
@@ -44,5 +47,15 @@ void lm_backend_close(lm_backend *b);
  * inputs are made contiguous first. */
 lm_tensor *lm_tensor_to_device(lm_ctx *c, lm_tensor *t);
 lm_tensor *lm_tensor_to_host(lm_ctx *c, lm_tensor *t);
+
+/* Persistent host tensors (model parameters: layers keep their addresses) used by device ops
+ * for one step. swap_to_device replaces each *ts[i] in place by a device copy in the ctx's
+ * device arena (requiring grad when the host tensor does; its gradient then lives on the
+ * device), keeping the host structs in saved[0..n). swap_back adds each device gradient into
+ * the host tensor's gradient (host grad, contiguous, when both exist) and puts the host structs
+ * back; call it after lm_backward and before lm_ctx_reset. Both return the ctx status; on a
+ * device-less backend they do nothing. */
+lm_status lm_tensors_swap_to_device(lm_ctx *c, lm_tensor *const *ts, int n, lm_tensor *saved);
+lm_status lm_tensors_swap_back(lm_ctx *c, lm_tensor *const *ts, int n, const lm_tensor *saved);
 
 #endif

@@ -69,7 +69,10 @@ static int run_col(lm_cl *b, lm_ctx *c, const char *kname, const lm_tensor *src,
     lm_cl_arg_int(&a, p0);
     lm_cl_arg_int(&a, P);
     lm_cl_arg_int(&a, n);
-    return lm_cl_run_1d(&a, (size_t)n);
+    /* work-items: (segment of 64 columns / pixels, row); see conv.cl */
+    int len = !strcmp(kname, "im2col") ? P : g->W;
+    size_t global[2] = {(size_t)(len + 63) / 64, (size_t)(n / len)}, local[2] = {1, 16};
+    return lm_cl_run_nd(&a, 2, global, local);
 }
 
 /* Operands of one chunk (images b0.., columns p0.. of width P) for the three products. */

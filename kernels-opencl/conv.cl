@@ -21,48 +21,64 @@
 #define CG_G g.sf
 
 /* col ([img][group][K][P], K = Cin/groups kh kw) = patches of images b0.. for output
- * columns p0 .. p0 + P (zero outside the input). n = nimg groups K P. Writes =. */
+ * columns p0 .. p0 + P (zero outside the input). Work-item (s, r): row r of the nimg groups K
+ * rows, columns [64 s, 64 s + 64) of the chunk, walked with an incremental (oy, ox) so the
+ * loop has no divisions (PoCL runs one simple loop per work-item well). Writes =. */
+#define IM2COL_SEG 64
 __kernel void im2col(__global const float *x, int xo, __global float *col, int co, int16 g,
                      int b0, int p0, int P, int n)
 {
-    int i = get_global_id(0);
-    if (i >= n) return;
+    int s = get_global_id(0), r = get_global_id(1);
     int cig = CG_CIN / CG_G, kk = CG_KH * CG_KW, K = cig * kk;
-    int pp = i % P, k = (i / P) % K, q = (i / (P * K)) % CG_G, im = i / (P * K * CG_G);
-    int ci = k / kk, ki = (k % kk) / CG_KW, kj = k % CG_KW, p = p0 + pp;
-    int iy = (p / CG_WO) * CG_SH - CG_PH + ki * CG_DH;
-    int ix = (p % CG_WO) * CG_SW - CG_PW + kj * CG_DW;
-    int inside = iy >= 0 && iy < CG_H && ix >= 0 && ix < CG_W;
-    int c = q * cig + ci;
-    col[co + i] = inside ? x[xo + (((b0 + im) * CG_CIN + c) * CG_H + iy) * CG_W + ix] : 0.0f;
+    if (r >= n / P || s * IM2COL_SEG >= P) return;
+    int k = r % K, q = (r / K) % CG_G, im = r / (K * CG_G);
+    int ci = k / kk, ki = (k % kk) / CG_KW, kj = k % CG_KW;
+    __global const float *xc = x + xo + ((b0 + im) * CG_CIN + q * cig + ci) * CG_H * CG_W;
+    __global float *out = col + co + (long)r * P;
+    int pp = s * IM2COL_SEG, pend = min(P, pp + IM2COL_SEG);
+    int oy = (p0 + pp) / CG_WO, ox = (p0 + pp) % CG_WO;
+    int iy = oy * CG_SH - CG_PH + ki * CG_DH, dx = kj * CG_DW - CG_PW;
+    for (; pp < pend; pp++) {
+        int ix = ox * CG_SW + dx;
+        out[pp] = iy >= 0 && iy < CG_H && ix >= 0 && ix < CG_W ? xc[iy * CG_W + ix] : 0.0f;
+        if (++ox == CG_WO) {
+            ox = 0;
+            iy += CG_SH;
+        }
+    }
 }
 
 /* dx (images b0 .. b0 + nimg) += col2im(dcol) for output columns [p0, p0 + P): each input
- * pixel gathers the patch entries that read it, taps in (ki, kj) order. Writes +=. */
+ * pixel gathers the patch entries that read it, taps in (ki, kj) order. Work-item (s, r):
+ * input row r = (img, c, iy), pixels [64 s, 64 s + 64) of it, accumulated in a private
+ * array tap by tap (the tap tests hoisted out of the pixel loop). Writes +=. */
 __kernel void col2im_gather(__global const float *dcol, int dco, __global float *dx, int dxo,
                             int16 g, int b0, int p0, int P, int n)
 {
-    int i = get_global_id(0);
-    if (i >= n) return;
+    int s = get_global_id(0), r = get_global_id(1);
+    if (r >= n / CG_W || s * IM2COL_SEG >= CG_W) return;
     int cig = CG_CIN / CG_G, kk = CG_KH * CG_KW, K = cig * kk;
-    int ix = i % CG_W, iy = (i / CG_W) % CG_H, c = (i / (CG_W * CG_H)) % CG_CIN;
-    int im = i / (CG_W * CG_H * CG_CIN), q = c / cig, ci = c % cig;
-    int k = dxo + ((b0 + im) * CG_CIN + c) * CG_H * CG_W + iy * CG_W + ix;
-    float v = dx[k];
+    int iy = r % CG_H, c = (r / CG_H) % CG_CIN, im = r / (CG_H * CG_CIN);
+    int q = c / cig, ci = c % cig, x0 = s * IM2COL_SEG, len = min(CG_W - x0, IM2COL_SEG);
+    __global float *d = dx + dxo + ((b0 + im) * CG_CIN + c) * CG_H * CG_W + iy * CG_W + x0;
+    float v[IM2COL_SEG];
+    for (int j = 0; j < len; j++) v[j] = d[j];
     for (int ki = 0; ki < CG_KH; ki++) {
         int ty = iy + CG_PH - ki * CG_DH;
-        if (ty < 0 || ty % CG_SH) continue;
-        int oy = ty / CG_SH;
-        if (oy >= CG_HO) continue;
+        if (ty < 0 || ty % CG_SH || ty / CG_SH >= CG_HO) continue;
+        int prow = (ty / CG_SH) * CG_WO - p0;
         for (int kj = 0; kj < CG_KW; kj++) {
-            int tx = ix + CG_PW - kj * CG_DW;
-            if (tx < 0 || tx % CG_SW) continue;
-            int ox = tx / CG_SW, p = oy * CG_WO + ox - p0;
-            if (ox >= CG_WO || p < 0 || p >= P) continue;
-            v += dcol[dco + ((im * CG_G + q) * K + ci * kk + ki * CG_KW + kj) * P + p];
+            __global const float *src =
+                dcol + dco + (long)((im * CG_G + q) * K + ci * kk + ki * CG_KW + kj) * P;
+            for (int j = 0; j < len; j++) {
+                int tx = x0 + j + CG_PW - kj * CG_DW;
+                if (tx < 0 || tx % CG_SW) continue;
+                int ox = tx / CG_SW, p = prow + ox;
+                if (ox < CG_WO && p >= 0 && p < P) v[j] += src[p];
+            }
         }
     }
-    dx[k] = v;
+    for (int j = 0; j < len; j++) d[j] = v[j];
 }
 
 /* ---- conv3d (stride 1); geometry int16 in conv3d_params order:
@@ -141,7 +157,8 @@ __kernel void conv3d_bwd_x(__global const float *dy, int dyo, __global const flo
 }
 
 /* dw[co, ci, kz, ky, kx] += sum over (b, oz, oy, ox) of dy * x at the tap; one work-group per
- * weight element. Writes +=. */
+ * weight element, each item summing whole output rows (b, oz, oy) with ox innermost (the tap's
+ * valid ox range hoisted out of the loop). Writes +=. */
 __kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
 void conv3d_bwd_w(__global const float *x, int xo, __global const float *dy, int dyo,
                   __global float *dw, int dwo, int16 g)
@@ -150,16 +167,20 @@ void conv3d_bwd_w(__global const float *x, int xo, __global const float *dy, int
     int e = get_group_id(0), l = get_local_id(0);
     int kx = e % C3_KW, ky = (e / C3_KW) % C3_KH, kz = (e / (C3_KW * C3_KH)) % C3_KD;
     int ci = (e / (C3_KW * C3_KH * C3_KD)) % C3_CIN, co = e / (C3_KW * C3_KH * C3_KD * C3_CIN);
-    int vol = C3_DO * C3_HO * C3_WO, total = C3_B * vol;
+    int rows = C3_B * C3_DO * C3_HO;
+    int ox0 = max(0, C3_PW - kx), ox1 = min(C3_WO, C3_W + C3_PW - kx);
     float s = 0.0f, c = 0.0f;
-    for (int q = l; q < total; q += WG) {
-        int ox = q % C3_WO, oy = (q / C3_WO) % C3_HO, oz = (q / (C3_WO * C3_HO)) % C3_DO;
-        int b = q / vol;
-        int iz = oz + kz - C3_PD, iy = oy + ky - C3_PH, ix = ox + kx - C3_PW;
-        if (iz < 0 || iz >= C3_D || iy < 0 || iy >= C3_H || ix < 0 || ix >= C3_W) continue;
-        float d = dy[dyo + ((b * C3_COUT + co) * vol) + (oz * C3_HO + oy) * C3_WO + ox];
-        float xv = x[xo + (((b * C3_CIN + ci) * C3_D + iz) * C3_H + iy) * C3_W + ix];
-        kahan_add(&s, &c, d * xv);
+    for (int q = l; q < rows; q += WG) {
+        int oy = q % C3_HO, oz = (q / C3_HO) % C3_DO, b = q / (C3_HO * C3_DO);
+        int iz = oz + kz - C3_PD, iy = oy + ky - C3_PH;
+        if (iz < 0 || iz >= C3_D || iy < 0 || iy >= C3_H) continue;
+        __global const float *dr =
+            dy + dyo + (((b * C3_COUT + co) * C3_DO + oz) * C3_HO + oy) * C3_WO;
+        __global const float *xr =
+            x + xo + (((b * C3_CIN + ci) * C3_D + iz) * C3_H + iy) * C3_W + kx - C3_PW;
+        float r = 0.0f;
+        for (int ox = ox0; ox < ox1; ox++) r += dr[ox] * xr[ox];
+        kahan_add(&s, &c, r);
     }
     float tot = wg_sum(scratch, s - c);
     if (l == 0) dw[dwo + e] += tot;

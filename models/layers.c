@@ -62,10 +62,24 @@ void lm_conv_init_default(lm_conv *l, lm_rng *r)
     if (l->b) lm_init_uniform(l->b, r, bound);
 }
 
+static const lm_ctx *observed_ctx;
+static lm_layer_observer observer;
+static void *observer_user;
+
+void lm_layer_observe(const lm_ctx *c, lm_layer_observer fn, void *user)
+{
+    observed_ctx = fn ? c : NULL;
+    observer = fn;
+    observer_user = user;
+}
+
 lm_tensor *lm_conv_forward(lm_ctx *c, const lm_conv *l, lm_tensor *x)
 {
-    if (l->transposed) return lm_conv_transpose2d(c, x, l->w, l->b, &l->o, 0, 0);
-    return lm_conv2d(c, x, l->w, l->b, &l->o);
+    lm_tensor *y = l->transposed ? lm_conv_transpose2d(c, x, l->w, l->b, &l->o, 0, 0)
+                                 : lm_conv2d(c, x, l->w, l->b, &l->o);
+    if (observer && observed_ctx == c && y)
+        observer(observer_user, l->transposed ? "convT" : "conv", l->w, l->b, x, y);
+    return y;
 }
 
 lm_status lm_linear_declare(lm_params *p, lm_linear_layer *l, const char *name, int in, int out,
@@ -85,7 +99,9 @@ void lm_linear_init_default(lm_linear_layer *l, lm_rng *r)
 
 lm_tensor *lm_linear_forward(lm_ctx *c, const lm_linear_layer *l, lm_tensor *x)
 {
-    return lm_linear(c, x, l->w, l->b);
+    lm_tensor *y = lm_linear(c, x, l->w, l->b);
+    if (observer && observed_ctx == c && y) observer(observer_user, "linear", l->w, l->b, x, y);
+    return y;
 }
 
 void lm_mosaic_default(lm_mosaic *m)

@@ -42,6 +42,14 @@ lm_status lm_linear_declare(lm_params *p, lm_linear_layer *l, const char *name, 
 void lm_linear_init_default(lm_linear_layer *l, lm_rng *r);
 lm_tensor *lm_linear_forward(lm_ctx *c, const lm_linear_layer *l, lm_tensor *x);
 
+/* Layer observer (profiling, models/profile.h): while installed for ctx c, every successful
+ * lm_conv_forward ("conv" / "convT") and lm_linear_forward ("linear") on c reports its weight,
+ * bias (or NULL), input and output. One observer per process; lm_layer_observe(NULL, NULL,
+ * NULL) removes it. */
+typedef void (*lm_layer_observer)(void *user, const char *kind, const lm_tensor *w,
+                                  const lm_tensor *b, const lm_tensor *x, const lm_tensor *y);
+void lm_layer_observe(const lm_ctx *c, lm_layer_observer fn, void *user);
+
 /* The network input: how the raw mosaic maps to channels (system.md §6). Filled from the
  * system description by data/; models only read it. */
 #define LM_MOSAIC_MAX_CH 64

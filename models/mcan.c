@@ -4,6 +4,7 @@
  * depends on each pixel's tile phase through a small MLP; mosaic attention (MA); two
  * conv-attention blocks; output = back conv + lifted WB. Names follow the official `Net`. */
 #include "models/model.h"
+#include "kernels-opencl/cl_backend.h"
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -33,17 +34,29 @@ static lm_tensor *mosaic_attention(lm_ctx *c, const mcan *n, const ma_layer *ma,
     return lm_pixel_shuffle(c, lm_mul(c, u, s), n->ty, n->tx);
 }
 
+/* A constant built on the host: moved to the ctx's device when the backend is not the CPU. */
+static lm_tensor *host_const(lm_ctx *c, int ndim, const int *shape)
+{
+    lm_tensor *t = lm_tensor_new_on(c, LM_DEVICE_CPU, ndim, shape);
+    if (t) lm_tensor_fill(t, 0.0f);
+    return t;
+}
+static lm_tensor *to_ctx_device(lm_ctx *c, lm_tensor *t)
+{
+    return c->backend->device == LM_DEVICE_CPU ? t : lm_tensor_to_device(c, t);
+}
+
 /* Sparse cube: channel k keeps the raw value at its phase's pixels, 0 elsewhere. */
 static lm_tensor *sparse_cube(lm_ctx *c, const lm_model *m, lm_tensor *raw)
 {
     int H = raw->shape[2], W = raw->shape[3], P = m->mosaic.nch;
-    lm_tensor *mask = lm_tensor_zeros(c, 4, (int[]){1, P, H, W});
+    lm_tensor *mask = host_const(c, 4, (int[]){1, P, H, W});
     if (!mask) return NULL;
     for (int k = 0; k < P; k++)
         for (int y = m->mosaic.phase_y[k]; y < H; y += m->mosaic.ty)
             for (int x = m->mosaic.phase_x[k]; x < W; x += m->mosaic.tx)
                 mask->data[((size_t)k * H + y) * W + x] = 1.0f;
-    return lm_mul(c, raw, mask);
+    return lm_mul(c, raw, to_ctx_device(c, mask));
 }
 
 /* MCM: per-phase 5x5 kernels from the MLP, applied to the 5x5 neighbourhood of each pixel. */
@@ -51,13 +64,15 @@ static lm_tensor *mosaic_conv(lm_ctx *c, const mcan *n, lm_tensor *raw)
 {
     int B = raw->shape[0], H = raw->shape[2], W = raw->shape[3], P = n->P;
     int h = H / n->ty, w = W / n->tx;
-    lm_tensor *pos = lm_tensor_new2(c, P, 2), *eye = lm_tensor_zeros(c, 4, (int[]){25, 1, 5, 5});
+    lm_tensor *pos = host_const(c, 2, (int[]){P, 2}), *eye = host_const(c, 4, (int[]){25, 1, 5, 5});
     if (!pos || !eye) return NULL;
     for (int q = 0; q < P; q++) { /* phase q = i*tx + j, pos = ((i+1)/ty, (j+1)/tx) */
         pos->data[2 * q] = (float)(q / n->tx + 1) / (float)n->ty;
         pos->data[2 * q + 1] = (float)(q % n->tx + 1) / (float)n->tx;
     }
     for (int k = 0; k < 25; k++) eye->data[k * 25 + k] = 1.0f;
+    pos = to_ctx_device(c, pos);
+    eye = to_ctx_device(c, eye);
     lm_tensor *kw = lm_linear_forward(c, &n->p2w2, lm_relu(c, lm_linear_forward(c, &n->p2w0, pos)));
     kw = lm_transpose(c, lm_reshape(c, kw, 3, (int[]){P, 25, P}), 1, 2); /* q x o x k */
     lm_conv2d_opts o = {1, 1, 2, 2, 1, 1, 1};

@@ -4,6 +4,7 @@
  * self-attention blocks (SAM); H and W padded (reflect) to multiples of 16 inside the model
  * and cropped back. Parameter names follow the official SRNet module. */
 #include "models/model.h"
+#include "kernels-opencl/cl_backend.h"
 #include <stdio.h>
 #include <stdlib.h>
 
@@ -52,10 +53,11 @@ static lm_tensor *sam_forward(lm_ctx *c, const sam *s, lm_tensor *x)
     return lm_scope_end(c, sc, x);
 }
 
-/* 1 x 33 x H x W map: every pixel gets its LED's response, normalised to max 1. */
+/* 1 x 33 x H x W map: every pixel gets its LED's response, normalised to max 1. Built on the
+ * host, moved to the ctx's device when the backend is not the CPU. */
 static lm_tensor *response_map(lm_ctx *c, const lm_mosaic *m, int H, int W)
 {
-    lm_tensor *t = lm_tensor_new(c, 4, (int[]){1, LM_MOSAIC_RESP_CH, H, W});
+    lm_tensor *t = lm_tensor_new_on(c, LM_DEVICE_CPU, 4, (int[]){1, LM_MOSAIC_RESP_CH, H, W});
     if (!t) return NULL;
     float mx = 0.0f;
     for (int k = 0; k < m->nch; k++)
@@ -70,7 +72,7 @@ static lm_tensor *response_map(lm_ctx *c, const lm_mosaic *m, int H, int W)
                 int k = chan_of[(y % m->ty) * m->tx + x % m->tx];
                 t->data[((size_t)j * H + y) * W + x] = m->response[k][j] * inv;
             }
-    return t;
+    return c->backend->device == LM_DEVICE_CPU ? t : lm_tensor_to_device(c, t);
 }
 
 static lm_tensor *srnet_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)

@@ -115,7 +115,8 @@ static lm_tensor slice_of(const lm_tensor *full, const lm_tensor *out, const sli
 {
     lm_tensor v = *full;
     for (int i = 0; i < out->ndim; i++) v.shape[i] = out->shape[i];
-    v.data = full->data + p->start * full->stride[p->dim];
+    if (full->device == LM_DEVICE_CPU) v.data = full->data + p->start * full->stride[p->dim];
+    else v.dev_off = full->dev_off + (size_t)p->start * (size_t)full->stride[p->dim];
     return v;
 }
 
@@ -140,15 +141,12 @@ lm_tensor *lm_slice(lm_ctx *c, lm_tensor *x, int dim, int start, int len)
                     start + len, dim, lm_shape_str(x, sb, sizeof sb));
         return NULL;
     }
-    if (x->device != LM_DEVICE_CPU) {
-        lm_ctx_fail(c, LM_ERR_UNSUPPORTED, "slice: views of device tensors are not supported");
-        return NULL;
-    }
     lm_tensor *y = lm_ctx_alloc(c, sizeof *y);
     if (!y) return NULL;
     *y = *x;
     y->shape[dim] = len;
-    y->data = x->data + start * x->stride[dim];
+    if (x->device == LM_DEVICE_CPU) y->data = x->data + start * x->stride[dim];
+    else y->dev_off = x->dev_off + (size_t)start * (size_t)x->stride[dim]; /* device view */
     y->grad = NULL;
     y->flags = (x->flags & ~(unsigned)(LM_PARAM | LM_REQUIRES_GRAD)) | LM_VIEW;
     y->name = NULL;

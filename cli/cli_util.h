@@ -1,0 +1,62 @@
+/* cli_util.h — small helpers shared by the cli/cmd_*.c commands: option parsing and output
+ * folders written atomically.
+ * What it is: a cursor over argv that matches "--name value" and "--name=value", flags, and
+ * integers / reals with range checks; every failure prints ONE line "<prog>: <problem>" to
+ * stderr (prog is e.g. "lumosaic simulate") and the caller returns exit status 2. Plus
+ * "<dir>.tmp.<pid>" staging folders that are renamed into place on success and removed on
+ * failure, so a command never leaves half-written output.
+ * What it is not: a general getopt (no short options, no option bundling), or library code
+ * (nothing here is used by the library; it may print). */
+#ifndef LM_CLI_UTIL_H
+#define LM_CLI_UTIL_H
+#include <stddef.h>
+
+typedef struct lm_cli {
+    const char *prog; /* prefix of error messages, e.g. "lumosaic simulate" */
+    int argc;
+    char **argv;
+    int i;            /* index of the argument being parsed (starts at 1) */
+} lm_cli;
+
+void lm_cli_init(lm_cli *c, const char *prog, int argc, char **argv);
+/* Nonzero once every argument is consumed. */
+int lm_cli_done(const lm_cli *c);
+/* Is the current argument "--help" or "-h"? (Does not advance.) */
+int lm_cli_is_help(const lm_cli *c);
+
+/* Each matcher looks at the current argument and returns 1 (matched and, for values, parsed:
+ * the cursor advances), 0 (not this option: nothing changes) or -1 (matched but wrong: the
+ * one-line error is printed). */
+/* "--name value" or "--name=value"; a missing value is an error. */
+int lm_cli_value(lm_cli *c, const char *name, const char **value);
+/* "--name" alone ("--name=x" is an error). */
+int lm_cli_flag(lm_cli *c, const char *name, int *flag);
+/* A value that must be an integer in [lo, hi] / a finite real in [lo, hi]. */
+int lm_cli_int(lm_cli *c, const char *name, long long lo, long long hi, long long *out);
+int lm_cli_real(lm_cli *c, const char *name, double lo, double hi, double *out);
+/* A value that must be one of the NULL-terminated `choices`; *out = its index. */
+int lm_cli_choice(lm_cli *c, const char *name, const char *const *choices, int *out);
+
+/* Parse a whole string as a number: 0, or -1 (nothing printed). */
+int lm_cli_parse_ll(const char *s, long long *out);
+int lm_cli_parse_real(const char *s, double *out);
+
+/* Print "<prog>: <message>" as one line on stderr. Returns 2 (the bad-usage status). */
+int lm_cli_error(const lm_cli *c, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* "<prog>: unknown option '<arg>' (see '<prog> --help')", returns 2. */
+int lm_cli_unknown(const lm_cli *c);
+
+/* Case-insensitive: does path end with ext (".png")? */
+int lm_cli_has_ext(const char *path, const char *ext);
+
+/* Staging folder for an output folder `dir`: checks that dir does not exist or is an empty
+ * folder, then creates "<dir>.tmp.<pid>" (written to tmp, n bytes). Returns 0, or -1 with a
+ * one-line error printed. */
+int lm_cli_stage_dir(const lm_cli *c, const char *dir, char *tmp, size_t n);
+/* Rename the staging folder onto dir (replacing an empty dir). 0, or -1 with an error printed
+ * (the staging folder is then removed). */
+int lm_cli_commit_dir(const lm_cli *c, const char *tmp, const char *dir);
+/* Remove a folder and everything in it (staging folders after a failure). */
+void lm_cli_remove_tree(const char *dir);
+
+#endif

@@ -1,0 +1,796 @@
+/* dataset.c — scene listing, split by name hash, lazy LRU cube cache, sample synthesis and a
+ * small worker pool that prepares the next batch ahead (dataset.h).
+ * What it is: a sample is a pure function of (seed, split, index): every random choice is
+ * drawn from lm_rng_split(split generator, index) in a fixed order (sample_plan), so worker
+ * threads, the cache state and the order of preparation never change the numbers.
+ * What it is not: a file reader (cube_io.h), the forward model (forward.h) or the synthetic
+ * generators (synth.h). */
+#include "data/dataset.h"
+#include "data/cube_io.h"
+#include "data/forward.h"
+#include "data/image.h"
+#include "data/spectra.h"
+#include "data/synth.h"
+#include <dirent.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
+
+#define DS_PATH_MAX 4096
+#define DS_MAX_WORKERS 64
+
+typedef struct scene {
+    char *path;          /* what lm_cube_read opens */
+    char *name;          /* hashed for the split */
+    int height, width;
+    lm_data_split split;
+} scene;
+
+typedef struct cache_entry {
+    int scene;           /* -1: empty */
+    int pins;            /* samples using it now (not evictable) */
+    unsigned long last_use;
+    lm_cube cube;
+} cache_entry;
+
+typedef struct batch_slot {
+    long index;
+    int batch;           /* 0: free */
+    int next, done, inflight, cancel;
+    int cap;             /* items the buffers hold */
+    float *raw, *target;
+    lm_status status;
+    int err_item;
+    lm_err err;
+} batch_slot;
+
+struct lm_dataset {
+    lm_dataset_cfg cfg;
+    scene *scenes;
+    int nscenes;
+    int *list[3], count[3], borrowed[3];
+    int too_small;       /* scenes smaller than the patch (in no list) */
+    lm_synth_palette pal;
+    lm_rng rng[3];
+    pthread_mutex_t mu;  /* cache and worker pool */
+    pthread_cond_t work_cv, done_cv;
+    cache_entry *cache;
+    int cache_cap, cached, max_cached;
+    unsigned long tick;
+    long loads;
+    pthread_t threads[DS_MAX_WORKERS];
+    int nthreads, stop;
+    batch_slot slot[2];
+    batch_slot *wanted;
+};
+
+void lm_dataset_default_cfg(lm_dataset_cfg *cfg)
+{
+    *cfg = (lm_dataset_cfg){.patch_h = 66, .patch_w = 64, .synth_fraction = 0.33f,
+                            .noise_min = 0.0f, .noise_max = 0.15f, .flips = 1, .seed = 1,
+                            .workers = 2, .cache_scenes = 0, .val_patches = 64,
+                            .val_noise = 0.0f, .synth_narrowband = 0.5f};
+}
+
+/* ---- split ------------------------------------------------------------------------------ */
+lm_data_split lm_dataset_split_of(const char *name)
+{
+    uint64_t h = 0xcbf29ce484222325ull; /* FNV-1a, then a splitmix finaliser */
+    for (const unsigned char *p = (const unsigned char *)name; *p; p++)
+        h = (h ^ *p) * 0x100000001b3ull;
+    h = (h ^ (h >> 30)) * 0xBF58476D1CE4E5B9ull;
+    h = (h ^ (h >> 27)) * 0x94D049BB133111EBull;
+    h ^= h >> 31;
+    int bucket = (int)(h % 10);
+    return bucket < 8 ? LM_SPLIT_TRAIN : bucket == 8 ? LM_SPLIT_VAL : LM_SPLIT_TEST;
+}
+
+/* ---- scene discovery -------------------------------------------------------------------- */
+static int is_dir(const char *p)
+{
+    struct stat st;
+    return stat(p, &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+static const char *base_name(const char *p) { return strrchr(p, '/') ? strrchr(p, '/') + 1 : p; }
+
+/* Number of CAVE band images `*_ms_NN.png|tif|tiff` directly in dir; first receives band 01. */
+static int cave_bands_in(const char *dir, char *first, size_t n)
+{
+    DIR *d = opendir(dir);
+    if (!d) return 0;
+    int count = 0;
+    struct dirent *de;
+    while ((de = readdir(d)) != NULL) {
+        const char *dot = strrchr(de->d_name, '.');
+        if (de->d_name[0] == '.' || !dot || (strcasecmp(dot, ".png") && strcasecmp(dot, ".tif")
+                                             && strcasecmp(dot, ".tiff")))
+            continue;
+        const char *p = dot;
+        while (p > de->d_name && p[-1] >= '0' && p[-1] <= '9') p--;
+        if (p == dot || p - de->d_name < 4 || strncasecmp(p - 4, "_ms_", 4)) continue;
+        count++;
+        if (atoi(p) == 1 && first) snprintf(first, n, "%s/%s", dir, de->d_name);
+    }
+    closedir(d);
+    return count;
+}
+
+static int is_cube_file(const char *name)
+{
+    const char *dot = strrchr(name, '.');
+    return dot && (!strcasecmp(dot, ".mat") || !strcasecmp(dot, ".exr"));
+}
+
+/* The folder holding a CAVE scene's bands: dir itself, or its single sub-folder with bands
+ * when dir holds nothing else that is a scene (scene/scene/ layout). Empty if dir is not a
+ * CAVE scene. */
+static void cave_band_dir(const char *dir, char *out, size_t n)
+{
+    out[0] = 0;
+    if (cave_bands_in(dir, NULL, 0) > 0) {
+        snprintf(out, n, "%s", dir);
+        return;
+    }
+    DIR *d = opendir(dir);
+    if (!d) return;
+    int found = 0, other = 0;
+    struct dirent *de;
+    while ((de = readdir(d)) != NULL) {
+        char sub[DS_PATH_MAX];
+        if (de->d_name[0] == '.') continue;
+        snprintf(sub, sizeof sub, "%s/%s", dir, de->d_name);
+        if (is_dir(sub) && cave_bands_in(sub, NULL, 0) > 0) {
+            if (found++ == 0) snprintf(out, n, "%s", sub);
+        } else if (is_cube_file(de->d_name)) {
+            other++;
+        }
+    }
+    closedir(d);
+    if (found != 1 || other) out[0] = 0;
+}
+
+static lm_status add_scene(lm_dataset *d, const char *path, const char *name, lm_err *err)
+{
+    scene *s = realloc(d->scenes, (size_t)(d->nscenes + 1) * sizeof *s);
+    if (!s) return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory");
+    d->scenes = s;
+    s += d->nscenes;
+    memset(s, 0, sizeof *s);
+    s->path = strdup(path);
+    s->name = strdup(name);
+    d->nscenes++; /* freed by lm_dataset_close even when incomplete */
+    if (!s->path || !s->name) return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory");
+    char *dot = strrchr(s->name, '.');
+    if (dot && is_cube_file(s->name)) *dot = 0;
+    return LM_OK;
+}
+
+/* A folder of scenes: .mat / .exr files and CAVE scene folders, in name order. */
+static lm_status scan_folder(lm_dataset *d, const char *dir, lm_err *err)
+{
+    struct dirent **ents;
+    int n = scandir(dir, &ents, NULL, alphasort);
+    if (n < 0) return lm_err_set(err, LM_ERR_IO, "%s: cannot open folder", dir);
+    lm_status st = LM_OK;
+    int before = d->nscenes;
+    for (int i = 0; i < n; i++) {
+        char sub[DS_PATH_MAX], bands[DS_PATH_MAX];
+        const char *nm = ents[i]->d_name;
+        snprintf(sub, sizeof sub, "%s/%s", dir, nm);
+        if (st == LM_OK && nm[0] != '.') {
+            if (is_dir(sub)) {
+                cave_band_dir(sub, bands, sizeof bands);
+                if (bands[0]) st = add_scene(d, bands, base_name(bands), err);
+            } else if (is_cube_file(nm)) {
+                st = add_scene(d, sub, nm, err);
+            }
+        }
+        free(ents[i]);
+    }
+    free(ents);
+    if (st == LM_OK && d->nscenes == before)
+        st = lm_err_set(err, LM_ERR_FORMAT, "%s: no scenes in this folder (expected CAVE scene "
+                        "folders, .mat or .exr files)", dir);
+    return st;
+}
+
+static lm_status add_path(lm_dataset *d, const char *path, lm_err *err)
+{
+    struct stat st;
+    if (stat(path, &st) != 0)
+        return lm_err_set(err, LM_ERR_IO, "%s: no such file or folder", path);
+    if (S_ISDIR(st.st_mode)) {
+        char bands[DS_PATH_MAX];
+        cave_band_dir(path, bands, sizeof bands);
+        return bands[0] ? add_scene(d, bands, base_name(bands), err) : scan_folder(d, path, err);
+    }
+    if (!is_cube_file(path))
+        return lm_err_set(err, LM_ERR_UNSUPPORTED, "%s: not a scene (expected a CAVE folder, "
+                          ".mat or .exr)", path);
+    return add_scene(d, path, base_name(path), err);
+}
+
+/* ---- scene headers ---------------------------------------------------------------------- */
+/* 31 spectral channels (T., else S0.) at 400..700 nm in an EXR header? Returns their count. */
+static int exr_bands_ok(const lm_image *im, int *ok)
+{
+    const char *prefix[2] = {"T.", "S0."};
+    int nb = 0;
+    *ok = 1;
+    for (int p = 0; p < 2 && nb == 0; p++)
+        for (int c = 0; c < im->channels; c++) {
+            double nm;
+            if (!lm_spectral_channel_parse(im->names[c], prefix[p], &nm)) continue;
+            *ok &= fabs(fmod(nm - 400.0, 10.0)) < 0.5 && nm > 399.5 && nm < 700.5;
+            nb++;
+        }
+    *ok &= nb == LM_GRID31_COUNT;
+    return nb;
+}
+
+/* Sizes from headers (CAVE band 01, EXR); a .mat is read whole (matio has no cheap
+ * thread-safe header path here). */
+static lm_status probe_scene(scene *s, lm_err *err)
+{
+    lm_cube_format f = lm_cube_detect(s->path);
+    char hdr[DS_PATH_MAX] = "";
+    if (f == LM_CUBE_FMT_MAT) {
+        lm_cube c;
+        lm_status st = lm_cube_read(s->path, &c, err);
+        s->height = c.height;
+        s->width = c.width;
+        lm_cube_free(&c);
+        return st;
+    }
+    int n = f == LM_CUBE_FMT_CAVE ? cave_bands_in(s->path, hdr, sizeof hdr) : 0;
+    if (f == LM_CUBE_FMT_CAVE && (n != LM_CAVE_BANDS || !hdr[0]))
+        return lm_err_set(err, LM_ERR_FORMAT, "%s: CAVE scene with %d band images%s; expected "
+                          "%d (_ms_01 .. _ms_31)", s->path, n, hdr[0] ? "" : " and no band 01",
+                          LM_CAVE_BANDS);
+    lm_image im;
+    lm_status st = lm_image_info(f == LM_CUBE_FMT_CAVE ? hdr : s->path, &im, err);
+    int ok = 1, nb = st == LM_OK && f == LM_CUBE_FMT_EXR ? exr_bands_ok(&im, &ok) : 0;
+    s->height = im.height;
+    s->width = im.width;
+    lm_image_free(&im);
+    if (st == LM_OK && !ok)
+        st = lm_err_set(err, LM_ERR_FORMAT, "%s: dataset scenes need 31 bands at 400..700 nm "
+                        "(10 nm); the file has %d spectral channels", s->path, nb);
+    return st;
+}
+
+/* ---- splits ----------------------------------------------------------------------------- */
+static int fits(const lm_dataset *d, const scene *s)
+{
+    return s->height >= d->cfg.patch_h && s->width >= d->cfg.patch_w;
+}
+
+static lm_status build_splits(lm_dataset *d, lm_err *err)
+{
+    for (int k = 0; k < 3; k++) {
+        d->list[k] = malloc((size_t)(d->nscenes + 1) * sizeof(int));
+        if (!d->list[k]) return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory");
+    }
+    for (int i = 0; i < d->nscenes; i++) {
+        d->scenes[i].split = lm_dataset_split_of(d->scenes[i].name);
+        if (!fits(d, &d->scenes[i])) d->too_small++;
+        else d->list[d->scenes[i].split][d->count[d->scenes[i].split]++] = i;
+    }
+    int usable = d->nscenes - d->too_small;
+    if (d->nscenes > 0 && usable == 0) {
+        const scene *big = &d->scenes[0];
+        for (int i = 1; i < d->nscenes; i++)
+            if ((long)d->scenes[i].height * d->scenes[i].width > (long)big->height * big->width)
+                big = &d->scenes[i];
+        return lm_err_set(err, LM_ERR_SHAPE, "dataset: patch %d x %d is larger than every scene "
+                          "(largest: %s, %d x %d)", d->cfg.patch_h, d->cfg.patch_w, big->path,
+                          big->height, big->width);
+    }
+    for (int k = 0; k < 3 && d->nscenes < 3; k++) {
+        if (d->count[k] > 0) continue;
+        d->borrowed[k] = 1;
+        for (int i = 0; i < d->nscenes; i++)
+            if (fits(d, &d->scenes[i])) d->list[k][d->count[k]++] = i;
+    }
+    return LM_OK;
+}
+
+/* ---- cache ------------------------------------------------------------------------------ */
+typedef struct scene_ref {
+    int entry;          /* cache entry pinned, or -1: priv holds a private copy */
+    lm_cube priv;
+    const lm_cube *cube;
+} scene_ref;
+
+static int cache_find(const lm_dataset *d, int s)
+{
+    for (int e = 0; e < d->cache_cap; e++)
+        if (d->cache[e].scene == s) return e;
+    return -1;
+}
+
+/* An empty entry, else the least recently used unpinned one (evicted), else -1. */
+static int cache_victim(lm_dataset *d)
+{
+    int best = -1;
+    for (int e = 0; e < d->cache_cap; e++) {
+        cache_entry *c = &d->cache[e];
+        if (c->scene < 0) return e;
+        if (c->pins == 0 && (best < 0 || c->last_use < d->cache[best].last_use)) best = e;
+    }
+    if (best >= 0) {
+        lm_cube_free(&d->cache[best].cube);
+        d->cache[best].scene = -1;
+        d->cached--;
+    }
+    return best;
+}
+
+static lm_status load_checked(const lm_dataset *d, int s, lm_cube *c, lm_err *err)
+{
+    const scene *sc = &d->scenes[s];
+    lm_status st = lm_cube_read(sc->path, c, err);
+    if (st != LM_OK) return st;
+    int grid = c->bands == LM_GRID31_COUNT && fabsf(c->wavelength[0] - 400.0f) < 0.5f &&
+               fabsf(c->wavelength[30] - 700.0f) < 0.5f;
+    if (!grid || c->height != sc->height || c->width != sc->width) {
+        st = lm_err_set(err, LM_ERR_FORMAT, "%s: read %d bands of %d x %d; the dataset expected "
+                        "31 bands 400..700 nm of %d x %d (file changed?)", sc->path, c->bands,
+                        c->height, c->width, sc->height, sc->width);
+        lm_cube_free(c);
+    }
+    return st;
+}
+
+/* Under the lock: pin entry r->entry for a sample. */
+static void pin(lm_dataset *d, scene_ref *r)
+{
+    d->cache[r->entry].pins++;
+    d->cache[r->entry].last_use = ++d->tick;
+    r->cube = &d->cache[r->entry].cube;
+}
+
+static lm_status scene_acquire(lm_dataset *d, int s, scene_ref *r, lm_err *err)
+{
+    memset(r, 0, sizeof *r);
+    pthread_mutex_lock(&d->mu);
+    r->entry = cache_find(d, s);
+    if (r->entry >= 0) pin(d, r);
+    pthread_mutex_unlock(&d->mu);
+    if (r->entry >= 0) return LM_OK;
+    lm_cube c;
+    lm_status st = load_checked(d, s, &c, err); /* outside the lock: workers load in parallel */
+    if (st != LM_OK) return st;
+    pthread_mutex_lock(&d->mu);
+    d->loads++;
+    r->entry = cache_find(d, s); /* another thread may have loaded it meanwhile */
+    if (r->entry >= 0) {
+        lm_cube_free(&c);
+    } else if ((r->entry = cache_victim(d)) >= 0) {
+        d->cache[r->entry].scene = s;
+        d->cache[r->entry].cube = c;
+        d->cached++;
+        d->max_cached = d->cached > d->max_cached ? d->cached : d->max_cached;
+    }
+    if (r->entry >= 0) {
+        pin(d, r);
+    } else {
+        r->priv = c; /* every entry pinned: use it once, uncached */
+        r->cube = &r->priv;
+    }
+    pthread_mutex_unlock(&d->mu);
+    return LM_OK;
+}
+
+static void scene_release(lm_dataset *d, scene_ref *r)
+{
+    pthread_mutex_lock(&d->mu);
+    if (r->entry >= 0) d->cache[r->entry].pins--;
+    pthread_mutex_unlock(&d->mu);
+    if (r->entry < 0) lm_cube_free(&r->priv);
+}
+
+void lm_dataset_get_stats(lm_dataset *d, lm_dataset_stats *st)
+{
+    pthread_mutex_lock(&d->mu);
+    *st = (lm_dataset_stats){d->loads, d->cached, d->max_cached};
+    pthread_mutex_unlock(&d->mu);
+}
+
+/* ---- one sample ------------------------------------------------------------------------- */
+typedef struct sample_plan {
+    lm_dataset_sample_info info;
+    uint64_t synth_seed;
+    lm_rng synth_rng, noise_rng;
+} sample_plan;
+
+/* Every draw in a fixed order, whatever the sample turns out to be. */
+static lm_status plan_sample(const lm_dataset *d, lm_data_split split, long i, sample_plan *p,
+                             lm_err *err)
+{
+    const lm_dataset_cfg *c = &d->cfg;
+    lm_rng r = lm_rng_split(&d->rng[split], (uint64_t)i);
+    memset(p, 0, sizeof *p);
+    float u_synth = lm_rng_uniform(&r), u_kind = lm_rng_uniform(&r);
+    float k = lm_rng_uniform_range(&r, c->noise_min, c->noise_max);
+    uint32_t pick = lm_rng_u32(&r), py = lm_rng_u32(&r), px = lm_rng_u32(&r);
+    int fh = (int)lm_rng_below(&r, 2), fv = (int)lm_rng_below(&r, 2);
+    p->synth_seed = lm_rng_u64(&r);
+    p->synth_rng = lm_rng_split(&r, 1);
+    p->noise_rng = lm_rng_split(&r, 2);
+    int train = split == LM_SPLIT_TRAIN;
+    lm_dataset_sample_info *in = &p->info;
+    in->scene = -1;
+    in->noise_k = train ? k : c->val_noise;
+    if (train && u_synth < c->synth_fraction) {
+        in->kind = u_kind < c->synth_narrowband ? LM_SAMPLE_NARROWBAND : LM_SAMPLE_PROCEDURAL;
+    } else {
+        int n = d->count[split];
+        if (n == 0)
+            return lm_err_set(err, LM_ERR_ARG, "dataset: the %s split has no scene (%d scenes "
+                              "listed, %d smaller than the %d x %d patch)", train ? "training"
+                              : split == LM_SPLIT_VAL ? "validation" : "test", d->nscenes,
+                              d->too_small, c->patch_h, c->patch_w);
+        in->kind = LM_SAMPLE_SCENE;
+        in->scene = train ? (int)(pick % (uint32_t)n) : (int)(i % n);
+        const scene *s = &d->scenes[d->list[split][in->scene]];
+        int tr = c->sys->tile_rows, tc = c->sys->tile_cols;
+        in->y0 = tr * (int)(py % (uint32_t)((s->height - c->patch_h) / tr + 1));
+        in->x0 = tc * (int)(px % (uint32_t)((s->width - c->patch_w) / tc + 1));
+    }
+    in->flip_h = train && c->flips ? fh : 0;
+    in->flip_v = train && c->flips ? fv : 0;
+    return LM_OK;
+}
+
+lm_status lm_dataset_sample_info_get(const lm_dataset *d, lm_data_split split, long i,
+                                     lm_dataset_sample_info *info, lm_err *err)
+{
+    if ((int)split < 0 || split > LM_SPLIT_TEST || i < 0)
+        return lm_err_set(err, LM_ERR_ARG, "dataset: bad split %d or sample %ld", (int)split, i);
+    sample_plan p;
+    lm_status st = plan_sample(d, split, i, &p, err);
+    if (st == LM_OK) *info = p.info;
+    return st;
+}
+
+/* The 31-band patch of a sample, flips applied. */
+static lm_status sample_cube(lm_dataset *d, sample_plan *p, lm_data_split split, lm_cube *out,
+                             lm_err *err)
+{
+    int ph = d->cfg.patch_h, pw = d->cfg.patch_w;
+    const lm_dataset_sample_info *in = &p->info;
+    if (in->kind == LM_SAMPLE_NARROWBAND) return lm_synth_gauss_patch(&p->synth_rng, ph, pw, out,
+                                                                       NULL, err);
+    lm_cube src = {0};
+    scene_ref ref = {-1, {0}, NULL};
+    lm_status st;
+    if (in->kind == LM_SAMPLE_PROCEDURAL) {
+        st = lm_synth_scene(p->synth_seed, ph, pw, &d->pal, &src, err);
+    } else {
+        st = scene_acquire(d, d->list[split][in->scene], &ref, err);
+        if (st == LM_OK) src = *ref.cube;
+    }
+    if (st == LM_OK) st = lm_cube_alloc(out, LM_GRID31_COUNT, ph, pw, LM_GRID31_START, 10.0f);
+    if (st == LM_OK) {
+        int y0 = in->y0, x0 = in->x0; /* 0, 0 for synthetic patches */
+        for (int b = 0; b < LM_GRID31_COUNT; b++)
+            for (int y = 0; y < ph; y++) {
+                int sy = y0 + (in->flip_v ? ph - 1 - y : y);
+                const float *srow = lm_cube_band(&src, b) + (size_t)sy * src.width + x0;
+                float *drow = lm_cube_band(out, b) + (size_t)y * pw;
+                for (int x = 0; x < pw; x++) drow[x] = srow[in->flip_h ? pw - 1 - x : x];
+            }
+    }
+    if (in->kind == LM_SAMPLE_PROCEDURAL) lm_cube_free(&src);
+    else if (ref.cube) scene_release(d, &ref);
+    return st;
+}
+
+static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, float *raw, float *target,
+                             lm_err *err)
+{
+    sample_plan p;
+    lm_status st = plan_sample(d, split, i, &p, err);
+    lm_cube c31 = {0}, c41 = {0}, t33 = {0};
+    if (st == LM_OK) st = sample_cube(d, &p, split, &c31, err);
+    if (st == LM_OK) st = lm_cube_mirror41(&c31, &c41, err);
+    if (st == LM_OK) st = lm_forward_clean(d->cfg.sys, &c41, 0, 0, raw, NULL, 1, err);
+    if (st == LM_OK && p.info.noise_k > 0.0f) {
+        lm_noise_opts no = {0};
+        no.gauss_k = p.info.noise_k;
+        st = lm_forward_noise(raw, d->cfg.patch_h, d->cfg.patch_w, &no, &p.noise_rng, 1, err);
+    }
+    if (st == LM_OK) st = lm_cube_target33(&c41, &t33, err);
+    if (st == LM_OK)
+        memcpy(target, t33.data, (size_t)LM_TARGET_CHANNELS * t33.height * t33.width *
+               sizeof(float));
+    lm_cube_free(&c31);
+    lm_cube_free(&c41);
+    lm_cube_free(&t33);
+    return st;
+}
+
+/* ---- worker pool ------------------------------------------------------------------------ */
+static size_t raw_items(const lm_dataset *d) { return (size_t)d->cfg.patch_h * d->cfg.patch_w; }
+
+static batch_slot *find_job(lm_dataset *d)
+{
+    if (d->wanted && !d->wanted->cancel && d->wanted->next < d->wanted->batch) return d->wanted;
+    for (int k = 0; k < 2; k++) {
+        batch_slot *s = &d->slot[k];
+        if (s->batch > 0 && !s->cancel && s->next < s->batch) return s;
+    }
+    return NULL;
+}
+
+static void *worker_main(void *arg)
+{
+    lm_dataset *d = arg;
+    size_t n = raw_items(d);
+    pthread_mutex_lock(&d->mu);
+    for (;;) {
+        batch_slot *s = NULL;
+        while (!d->stop && !(s = find_job(d))) pthread_cond_wait(&d->work_cv, &d->mu);
+        if (d->stop) break;
+        int j = s->next++;
+        long i = s->index * s->batch + j;
+        s->inflight++;
+        pthread_mutex_unlock(&d->mu);
+        lm_err e = {LM_OK, ""};
+        lm_status st = make_sample(d, LM_SPLIT_TRAIN, i, s->raw + (size_t)j * n,
+                                   s->target + (size_t)j * LM_TARGET_CHANNELS * n, &e);
+        pthread_mutex_lock(&d->mu);
+        s->inflight--;
+        s->done++;
+        if (st != LM_OK && (s->status == LM_OK || j < s->err_item)) {
+            s->status = st;
+            s->err_item = j;
+            s->err = e;
+        }
+        pthread_cond_broadcast(&d->done_cv);
+    }
+    pthread_mutex_unlock(&d->mu);
+    return NULL;
+}
+
+/* Under the lock: a free slot set up for (index, B). */
+static batch_slot *slot_start(lm_dataset *d, long index, int B, lm_err *err)
+{
+    /* batch_pooled frees every other slot first, so one is always free */
+    batch_slot *s = d->slot[0].batch == 0 ? &d->slot[0] : &d->slot[1];
+    if (s->cap < B) {
+        size_t n = raw_items(d) * (size_t)B;
+        float *raw = realloc(s->raw, n * sizeof(float));
+        if (raw) s->raw = raw;
+        float *tg = raw ? realloc(s->target, n * LM_TARGET_CHANNELS * sizeof(float)) : NULL;
+        if (tg) s->target = tg;
+        if (!raw || !tg) {
+            lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory for a batch of %d", B);
+            return NULL;
+        }
+        s->cap = B;
+    }
+    s->index = index;
+    s->batch = B;
+    s->next = s->done = s->inflight = s->cancel = 0;
+    s->status = LM_OK;
+    s->err_item = B;
+    lm_err_clear(&s->err);
+    pthread_cond_broadcast(&d->work_cv);
+    return s;
+}
+
+static lm_status batch_pooled(lm_dataset *d, long index, int B, float *raw, float *target,
+                              lm_err *err)
+{
+    pthread_mutex_lock(&d->mu);
+    batch_slot *s = NULL, *stale = NULL;
+    for (int k = 0; k < 2; k++) {
+        batch_slot *c = &d->slot[k];
+        if (c->batch == 0) continue;
+        if (c->index == index && c->batch == B && !c->cancel) s = c;
+        else stale = c;
+    }
+    if (stale) { /* a prefetch nobody asked for: stop it */
+        stale->cancel = 1;
+        while (stale->inflight > 0) pthread_cond_wait(&d->done_cv, &d->mu);
+        stale->batch = 0;
+    }
+    if (!s) s = slot_start(d, index, B, err);
+    lm_status st = s ? LM_OK : LM_ERR_NOMEM;
+    if (s) {
+        d->wanted = s;
+        while (s->done < B) pthread_cond_wait(&d->done_cv, &d->mu);
+        d->wanted = NULL;
+        st = s->status;
+        if (st != LM_OK) lm_err_set(err, st, "%s", s->err.msg);
+        s->cancel = 1; /* completed: no worker touches it; keep it out of find_job */
+    }
+    pthread_mutex_unlock(&d->mu);
+    if (st == LM_OK) {
+        size_t n = raw_items(d) * (size_t)B;
+        memcpy(raw, s->raw, n * sizeof(float));
+        memcpy(target, s->target, n * LM_TARGET_CHANNELS * sizeof(float));
+    }
+    pthread_mutex_lock(&d->mu);
+    if (s) s->batch = 0;
+    lm_err ignore = {LM_OK, ""};
+    if (st == LM_OK) slot_start(d, index + 1, B, &ignore); /* prefetch the next batch */
+    pthread_mutex_unlock(&d->mu);
+    return st;
+}
+
+lm_status lm_dataset_batch(lm_dataset *d, long index, int batch, float *raw, float *target,
+                           lm_err *err)
+{
+    if (index < 0 || batch < 1 || !raw || !target)
+        return lm_err_set(err, LM_ERR_ARG, "dataset batch: need index >= 0, batch >= 1 and "
+                          "buffers (got %ld, %d)", index, batch);
+    if (d->nthreads > 0) return batch_pooled(d, index, batch, raw, target, err);
+    size_t n = raw_items(d);
+    for (int j = 0; j < batch; j++) {
+        lm_status st = make_sample(d, LM_SPLIT_TRAIN, index * batch + j, raw + (size_t)j * n,
+                                   target + (size_t)j * LM_TARGET_CHANNELS * n, err);
+        if (st != LM_OK) return st;
+    }
+    return LM_OK;
+}
+
+/* ---- evaluation samples, accessors ------------------------------------------------------ */
+int lm_dataset_eval_count(const lm_dataset *d, lm_data_split split)
+{
+    if (split != LM_SPLIT_VAL && split != LM_SPLIT_TEST) return 0;
+    return d->count[split] > 0 ? d->cfg.val_patches : 0;
+}
+
+lm_status lm_dataset_eval_sample(lm_dataset *d, lm_data_split split, int i, float *raw,
+                                 float *target, lm_err *err)
+{
+    if (split != LM_SPLIT_VAL && split != LM_SPLIT_TEST)
+        return lm_err_set(err, LM_ERR_ARG, "dataset eval sample: split must be validation or "
+                          "test");
+    if (i < 0 || i >= lm_dataset_eval_count(d, split))
+        return lm_err_set(err, LM_ERR_ARG, "dataset eval sample: index %d outside 0..%d", i,
+                          lm_dataset_eval_count(d, split) - 1);
+    return make_sample(d, split, i, raw, target, err);
+}
+
+int lm_dataset_num_scenes(const lm_dataset *d, lm_data_split split)
+{
+    return (int)split >= 0 && split <= LM_SPLIT_TEST ? d->count[split] : 0;
+}
+
+const char *lm_dataset_scene_name(const lm_dataset *d, lm_data_split split, int i)
+{
+    return i < 0 || i >= lm_dataset_num_scenes(d, split) ? NULL : d->scenes[d->list[split][i]].name;
+}
+
+const char *lm_dataset_scene_path(const lm_dataset *d, lm_data_split split, int i)
+{
+    return i < 0 || i >= lm_dataset_num_scenes(d, split) ? NULL : d->scenes[d->list[split][i]].path;
+}
+
+void lm_dataset_describe(const lm_dataset *d, FILE *f)
+{
+    static const char *names[3] = {"train", "val", "test"};
+    const lm_dataset_cfg *c = &d->cfg;
+    fprintf(f, "dataset: %d scenes; patch %d x %d; synthetic %.0f%% (%.0f%% of them narrowband, "
+            "the rest procedural); noise k ~ U[%g, %g]; flips %s; seed %llu; %d workers; cache "
+            "%d scenes\n", d->nscenes, c->patch_h, c->patch_w, 100.0 * c->synth_fraction,
+            100.0 * c->synth_narrowband, c->noise_min, c->noise_max, c->flips ? "on" : "off",
+            (unsigned long long)c->seed, d->nthreads, d->cache_cap);
+    for (int k = 0; k < 3; k++) {
+        fprintf(f, "  %-5s %d scenes%s", names[k], d->count[k],
+                d->borrowed[k] ? " (borrowed: fewer than 3 scenes, this split reuses all of "
+                                 "them)" : "");
+        if (k > 0) fprintf(f, ", %d fixed samples (noise k = %g)", lm_dataset_eval_count(d, k),
+                           c->val_noise);
+        if (d->count[k] == 0) fprintf(f, " (no scene hashed here: %s)", k ? "not evaluated"
+                                      : "synthetic samples only");
+        fputc('\n', f);
+    }
+    if (d->too_small)
+        fprintf(f, "  %d scenes smaller than the patch are not used\n", d->too_small);
+}
+
+/* ---- open / close ----------------------------------------------------------------------- */
+static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
+{
+    const lm_system *s = c->sys;
+    if (!s) return lm_err_set(err, LM_ERR_ARG, "dataset: no system description");
+    if (s->nbins != LM_GRID41_COUNT || fabsf(s->grid_start - LM_GRID41_START) > 0.01f ||
+        fabsf(s->grid_step - LM_GRID41_STEP) > 0.01f)
+        return lm_err_set(err, LM_ERR_ARG, "dataset: the system '%s' must use the 380..780 nm "
+                          "grid of 41 bins (has %d bins from %g nm)", s->name, s->nbins,
+                          s->grid_start);
+    if (c->patch_h < 1 || c->patch_w < 1 || c->patch_h % s->tile_rows ||
+        c->patch_w % s->tile_cols)
+        return lm_err_set(err, LM_ERR_SHAPE, "dataset: patch %d x %d is not a positive multiple "
+                          "of the %d x %d tile", c->patch_h, c->patch_w, s->tile_rows,
+                          s->tile_cols);
+    if (!(c->synth_fraction >= 0.0f && c->synth_fraction <= 1.0f) ||
+        !(c->synth_narrowband >= 0.0f && c->synth_narrowband <= 1.0f))
+        return lm_err_set(err, LM_ERR_ARG, "dataset: synth_fraction and synth_narrowband must "
+                          "be in [0, 1] (got %g, %g)", c->synth_fraction, c->synth_narrowband);
+    if (!(c->noise_min >= 0.0f && c->noise_max >= c->noise_min && isfinite(c->noise_max)) ||
+        !(c->val_noise >= 0.0f && isfinite(c->val_noise)))
+        return lm_err_set(err, LM_ERR_ARG, "dataset: need 0 <= noise_min <= noise_max and "
+                          "val_noise >= 0 (got %g, %g, %g)", c->noise_min, c->noise_max,
+                          c->val_noise);
+    if (c->workers < 0 || c->workers > DS_MAX_WORKERS || c->cache_scenes < 0 ||
+        c->val_patches < 0 || c->npaths < 0 || (c->npaths > 0 && !c->paths))
+        return lm_err_set(err, LM_ERR_ARG, "dataset: need 0 <= workers <= %d, cache_scenes >= 0, "
+                          "val_patches >= 0 and a path list", DS_MAX_WORKERS);
+    if (c->npaths == 0 && c->synth_fraction < 1.0f)
+        return lm_err_set(err, LM_ERR_ARG, "dataset: no scene paths given (only a fully "
+                          "synthetic dataset, synth_fraction 1, needs none)");
+    return LM_OK;
+}
+
+static lm_status open_scenes(lm_dataset *d, lm_err *err)
+{
+    lm_status st = LM_OK;
+    for (int p = 0; p < d->cfg.npaths && st == LM_OK; p++) st = add_path(d, d->cfg.paths[p], err);
+    for (int i = 0; i < d->nscenes && st == LM_OK; i++) st = probe_scene(&d->scenes[i], err);
+    if (st == LM_OK) st = build_splits(d, err);
+    if (st != LM_OK) return st;
+    d->cache_cap = d->cfg.cache_scenes > 0 && d->cfg.cache_scenes < d->nscenes
+                   ? d->cfg.cache_scenes : d->nscenes;
+    d->cache = calloc((size_t)(d->cache_cap + 1), sizeof *d->cache);
+    if (!d->cache) return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory");
+    for (int e = 0; e < d->cache_cap; e++) d->cache[e].scene = -1;
+    return LM_OK;
+}
+
+lm_dataset *lm_dataset_open(const lm_dataset_cfg *cfg, lm_err *err)
+{
+    if (check_cfg(cfg, err) != LM_OK) return NULL;
+    lm_dataset *d = calloc(1, sizeof *d);
+    if (!d) return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory"), NULL;
+    d->cfg = *cfg;
+    pthread_mutex_init(&d->mu, NULL);
+    pthread_cond_init(&d->work_cv, NULL);
+    pthread_cond_init(&d->done_cv, NULL);
+    lm_status st = open_scenes(d, err);
+    d->cfg.paths = NULL; /* the caller's list is only read during open */
+    if (st == LM_OK && cfg->synth_fraction > 0.0f) st = lm_synth_palette_load(&d->pal, err);
+    lm_rng base;
+    lm_rng_seed(&base, cfg->seed);
+    for (int k = 0; k < 3; k++) d->rng[k] = lm_rng_split(&base, 0x5EED0000u + (uint64_t)k);
+    for (int t = 0; t < cfg->workers && st == LM_OK; t++) {
+        if (pthread_create(&d->threads[t], NULL, worker_main, d) != 0)
+            st = lm_err_set(err, LM_ERR_NOMEM, "dataset: cannot start worker thread %d", t);
+        else
+            d->nthreads++;
+    }
+    if (st != LM_OK) {
+        lm_dataset_close(d);
+        return NULL;
+    }
+    return d;
+}
+
+void lm_dataset_close(lm_dataset *d)
+{
+    if (!d) return;
+    pthread_mutex_lock(&d->mu);
+    d->stop = 1;
+    pthread_cond_broadcast(&d->work_cv);
+    pthread_mutex_unlock(&d->mu);
+    for (int t = 0; t < d->nthreads; t++) pthread_join(d->threads[t], NULL);
+    for (int k = 0; k < 2; k++) free(d->slot[k].raw), free(d->slot[k].target);
+    for (int e = 0; e < d->cache_cap && d->cache; e++) lm_cube_free(&d->cache[e].cube);
+    free(d->cache);
+    for (int i = 0; i < d->nscenes; i++) free(d->scenes[i].path), free(d->scenes[i].name);
+    free(d->scenes);
+    for (int k = 0; k < 3; k++) free(d->list[k]);
+    pthread_cond_destroy(&d->work_cv);
+    pthread_cond_destroy(&d->done_cv);
+    pthread_mutex_destroy(&d->mu);
+    free(d);
+}

@@ -1,0 +1,670 @@
+/* test_dataset.c — the sampler (data/dataset.h): split by name hash (determinism, 80/10/10,
+ * disjoint, stable when scenes are added, borrowing below 3 scenes), tile-aligned patches
+ * (a fixture whose values encode the position: the target tells where the patch came from and
+ * the raw equals lm_forward_clean of that crop), flips applied to the cube before simulation,
+ * the 33-channel target written out here, batch determinism across datasets, worker counts
+ * and batch sizes, noise level distribution and actual noise, synthetic proportion, the LRU
+ * bound (load counts), fixed evaluation samples, and bad input. Fixtures are spectral EXR files
+ * written to a mkdtemp folder (removed at the end); the real CAVE samples come from
+ * $LM_SHARED_DIR/data/cave. */
+#define _GNU_SOURCE
+#include "tests/check.h"
+#include "data/cube_io.h"
+#include "data/dataset.h"
+#include "data/forward.h"
+#include "data/spectra.h"
+#include <dirent.h>
+#include <stdlib.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+static char tmpdir[] = "/tmp/lm_dataset_XXXXXX";
+static lm_system g_sys;
+static int g_ok;
+static lm_err g_err;
+
+#define PH 12
+#define PW 16
+#define POS_H 30
+#define POS_W 40
+
+static const char *shared_dir(void)
+{
+    static char buf[1024];
+    const char *env = getenv("LM_SHARED_DIR");
+    if (env) return env;
+    snprintf(buf, sizeof buf, "%s", __FILE__);
+    for (int k = 0; k < 2; k++) {
+        char *s = strrchr(buf, '/');
+        if (s) *s = 0;
+        else snprintf(buf, sizeof buf, "..");
+    }
+    strncat(buf, "/../shared", sizeof buf - strlen(buf) - 1);
+    return buf;
+}
+
+/* The position fixture: band 0 = (y+1)/1000, band 1 = (x+1)/1000, others vary with b, y, x. */
+static float pos_value(int b, int y, int x)
+{
+    if (b == 0) return (float)(y + 1) / 1000.0f;
+    if (b == 1) return (float)(x + 1) / 1000.0f;
+    return 0.05f + (float)((b * 7 + y * 3 + x * 5) % 17) / 20.0f;
+}
+
+static void write_scene(const char *path, int h, int w, int kind)
+{
+    lm_cube c;
+    CHECK(lm_cube_alloc(&c, 31, h, w, 400, 10) == LM_OK);
+    for (int b = 0; b < 31; b++)
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w; x++)
+                lm_cube_band(&c, b)[y * w + x] = kind ? pos_value(b, y, x)
+                                                      : 0.1f + 0.02f * (float)((b + y + x) % 9);
+    lm_err e;
+    lm_err_clear(&e);
+    CHECK_MSG(lm_cube_write_exr(path, &c, &e) == LM_OK, "%s", e.msg);
+    lm_cube_free(&c);
+}
+
+static void subdir(char *out, size_t n, const char *name)
+{
+    snprintf(out, n, "%s/%s", tmpdir, name);
+    mkdir(out, 0700);
+}
+
+static lm_dataset_cfg base_cfg(const char *const *paths, int npaths)
+{
+    lm_dataset_cfg c;
+    lm_dataset_default_cfg(&c);
+    c.paths = paths;
+    c.npaths = npaths;
+    c.sys = &g_sys;
+    c.patch_h = PH;
+    c.patch_w = PW;
+    c.synth_fraction = 0.0f;
+    c.noise_min = c.noise_max = 0.0f;
+    c.flips = 0;
+    c.workers = 0;
+    c.seed = 42;
+    c.val_patches = 4;
+    return c;
+}
+
+static char g_posdir[1024], g_pospath[1100];
+
+/* ---- split ------------------------------------------------------------------------------ */
+static void test_split_hash_proportions(void)
+{
+    int n[3] = {0, 0, 0};
+    const int N = 3000;
+    for (int i = 0; i < N; i++) {
+        char name[32];
+        snprintf(name, sizeof name, "scene_%04d", i);
+        lm_data_split s = lm_dataset_split_of(name);
+        CHECK(s == lm_dataset_split_of(name));
+        n[s]++;
+    }
+    CHECK_CLOSE(n[0] / (double)N, 0.8, 0.025, 0);
+    CHECK_CLOSE(n[1] / (double)N, 0.1, 0.02, 0);
+    CHECK_CLOSE(n[2] / (double)N, 0.1, 0.02, 0);
+}
+
+static int in_split(const lm_dataset *d, lm_data_split s, const char *name)
+{
+    for (int i = 0; i < lm_dataset_num_scenes(d, s); i++)
+        if (!strcmp(lm_dataset_scene_name(d, s, i), name)) return 1;
+    return 0;
+}
+
+static void test_split_open(void)
+{
+    char dir[1024], path[1100];
+    subdir(dir, sizeof dir, "fake");
+    const int NS = 14;
+    for (int i = 0; i < NS; i++) {
+        snprintf(path, sizeof path, "%s/fake_scene_%02d.exr", dir, i);
+        write_scene(path, 9, 8, 0);
+    }
+    const char *paths[1] = {dir};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    cfg.patch_h = 6;
+    cfg.patch_w = 8;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e), *d2 = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d && d2, "%s", e.msg);
+    if (!d || !d2) return;
+    int total = 0;
+    for (int s = 0; s < 3; s++) {
+        total += lm_dataset_num_scenes(d, s);
+        CHECK(lm_dataset_num_scenes(d, s) == lm_dataset_num_scenes(d2, s));
+        for (int i = 0; i < lm_dataset_num_scenes(d, s); i++) {
+            const char *nm = lm_dataset_scene_name(d, s, i);
+            CHECK(lm_dataset_split_of(nm) == (lm_data_split)s);
+            CHECK(!strcmp(nm, lm_dataset_scene_name(d2, s, i)));
+            CHECK(in_split(d, s, nm) + in_split(d, (s + 1) % 3, nm) +
+                  in_split(d, (s + 2) % 3, nm) == 1); /* never in two splits */
+        }
+    }
+    CHECK(total == NS);
+    /* adding scenes leaves the others where they were */
+    for (int i = NS; i < NS + 6; i++) {
+        snprintf(path, sizeof path, "%s/fake_scene_%02d.exr", dir, i);
+        write_scene(path, 9, 8, 0);
+    }
+    lm_dataset *d3 = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d3 != NULL, "%s", e.msg);
+    for (int s = 0; s < 3 && d3; s++)
+        for (int i = 0; i < lm_dataset_num_scenes(d, s); i++)
+            CHECK(in_split(d3, s, lm_dataset_scene_name(d, s, i)));
+    lm_dataset_close(d);
+    lm_dataset_close(d2);
+    lm_dataset_close(d3);
+}
+
+static void test_borrow_below_three_scenes(void)
+{
+    const char *paths[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    if (!d) return;
+    for (int s = 0; s < 3; s++) CHECK(lm_dataset_num_scenes(d, s) == 1);
+    CHECK(lm_dataset_eval_count(d, LM_SPLIT_VAL) == 4 && lm_dataset_eval_count(d, LM_SPLIT_TEST));
+    char *buf = NULL;
+    size_t n = 0;
+    FILE *f = open_memstream(&buf, &n);
+    lm_dataset_describe(d, f);
+    fclose(f);
+    CHECK(buf && strstr(buf, "borrowed"));
+    free(buf);
+    lm_dataset_close(d);
+}
+
+static void ref_raw(const lm_cube *c31, float *raw);
+static void crop(lm_cube *out, int y0, int x0, int fh, int fv);
+
+static void test_eval_samples_fixed(void)
+{
+    const char *paths[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    cfg.flips = 1;
+    cfg.synth_fraction = 0.5f;
+    cfg.noise_max = 0.1f;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    if (!d) return;
+    float raw[PH * PW], raw2[PH * PW], t[33 * PH * PW], t2[33 * PH * PW], rr[PH * PW];
+    int offsets = 0, last = -1;
+    for (int s = LM_SPLIT_VAL; s <= LM_SPLIT_TEST; s++)
+        for (int i = 0; i < lm_dataset_eval_count(d, s); i++) {
+            lm_dataset_sample_info info;
+            CHECK(lm_dataset_sample_info_get(d, s, i, &info, &e) == LM_OK);
+            CHECK(info.kind == LM_SAMPLE_SCENE && !info.flip_h && !info.flip_v &&
+                  info.noise_k == 0.0f); /* real scenes, no flips, val_noise */
+            CHECK(lm_dataset_eval_sample(d, s, i, raw, t, &e) == LM_OK);
+            CHECK(lm_dataset_eval_sample(d, s, i, raw2, t2, &e) == LM_OK);
+            CHECK(memcmp(raw, raw2, sizeof raw) == 0 && memcmp(t, t2, sizeof t) == 0);
+            lm_cube c;
+            crop(&c, info.y0, info.x0, 0, 0);
+            ref_raw(&c, rr);
+            CHECK_ARRAY_CLOSE(raw, rr, PH * PW, 1e-6, 1e-5);
+            lm_cube_free(&c);
+            offsets += info.y0 * 100 + info.x0 != last;
+            last = info.y0 * 100 + info.x0;
+        }
+    CHECK(offsets > 2);
+    lm_dataset_close(d);
+}
+
+/* ---- patches ---------------------------------------------------------------------------- */
+static void crop(lm_cube *out, int y0, int x0, int fh, int fv)
+{
+    CHECK(lm_cube_alloc(out, 31, PH, PW, 400, 10) == LM_OK);
+    for (int b = 0; b < 31; b++)
+        for (int y = 0; y < PH; y++)
+            for (int x = 0; x < PW; x++)
+                lm_cube_band(out, b)[y * PW + x] =
+                    pos_value(b, y0 + (fv ? PH - 1 - y : y), x0 + (fh ? PW - 1 - x : x));
+}
+
+/* raw of a 31-band crop through mirror + forward_clean (tile phase 0, 0). */
+static void ref_raw(const lm_cube *c31, float *raw)
+{
+    lm_cube c41;
+    lm_err e;
+    lm_err_clear(&e);
+    CHECK(lm_cube_mirror41(c31, &c41, &e) == LM_OK);
+    CHECK_MSG(lm_forward_clean(&g_sys, &c41, 0, 0, raw, NULL, 1, &e) == LM_OK, "%s", e.msg);
+    lm_cube_free(&c41);
+}
+
+/* The 33-channel target written out: 385 = mean(380 <- 420, 390 <- 410), 400..700, 745 = mean
+ * of 710..780 <- 690..620. */
+static void ref_target(const lm_cube *c, float *t)
+{
+    size_t n = (size_t)PH * PW;
+    for (size_t i = 0; i < n; i++) {
+        t[i] = 0.5f * (lm_cube_band(c, 2)[i] + lm_cube_band(c, 1)[i]);
+        for (int b = 0; b < 31; b++) t[(b + 1) * n + i] = lm_cube_band(c, b)[i];
+        float acc = 0.0f;
+        for (int b = 29; b >= 22; b--) acc += lm_cube_band(c, b)[i];
+        t[32 * n + i] = acc / 8.0f;
+    }
+}
+
+static void test_patches_on_tile_grid(void)
+{
+    const char *paths[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    if (!d) return;
+    const int B = 8;
+    size_t n = (size_t)PH * PW;
+    float raw[B * PH * PW], target[B * 33 * PH * PW], rr[PH * PW], rt[33 * PH * PW];
+    int seen_y[POS_H] = {0}, seen_x[POS_W] = {0}, distinct = 0;
+    for (long bi = 0; bi < 4; bi++) {
+        CHECK_MSG(lm_dataset_batch(d, bi, B, raw, target, &e) == LM_OK, "%s", e.msg);
+        for (int j = 0; j < B; j++) {
+            const float *t = target + (size_t)j * 33 * n;
+            int y0 = (int)lroundf(t[1 * n] * 1000.0f) - 1;
+            int x0 = (int)lroundf(t[2 * n] * 1000.0f) - 1;
+            CHECK_MSG(y0 % 3 == 0 && x0 % 4 == 0 && y0 >= 0 && x0 >= 0 && y0 + PH <= POS_H &&
+                      x0 + PW <= POS_W, "patch at (%d, %d)", y0, x0);
+            if (y0 < 0 || x0 < 0 || y0 + PH > POS_H || x0 + PW > POS_W) continue;
+            lm_dataset_sample_info info;
+            CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, bi * B + j, &info, &e) == LM_OK);
+            CHECK(info.kind == LM_SAMPLE_SCENE && info.y0 == y0 && info.x0 == x0);
+            distinct += !seen_y[y0] + !seen_x[x0];
+            seen_y[y0] = seen_x[x0] = 1;
+            lm_cube c;
+            crop(&c, y0, x0, 0, 0);
+            ref_raw(&c, rr);
+            ref_target(&c, rt);
+            CHECK_ARRAY_CLOSE(raw + (size_t)j * n, rr, n, 1e-6, 1e-5);
+            CHECK_ARRAY_CLOSE(t, rt, 33 * n, 1e-7, 1e-6);
+            lm_cube_free(&c);
+        }
+    }
+    CHECK_MSG(distinct >= 6, "only %d distinct offsets", distinct);
+    lm_dataset_close(d);
+}
+
+static void test_flips_before_simulation(void)
+{
+    const char *paths[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    cfg.flips = 1;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    if (!d) return;
+    size_t n = (size_t)PH * PW;
+    float raw[PH * PW], target[33 * PH * PW], rr[PH * PW], rt[33 * PH * PW], plain[PH * PW];
+    int kinds[4] = {0, 0, 0, 0};
+    for (long i = 0; i < 24; i++) {
+        lm_dataset_sample_info info;
+        CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        CHECK(lm_dataset_batch(d, i, 1, raw, target, &e) == LM_OK);
+        kinds[info.flip_h + 2 * info.flip_v]++;
+        lm_cube c;
+        crop(&c, info.y0, info.x0, info.flip_h, info.flip_v);
+        ref_raw(&c, rr);
+        ref_target(&c, rt);
+        CHECK_ARRAY_CLOSE(raw, rr, n, 1e-6, 1e-5);
+        CHECK_ARRAY_CLOSE(target, rt, 33 * n, 1e-7, 1e-6);
+        lm_cube_free(&c);
+        if (!info.flip_h) continue;
+        /* flipping the coded raw instead would give other numbers (it breaks the mosaic) */
+        crop(&c, info.y0, info.x0, 0, info.flip_v);
+        ref_raw(&c, plain);
+        double diff = 0;
+        for (int y = 0; y < PH; y++)
+            for (int x = 0; x < PW; x++) diff += fabs(raw[y * PW + x] - plain[y * PW + PW - 1 - x]);
+        CHECK(diff > 1e-2 * (double)n * 0.1);
+        lm_cube_free(&c);
+    }
+    for (int k = 0; k < 4; k++) CHECK_MSG(kinds[k] > 0, "flip combination %d never drawn", k);
+    lm_dataset_close(d);
+}
+
+/* ---- determinism on the real CAVE scenes ------------------------------------------------- */
+static lm_dataset *open_cave(int workers, uint64_t seed, int cache)
+{
+    static char dir[1024];
+    snprintf(dir, sizeof dir, "%s/data/cave", shared_dir());
+    static const char *paths[1];
+    paths[0] = dir;
+    lm_dataset_cfg cfg;
+    lm_dataset_default_cfg(&cfg);
+    cfg.paths = paths;
+    cfg.npaths = 1;
+    cfg.sys = &g_sys;
+    cfg.workers = workers;
+    cfg.seed = seed;
+    cfg.cache_scenes = cache;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    return d;
+}
+
+static void test_cave_scenes_listed(void)
+{
+    lm_dataset *d = open_cave(0, 1, 0);
+    if (!d) return;
+    int total = 0;
+    for (int s = 0; s < 3; s++) total += lm_dataset_num_scenes(d, s);
+    CHECK(total >= 3);
+    int found = 0; /* exactly one split holds it */
+    for (int s = 0; s < 3; s++) found += in_split(d, s, "balloons_crop100");
+    CHECK(found == 1);
+    CHECK(in_split(d, lm_dataset_split_of("chart_and_stuffed_toy_256"), "chart_and_stuffed_toy_256"));
+    lm_dataset_close(d);
+}
+
+#define CB 4
+#define CN (66 * 64)
+static void test_batches_deterministic(void)
+{
+    lm_dataset *a = open_cave(0, 7, 0), *b = open_cave(2, 7, 1), *c = open_cave(0, 8, 0);
+    if (!a || !b || !c) goto done;
+    static float ra[CB * CN], ta[CB * 33 * CN], rb[CB * CN], tb[CB * 33 * CN];
+    static float r2[CB * CN], t2[CB * 33 * CN];
+    lm_err e;
+    lm_err_clear(&e);
+    const long order[5] = {0, 1, 5, 1, 2}; /* includes a stale prefetch and a repeat */
+    for (int k = 0; k < 5; k++) {
+        CHECK_MSG(lm_dataset_batch(a, order[k], CB, ra, ta, &e) == LM_OK, "%s", e.msg);
+        CHECK_MSG(lm_dataset_batch(b, order[k], CB, rb, tb, &e) == LM_OK, "%s", e.msg);
+        CHECK(memcmp(ra, rb, sizeof ra) == 0 && memcmp(ta, tb, sizeof ta) == 0);
+    }
+    /* sample i is item i % B of batch i / B, whatever B */
+    CHECK(lm_dataset_batch(a, 1, CB, ra, ta, &e) == LM_OK);
+    CHECK(lm_dataset_batch(b, 3, 2, r2, t2, &e) == LM_OK);
+    CHECK(memcmp(ra + 2 * CN, r2, 2 * CN * sizeof(float)) == 0);
+    CHECK(memcmp(ta + 2 * 33 * CN, t2, 2 * 33 * CN * sizeof(float)) == 0);
+    /* different samples differ; another seed gives other samples */
+    CHECK(memcmp(ra, ra + CN, CN * sizeof(float)) != 0);
+    CHECK(lm_dataset_batch(a, 2, CB, r2, t2, &e) == LM_OK);
+    CHECK(memcmp(ra, r2, CN * sizeof(float)) != 0);
+    CHECK(lm_dataset_batch(c, 1, CB, r2, t2, &e) == LM_OK);
+    CHECK(memcmp(ra, r2, sizeof ra) != 0);
+    /* fixed evaluation samples */
+    if (lm_dataset_eval_count(a, LM_SPLIT_VAL) > 0) {
+        CHECK(lm_dataset_eval_sample(a, LM_SPLIT_VAL, 3, ra, ta, &e) == LM_OK);
+        CHECK(lm_dataset_eval_sample(b, LM_SPLIT_VAL, 3, rb, tb, &e) == LM_OK);
+        CHECK(memcmp(ra, rb, CN * sizeof(float)) == 0);
+    }
+done:
+    lm_dataset_close(a);
+    lm_dataset_close(b);
+    lm_dataset_close(c);
+}
+
+/* ---- noise and synthetic share ----------------------------------------------------------- */
+static void test_noise_levels(void)
+{
+    const char *paths[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    cfg.noise_min = 0.05f;
+    cfg.noise_max = 0.15f;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    cfg.noise_min = cfg.noise_max = 0.0f;
+    lm_dataset *clean = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d && clean, "%s", e.msg);
+    if (!d || !clean) goto done;
+    const int N = 4000;
+    int hist[5] = {0}, out = 0;
+    double mean = 0;
+    for (long i = 0; i < N; i++) {
+        lm_dataset_sample_info info;
+        CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        out += !(info.noise_k >= 0.05f && info.noise_k < 0.15f);
+        mean += info.noise_k / N;
+        int bin = (int)((info.noise_k - 0.05f) / 0.02f);
+        hist[bin < 0 ? 0 : bin > 4 ? 4 : bin]++;
+    }
+    CHECK(out == 0);
+    CHECK_CLOSE(mean, 0.10, 0.002, 0);
+    for (int b = 0; b < 5; b++) CHECK_CLOSE(hist[b] / (double)N, 0.2, 0.03, 0);
+    /* the raw's noise has sd = k x max clean value */
+    float raw[PH * PW], cl[PH * PW], t[33 * PH * PW];
+    for (long i = 0; i < 6; i++) {
+        lm_dataset_sample_info info;
+        CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        CHECK(lm_dataset_batch(d, i, 1, raw, t, &e) == LM_OK);
+        CHECK(lm_dataset_batch(clean, i, 1, cl, t, &e) == LM_OK);
+        double mx = 0, s = 0, ss = 0;
+        for (int p = 0; p < PH * PW; p++) {
+            mx = cl[p] > mx ? cl[p] : mx;
+            s += raw[p] - cl[p];
+            ss += (raw[p] - cl[p]) * (raw[p] - cl[p]);
+        }
+        double m = s / (PH * PW), sd = sqrt(ss / (PH * PW) - m * m);
+        CHECK_CLOSE(sd / mx, info.noise_k, 0, 0.15);
+    }
+done:
+    lm_dataset_close(d);
+    lm_dataset_close(clean);
+}
+
+static void test_synthetic_share(void)
+{
+    const char *paths[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    cfg.synth_fraction = 0.33f;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    if (!d) return;
+    const int N = 4000;
+    int n[3] = {0, 0, 0};
+    for (long i = 0; i < N; i++) {
+        lm_dataset_sample_info info;
+        CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        n[info.kind]++;
+    }
+    CHECK_CLOSE((n[1] + n[2]) / (double)N, 0.33, 0.025, 0);
+    CHECK_CLOSE(n[1] / (double)(n[1] + n[2]), 0.5, 0.05, 0);
+    /* the samples are what the info says: narrowband = uniform target, procedural = not */
+    size_t np = (size_t)PH * PW;
+    float raw[PH * PW], t[33 * PH * PW];
+    int checked[3] = {0, 0, 0};
+    for (long i = 0; i < 60; i++) {
+        lm_dataset_sample_info info;
+        CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        if (info.kind == LM_SAMPLE_SCENE || checked[info.kind] >= 3) continue;
+        CHECK(lm_dataset_batch(d, i, 1, raw, t, &e) == LM_OK);
+        int varies = 0;
+        for (int ch = 0; ch < 33; ch++)
+            for (size_t p = 1; p < np; p++) varies += t[ch * np + p] != t[ch * np];
+        CHECK(info.kind == LM_SAMPLE_NARROWBAND ? varies == 0 : varies > 0);
+        float mx = 0;
+        for (size_t p = 0; p < 33 * np; p++) mx = t[p] > mx ? t[p] : mx;
+        CHECK(mx <= 1.0f && mx > 0.0f);
+        checked[info.kind]++;
+    }
+    CHECK(checked[1] > 0 && checked[2] > 0);
+    lm_dataset_close(d);
+    cfg.synth_fraction = 1.0f; /* fully synthetic: no scene needed */
+    cfg.npaths = 0;
+    d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    if (d) CHECK(lm_dataset_batch(d, 3, 1, raw, t, &e) == LM_OK);
+    lm_dataset_close(d);
+}
+
+/* ---- cache ------------------------------------------------------------------------------ */
+static void test_lru_bound(void)
+{
+    char dir[1024], path[1100];
+    subdir(dir, sizeof dir, "lru");
+    int made = 0;
+    for (int i = 0; made < 4 && i < 1000; i++) {
+        char name[32];
+        snprintf(name, sizeof name, "lru_%d", i);
+        if (lm_dataset_split_of(name) != LM_SPLIT_TRAIN) continue;
+        snprintf(path, sizeof path, "%s/%s.exr", dir, name);
+        write_scene(path, 15, 16, made + 1 == 3);
+        made++;
+    }
+    const char *paths[1] = {dir};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    cfg.cache_scenes = 2;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *small = lm_dataset_open(&cfg, &e);
+    cfg.cache_scenes = 0;
+    lm_dataset *all = lm_dataset_open(&cfg, &e);
+    cfg.cache_scenes = 1;
+    cfg.workers = 2;
+    lm_dataset *one = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(small && all && one, "%s", e.msg);
+    if (!small || !all || !one) goto done;
+    CHECK(lm_dataset_num_scenes(small, LM_SPLIT_TRAIN) == 4);
+    float ra[3 * PH * PW], ta[3 * 33 * PH * PW], rb[3 * PH * PW], tb[3 * 33 * PH * PW];
+    for (long bi = 0; bi < 20; bi++) {
+        CHECK(lm_dataset_batch(small, bi, 3, ra, ta, &e) == LM_OK);
+        CHECK(lm_dataset_batch(all, bi, 3, rb, tb, &e) == LM_OK);
+        CHECK(memcmp(ra, rb, sizeof ra) == 0 && memcmp(ta, tb, sizeof ta) == 0);
+        CHECK(lm_dataset_batch(one, bi, 3, rb, tb, &e) == LM_OK);
+        CHECK(memcmp(ra, rb, sizeof ra) == 0 && memcmp(ta, tb, sizeof ta) == 0);
+    }
+    lm_dataset_stats s1, s2, s3;
+    lm_dataset_get_stats(small, &s1);
+    lm_dataset_get_stats(all, &s2);
+    lm_dataset_get_stats(one, &s3);
+    CHECK_MSG(s1.max_cached <= 2 && s1.cached <= 2 && s1.loads > 4, "cache 2: max %d, loads %ld",
+              s1.max_cached, s1.loads);
+    CHECK_MSG(s2.loads == 4 && s2.max_cached == 4, "cache all: max %d, loads %ld",
+              s2.max_cached, s2.loads);
+    CHECK_MSG(s3.max_cached <= 1 && s3.loads > 4, "cache 1: max %d, loads %ld", s3.max_cached,
+              s3.loads);
+done:
+    lm_dataset_close(small);
+    lm_dataset_close(all);
+    lm_dataset_close(one);
+}
+
+/* ---- bad input -------------------------------------------------------------------------- */
+static void expect_open_fails(const lm_dataset_cfg *cfg, lm_status st, const char *needle)
+{
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(cfg, &e);
+    CHECK_MSG(d == NULL && e.status == st && strstr(e.msg, needle), "status %d, message '%s', "
+              "expected %d and '%s'", (int)e.status, e.msg, (int)st, needle);
+    lm_dataset_close(d);
+}
+
+static void test_bad_input(void)
+{
+    char empty[1024], bad[1024], badfile[1100], missing[1100];
+    subdir(empty, sizeof empty, "empty");
+    subdir(bad, sizeof bad, "bad");
+    snprintf(badfile, sizeof badfile, "%s/broken.exr", bad);
+    FILE *f = fopen(badfile, "wb");
+    if (f) {
+        fputs("this is not an EXR file", f);
+        fclose(f);
+    }
+    const char *p_empty[1] = {empty}, *p_bad[1] = {bad}, *p_pos[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(p_empty, 1);
+    expect_open_fails(&cfg, LM_ERR_FORMAT, empty);
+    cfg.paths = p_bad;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d == NULL && strstr(e.msg, "broken.exr"), "'%s'", e.msg);
+    lm_dataset_close(d);
+    snprintf(missing, sizeof missing, "%s/nope.exr", tmpdir);
+    const char *p_missing[1] = {missing};
+    cfg.paths = p_missing;
+    expect_open_fails(&cfg, LM_ERR_IO, "nope.exr");
+    cfg.paths = p_pos;
+    cfg.patch_h = 13;
+    expect_open_fails(&cfg, LM_ERR_SHAPE, "multiple of the 3 x 4 tile");
+    cfg.patch_h = 33;
+    expect_open_fails(&cfg, LM_ERR_SHAPE, "larger than every scene");
+    cfg.patch_h = PH;
+    cfg.noise_min = 0.2f;
+    cfg.noise_max = 0.1f;
+    expect_open_fails(&cfg, LM_ERR_ARG, "noise");
+    /* a scene that becomes unreadable after open: the batch error names it */
+    char gone[1100];
+    snprintf(gone, sizeof gone, "%s/gone.exr", tmpdir);
+    write_scene(gone, 15, 16, 0);
+    const char *p_gone[1] = {gone};
+    cfg = base_cfg(p_gone, 1);
+    d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    if (!d) return;
+    unlink(gone);
+    float raw[PH * PW], t[33 * PH * PW];
+    lm_err_clear(&e);
+    CHECK(lm_dataset_batch(d, 0, 1, raw, t, &e) != LM_OK && strstr(e.msg, "gone.exr"));
+    lm_err_clear(&e);
+    CHECK(lm_dataset_eval_sample(d, LM_SPLIT_VAL, 99, raw, t, &e) == LM_ERR_ARG);
+    lm_dataset_close(d);
+}
+
+static void rm_tree(const char *dir)
+{
+    DIR *d = opendir(dir);
+    if (!d) return;
+    struct dirent *de;
+    while ((de = readdir(d)) != NULL) {
+        if (!strcmp(de->d_name, ".") || !strcmp(de->d_name, "..")) continue;
+        char p[2048];
+        snprintf(p, sizeof p, "%s/%s", dir, de->d_name);
+        struct stat st;
+        if (lstat(p, &st) == 0 && S_ISDIR(st.st_mode)) rm_tree(p);
+        else unlink(p);
+    }
+    closedir(d);
+    rmdir(dir);
+}
+
+int main(void)
+{
+    g_ok = lm_system_default(&g_sys, &g_err) == LM_OK;
+    if (!g_ok) {
+        fprintf(stderr, "default system: %s\n", g_err.msg);
+        return 1;
+    }
+    if (!mkdtemp(tmpdir)) {
+        perror("mkdtemp");
+        return 1;
+    }
+    subdir(g_posdir, sizeof g_posdir, "pos");
+    snprintf(g_pospath, sizeof g_pospath, "%s/posscene.exr", g_posdir);
+    write_scene(g_pospath, POS_H, POS_W, 1);
+    RUN(test_split_hash_proportions);
+    RUN(test_split_open);
+    RUN(test_borrow_below_three_scenes);
+    RUN(test_eval_samples_fixed);
+    RUN(test_patches_on_tile_grid);
+    RUN(test_flips_before_simulation);
+    RUN(test_cave_scenes_listed);
+    RUN(test_batches_deterministic);
+    RUN(test_noise_levels);
+    RUN(test_synthetic_share);
+    RUN(test_lru_bound);
+    RUN(test_bad_input);
+    rm_tree(tmpdir);
+    lm_system_free(&g_sys);
+    return check_summary();
+}

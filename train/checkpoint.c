@@ -1,0 +1,139 @@
+/* checkpoint.c — checkpoints of a training run: weights (model.safetensors) and optimizer +
+ * sampler state (optimizer.safetensors), each written atomically, optimizer first; see train.h.
+ * What it is not: the loop (train.c) or the safetensors codec (models/safetensors.c). */
+#include "train/train.h"
+#include <inttypes.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define CKPT_FORMAT "lumosaic-checkpoint-1"
+
+uint64_t lm_file_hash(const char *path)
+{
+    FILE *f = path && path[0] ? fopen(path, "rb") : NULL;
+    if (!f) return 0;
+    uint64_t h = 1469598103934665603ull;
+    int ch;
+    while ((ch = fgetc(f)) != EOF) h = (h ^ (uint64_t)(unsigned char)ch) * 1099511628211ull;
+    fclose(f);
+    return h;
+}
+
+/* An lm_params whose tensors view the optimizer moments (never finalized: data points into
+ * opt->m / opt->v, so save and load need no copy). */
+static lm_status moment_views(const lm_model *m, const lm_adam *opt, lm_params *v, lm_err *err)
+{
+    lm_params_init(v);
+    for (int pass = 0; pass < 2; pass++)
+        for (int i = 0; i < m->params.n; i++) {
+            const lm_param *e = m->params.items[i];
+            if (!e->trainable) continue;
+            char nm[LM_PARAM_NAME_MAX + 16];
+            snprintf(nm, sizeof nm, "%s.%s", pass ? "exp_avg_sq" : "exp_avg", e->name);
+            if (strlen(nm) >= LM_PARAM_NAME_MAX) /* keep the full name: fall back to a short one */
+                snprintf(nm, sizeof nm, "%s.%d", pass ? "exp_avg_sq" : "exp_avg", i);
+            lm_tensor *t = lm_params_add(v, nm, e->t.ndim, e->t.shape, 0, err);
+            if (!t) {
+                lm_params_free(v);
+                return err->status;
+            }
+            t->data = (pass ? opt->v : opt->m) + e->offset;
+        }
+    return LM_OK;
+}
+
+static void dir_file(char *out, size_t n, const char *dir, const char *name)
+{
+    snprintf(out, n, "%s/%s", dir, name);
+}
+
+lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_adam *opt,
+                                   long iteration, long next_batch, const lm_train_opts *opts,
+                                   const lm_train_cfg *cfg, lm_err *err)
+{
+    char path[LM_TRAIN_PATH_LEN + 64], it[32], nb[32], step[32], seed[32], thr[16], hash[32];
+    snprintf(it, sizeof it, "%ld", iteration);
+    snprintf(nb, sizeof nb, "%ld", next_batch);
+    snprintf(seed, sizeof seed, "%" PRIu64, cfg->seed);
+    snprintf(thr, sizeof thr, "%d", cfg->threads);
+    const char *sys = opts && opts->system_path ? opts->system_path : "";
+    snprintf(hash, sizeof hash, "%016" PRIx64, opts ? opts->system_hash : 0);
+    if (opt) {
+        lm_params v;
+        if (moment_views(m, opt, &v, err)) return err->status;
+        snprintf(step, sizeof step, "%ld", opt->step);
+        const char *meta[] = {"format", CKPT_FORMAT, "step", step, "iteration", it,
+                              "next_batch", nb, "seed", seed, "threads", thr};
+        dir_file(path, sizeof path, dir, "optimizer.safetensors");
+        lm_status st = lm_params_save(&v, path, meta, 6, err);
+        lm_params_free(&v);
+        if (st) return st;
+    }
+    const char *meta[] = {"format", CKPT_FORMAT, "preset", m->preset, "system", sys,
+                          "system_hash", hash, "iteration", it};
+    dir_file(path, sizeof path, dir, "model.safetensors");
+    return lm_params_save(&m->params, path, meta, 5, err);
+}
+
+/* Integer metadata value, required. */
+static lm_status meta_long(const char *path, const char *key, long long *out, lm_err *err)
+{
+    lm_err e2 = {0};
+    char *s = lm_safetensors_meta(path, key, &e2);
+    char *end = NULL;
+    if (s) *out = strtoll(s, &end, 10);
+    int ok = s && end != s && *end == 0;
+    free(s);
+    if (!ok)
+        return lm_err_set(err, LM_ERR_FORMAT, "%s: metadata '%s' missing or not an integer%s%s",
+                          path, key, e2.status ? ": " : "", e2.msg);
+    return LM_OK;
+}
+
+static lm_status load_optimizer(const char *path, lm_model *m, lm_adam *opt, long *next_batch,
+                                uint64_t *seed, long iteration, lm_err *err)
+{
+    long long it = 0, step = 0, nb = 0, sd = 0;
+    if (meta_long(path, "iteration", &it, err) || meta_long(path, "step", &step, err) ||
+        meta_long(path, "next_batch", &nb, err) || meta_long(path, "seed", &sd, err))
+        return err->status;
+    if (it != iteration)
+        return lm_err_set(err, LM_ERR_FORMAT, "%s: iteration %lld but the weights are at "
+                          "iteration %ld (interrupted while checkpointing?)", path, it, iteration);
+    lm_params v;
+    if (moment_views(m, opt, &v, err)) return err->status;
+    lm_status st = lm_params_load(&v, path, 0, err);
+    lm_params_free(&v);
+    if (st) return st;
+    opt->step = (long)step;
+    if (next_batch) *next_batch = (long)nb;
+    if (seed) *seed = (uint64_t)sd;
+    return LM_OK;
+}
+
+lm_status lm_train_load_checkpoint(const char *dir, lm_model *m, lm_adam *opt, long *iteration,
+                                   long *next_batch, uint64_t *seed, lm_err *err)
+{
+    char path[LM_TRAIN_PATH_LEN + 64];
+    dir_file(path, sizeof path, dir, "model.safetensors");
+    char *preset = lm_safetensors_meta(path, "preset", err);
+    if (!preset) {
+        if (err && !err->status)
+            lm_err_set(err, LM_ERR_FORMAT, "%s: not a Lumosaic checkpoint (no preset)", path);
+        return err ? err->status : LM_ERR_FORMAT;
+    }
+    int same = !strcmp(preset, m->preset);
+    if (!same)
+        lm_err_set(err, LM_ERR_ARG, "%s: checkpoint of model '%s', but the run uses '%s'", path,
+                   preset, m->preset);
+    free(preset);
+    if (!same) return LM_ERR_ARG;
+    long long it = 0;
+    if (meta_long(path, "iteration", &it, err)) return err->status;
+    lm_status st = lm_params_load(&m->params, path, 0, err);
+    if (st) return st;
+    if (iteration) *iteration = (long)it;
+    if (!opt) return LM_OK;
+    dir_file(path, sizeof path, dir, "optimizer.safetensors");
+    return load_optimizer(path, m, opt, next_batch, seed, (long)it, err);
+}

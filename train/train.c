@@ -1,0 +1,347 @@
+/* train.c — the training loop: batches from an lm_train_source, forward, L1 on all 33
+ * channels scaled by 1/accum_steps, backward, gradient accumulation, Adam, NaN/inf guard,
+ * validation metrics, CSV log, progress on stderr, checkpoints and exact resume (train.h).
+ * What it is not: the config (config.c), checkpoint files (checkpoint.c), or the data
+ * pipeline (data/dataset.h). */
+#include "train/train.h"
+#include "autograd/autograd.h"
+#include <errno.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+typedef struct loop {
+    const lm_train_cfg *cfg;
+    const lm_train_opts *opts;
+    const lm_train_source *src;
+    lm_model *model;
+    lm_adam opt;
+    lm_ctx ctx;
+    float *raw, *target, *pred;   /* one batch, host */
+    FILE *log;
+    long it0;                     /* iteration this invocation started at */
+    long saved;                   /* iteration of the checkpoint on disk (-1: none yet) */
+    double t0, last_print;
+    int tty;
+} loop;
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static lm_status make_dir(const char *path, lm_err *err)
+{
+    char buf[LM_TRAIN_PATH_LEN];
+    snprintf(buf, sizeof buf, "%s", path);
+    for (char *p = buf + 1; ; p++) {
+        if (*p == '/' || *p == 0) {
+            char ch = *p;
+            *p = 0;
+            if (mkdir(buf, 0777) != 0 && errno != EEXIST)
+                return lm_err_set(err, LM_ERR_IO, "output %s: cannot create folder %s: %s", path,
+                                  buf, strerror(errno));
+            *p = ch;
+            if (!ch) break;
+        }
+    }
+    return LM_OK;
+}
+
+/* ---- one iteration -------------------------------------------------------------------- */
+/* Forward + L1 + backward of batch `index`; adds the unscaled loss to *loss_sum. */
+static lm_status micro_step(loop *L, long index, double *loss_sum, lm_err *err)
+{
+    const lm_train_cfg *cfg = L->cfg;
+    int B = cfg->batch, H = cfg->patch_h, W = cfg->patch_w;
+    if (L->src->batch(L->src->user, index, B, L->raw, L->target, err)) return err->status;
+    lm_ctx *c = &L->ctx;
+    lm_ctx_reset(c);
+    lm_tensor *raw = lm_tensor_from(c, 4, (int[]){B, 1, H, W}, L->raw);
+    lm_tensor *tgt = lm_tensor_from(c, 4, (int[]){B, LM_MODEL_OUT_CHANNELS, H, W}, L->target);
+    lm_tensor *loss = lm_l1_loss(c, lm_model_forward(c, L->model, raw), tgt);
+    float lv = NAN;
+    if (loss) lm_tensor_read(c, loss, &lv);
+    if (loss && isfinite(lv))
+        lm_backward(c, lm_scale(c, loss, 1.0f / (float)cfg->accum_steps), NULL);
+    if (lm_ctx_status(c)) {
+        lm_err_set(err, lm_ctx_status(c), "training step: %s", lm_ctx_message(c));
+        lm_ctx_clear_error(c);
+        return err->status;
+    }
+    *loss_sum += lv;
+    return LM_OK;
+}
+
+static int grads_finite(const lm_params *p)
+{
+    int ok = 1;
+    for (int i = 0; i < p->n && ok; i++) {
+        const lm_param *e = p->items[i];
+        if (!e->trainable) continue;
+        long n = lm_tensor_numel(&e->t);
+        for (long k = 0; k < n && ok; k++) ok = isfinite(e->g.data[k]);
+    }
+    return ok;
+}
+
+/* One optimizer update (iteration `it`, 0-based). *loss = mean L1 over the accumulated
+ * batches. LM_ERR_NUMERIC (nothing updated) when the loss or a gradient is not finite. */
+static lm_status iteration(loop *L, long it, double *loss, lm_err *err)
+{
+    const lm_train_cfg *cfg = L->cfg;
+    lm_params_zero_grad(&L->model->params);
+    double sum = 0.0;
+    for (int k = 0; k < cfg->accum_steps; k++) {
+        lm_status st = micro_step(L, it * cfg->accum_steps + k, &sum, err);
+        if (st) return st;
+        if (!isfinite(sum)) break;
+    }
+    *loss = sum / cfg->accum_steps;
+    if (isfinite(*loss) && grads_finite(&L->model->params)) {
+        lm_adam_step(&L->opt, &L->model->params, lm_nthreads(&L->ctx));
+        return LM_OK;
+    }
+    char kept[LM_TRAIN_PATH_LEN + 64];
+    if (L->saved >= 0)
+        snprintf(kept, sizeof kept, "the last good checkpoint (iteration %ld) in %.400s is kept",
+                 L->saved, cfg->output);
+    else
+        snprintf(kept, sizeof kept, "no checkpoint had been written yet");
+    return lm_err_set(err, LM_ERR_NUMERIC, "iteration %ld: %s is %s; training stopped (%s)",
+                      it + 1, isfinite(*loss) ? "a gradient" : "the loss",
+                      isnan(*loss) ? "NaN" : "not finite", kept);
+}
+
+/* ---- validation ----------------------------------------------------------------------- */
+static lm_status validate(loop *L, lm_metrics *out, lm_err *err)
+{
+    const lm_train_cfg *cfg = L->cfg;
+    int n = L->src->eval_count ? L->src->eval_count(L->src->user) : 0;
+    int H = cfg->patch_h, W = cfg->patch_w;
+    size_t rn = (size_t)H * W, tn = (size_t)LM_MODEL_OUT_CHANNELS * H * W;
+    lm_metrics_acc acc = {0};
+    lm_ctx *c = &L->ctx;
+    int old = lm_ctx_set_grad(c, 0);
+    lm_status st = LM_OK;
+    for (int i0 = 0; i0 < n && !st; i0 += cfg->batch) {
+        int b = n - i0 < cfg->batch ? n - i0 : cfg->batch;
+        for (int j = 0; j < b && !st; j++)
+            st = L->src->eval_sample(L->src->user, i0 + j, L->raw + j * rn, L->target + j * tn, err);
+        if (st) break;
+        lm_ctx_reset(c);
+        lm_tensor *raw = lm_tensor_from(c, 4, (int[]){b, 1, H, W}, L->raw);
+        lm_tensor *pred = lm_model_forward(c, L->model, raw);
+        if (!pred || lm_tensor_read(c, pred, L->pred)) {
+            st = lm_err_set(err, lm_ctx_status(c), "validation: %s", lm_ctx_message(c));
+            lm_ctx_clear_error(c);
+            break;
+        }
+        for (int j = 0; j < b && !st; j++) {
+            lm_metrics m;
+            st = lm_metrics_target33(L->pred + j * tn, L->target + j * tn, H, W, &m, err);
+            if (!st) lm_metrics_acc_add(&acc, &m);
+        }
+    }
+    lm_ctx_set_grad(c, old);
+    lm_ctx_reset(c);
+    *out = lm_metrics_acc_mean(&acc);
+    return st;
+}
+
+/* ---- progress and log ------------------------------------------------------------------ */
+static void fmt_time(char *buf, size_t n, double s)
+{
+    if (!(s >= 0) || s > 1e7) snprintf(buf, n, "?");
+    else if (s >= 3600) snprintf(buf, n, "%dh%02dm", (int)(s / 3600), (int)fmod(s / 60, 60));
+    else snprintf(buf, n, "%dm%02ds", (int)(s / 60), (int)fmod(s, 60));
+}
+
+static void progress(loop *L, long done, double loss, float lr, int final)
+{
+    if (!L->opts->progress) return;
+    FILE *f = L->opts->progress_out ? L->opts->progress_out : stderr;
+    double t = now_s(), el = t - L->t0;
+    long total = L->cfg->iterations, here = done - L->it0;
+    if (L->tty && !final && t - L->last_print < 0.2) return;
+    if (!L->tty && !final && done % L->cfg->log_interval) return;
+    L->last_print = t;
+    double ips = el > 0 ? here / el : 0;
+    char eta[32], els[32];
+    fmt_time(eta, sizeof eta, ips > 0 ? (total - done) / ips : -1);
+    fmt_time(els, sizeof els, el);
+    if (L->tty) {
+        char bar[31];
+        int fill = (int)(30.0 * done / total);
+        for (int i = 0; i < 30; i++) bar[i] = i < fill ? '#' : '.';
+        bar[30] = 0;
+        fprintf(f, "\r[%s] %ld/%ld  %.2f it/s  loss %.5f  lr %.2e  ETA %s ", bar, done, total,
+                ips, loss, lr, eta);
+        if (final) fputc('\n', f);
+    } else {
+        fprintf(f, "train: iteration %ld/%ld  loss %.6f  lr %.3e  %.2f it/s  elapsed %s  ETA %s\n",
+                done, total, loss, lr, ips, els, eta);
+    }
+    fflush(f);
+}
+
+static void log_row(loop *L, long it, double loss, float lr, const lm_metrics *m)
+{
+    if (!L->log) return;
+    if (loss == loss) fprintf(L->log, "%ld,%.8g,%.6g", it, loss, lr);
+    else fprintf(L->log, "%ld,,%.6g", it, lr);
+    if (m) fprintf(L->log, ",%.6f,%.6f,%.8f,%.6f\n", m->psnr, m->ssim, m->mae, m->sam);
+    else fprintf(L->log, ",,,,\n");
+    fflush(L->log);
+}
+
+/* Open log.csv: fresh (header) or, on resume, keeping only rows up to `upto`. */
+static lm_status open_log(loop *L, int resume, long upto, lm_err *err)
+{
+    char path[LM_TRAIN_PATH_LEN + 16], tmp[LM_TRAIN_PATH_LEN + 32];
+    snprintf(path, sizeof path, "%s/log.csv", L->cfg->output);
+    snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());
+    FILE *in = resume ? fopen(path, "r") : NULL, *out = fopen(tmp, "w");
+    if (!out) {
+        if (in) fclose(in);
+        return lm_err_set(err, LM_ERR_IO, "%s: cannot write: %s", tmp, strerror(errno));
+    }
+    fprintf(out, "iteration,loss,lr,psnr,ssim,mae,sam\n");
+    char line[512];
+    while (in && fgets(line, sizeof line, in)) {
+        char *end;
+        long it = strtol(line, &end, 10);
+        if (end != line && *end == ',' && it <= upto) fputs(line, out);
+    }
+    if (in) fclose(in);
+    if (fclose(out) != 0 || rename(tmp, path) != 0) {
+        remove(tmp);
+        return lm_err_set(err, LM_ERR_IO, "%s: cannot write the log", path);
+    }
+    L->log = fopen(path, "a");
+    if (!L->log) return lm_err_set(err, LM_ERR_IO, "%s: cannot append: %s", path, strerror(errno));
+    return LM_OK;
+}
+
+/* ---- the run --------------------------------------------------------------------------- */
+static lm_status setup(loop *L, lm_err *err)
+{
+    const lm_train_cfg *cfg = L->cfg;
+    if (lm_ctx_init(&L->ctx, cfg->threads) != LM_OK)
+        return lm_err_set(err, LM_ERR_NOMEM, "train: cannot create the compute context");
+    size_t bn = (size_t)cfg->batch * cfg->patch_h * cfg->patch_w;
+    L->raw = malloc(bn * sizeof(float));
+    L->target = malloc(bn * LM_MODEL_OUT_CHANNELS * sizeof(float));
+    L->pred = malloc(bn * LM_MODEL_OUT_CHANNELS * sizeof(float));
+    if (!L->raw || !L->target || !L->pred)
+        return lm_err_set(err, LM_ERR_NOMEM, "train: out of memory for batch %d of %dx%d",
+                          cfg->batch, cfg->patch_h, cfg->patch_w);
+    lm_adam_cfg ac;
+    lm_train_cfg_adam(cfg, &ac);
+    if (lm_adam_init(&L->opt, &L->model->params, &ac, err)) return err->status;
+    return make_dir(cfg->output, err);
+}
+
+static void teardown(loop *L)
+{
+    if (L->log) fclose(L->log);
+    free(L->raw);
+    free(L->target);
+    free(L->pred);
+    lm_adam_free(&L->opt);
+    lm_ctx_free(&L->ctx);
+}
+
+/* Fresh run: config.json; resume: checkpoint state. Sets *start (iterations done). */
+static lm_status begin(loop *L, long *start, lm_err *err)
+{
+    const lm_train_cfg *cfg = L->cfg;
+    *start = 0;
+    if (!L->opts->resume) {
+        char path[LM_TRAIN_PATH_LEN + 16];
+        snprintf(path, sizeof path, "%s/config.json", cfg->output);
+        if (lm_train_cfg_save(cfg, path, err)) return err->status;
+        return open_log(L, 0, 0, err);
+    }
+    long nb = 0;
+    uint64_t seed = 0;
+    if (lm_train_load_checkpoint(L->opts->resume, L->model, &L->opt, start, &nb, &seed, err))
+        return err->status;
+    if (seed != cfg->seed || nb != *start * cfg->accum_steps)
+        return lm_err_set(err, LM_ERR_ARG, "resume %s: checkpoint has seed %llu and sampler "
+                          "position %ld, the run expects seed %llu and position %ld",
+                          L->opts->resume, (unsigned long long)seed, nb,
+                          (unsigned long long)cfg->seed, *start * cfg->accum_steps);
+    return open_log(L, 1, *start, err);
+}
+
+static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err)
+{
+    const lm_train_cfg *cfg = L->cfg;
+    long end = cfg->iterations;
+    if (L->opts->stop_after > 0 && start + L->opts->stop_after < end)
+        end = start + L->opts->stop_after;
+    for (long it = start; it < end; it++) {
+        float lr = lm_adam_lr(&L->opt.cfg, L->opt.step);
+        double loss = 0;
+        lm_status st = iteration(L, it, &loss, err);
+        if (st) {
+            log_row(L, it + 1, loss, lr, NULL);
+            return st;
+        }
+        if (it == start) res->first_loss = loss;
+        res->last_loss = loss;
+        res->iterations_done = it + 1;
+        int last = it + 1 == end;
+        int val = (cfg->val_interval > 0 && (it + 1) % cfg->val_interval == 0) ||
+                  it + 1 == cfg->iterations;
+        if (val && L->src->eval_count && L->src->eval_count(L->src->user) > 0) {
+            if (validate(L, &res->val, err)) return err->status;
+            res->validated = 1;
+        } else {
+            val = 0;
+        }
+        log_row(L, it + 1, loss, lr, val ? &res->val : NULL);
+        progress(L, it + 1, loss, lr, last);
+        if ((cfg->checkpoint_interval > 0 && (it + 1) % cfg->checkpoint_interval == 0) || last) {
+            if (lm_train_save_checkpoint(cfg->output, L->model, &L->opt, it + 1,
+                                         (it + 1) * cfg->accum_steps, L->opts, cfg, err))
+                return err->status;
+            L->saved = it + 1;
+        }
+    }
+    return LM_OK;
+}
+
+lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_source *src,
+                       const lm_train_opts *opts, lm_train_result *res, lm_err *err)
+{
+    lm_train_opts dflt = {0};
+    lm_train_result dummy;
+    if (!opts) opts = &dflt;
+    if (!res) res = &dummy;
+    memset(res, 0, sizeof *res);
+    if (lm_train_cfg_validate(cfg, err)) return err->status;
+    if (cfg->patch_h % model->mosaic.ty || cfg->patch_w % model->mosaic.tx)
+        return lm_err_set(err, LM_ERR_ARG, "config: field 'patch': %dx%d is not a multiple of the "
+                          "%d x %d tile", cfg->patch_h, cfg->patch_w, model->mosaic.ty,
+                          model->mosaic.tx);
+    loop L = {.cfg = cfg, .opts = opts, .src = src, .model = model};
+    L.tty = isatty(fileno(opts->progress_out ? opts->progress_out : stderr));
+    long start = 0;
+    lm_status st = setup(&L, err);
+    if (!st) st = begin(&L, &start, err);
+    res->iterations_done = start;
+    L.it0 = start;
+    L.saved = opts->resume ? start : -1;
+    L.t0 = L.last_print = now_s();
+    if (!st) st = run_loop(&L, start, res, err);
+    res->seconds = now_s() - L.t0;
+    teardown(&L);
+    return st;
+}

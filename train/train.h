@@ -1,0 +1,141 @@
+/* train.h — training runs: the run configuration (JSON, versioned, validated; every field also
+ * settable by a CLI flag) and the training loop (Adam + L1 on all 33 channels, gradient
+ * accumulation, validation metrics, CSV log, progress, checkpoints and exact resume).
+ *
+ * Output folder of a run:
+ *   config.json               the resolved configuration (written at the start)
+ *   model.safetensors         weights; tensor names = the model's PyTorch-style names;
+ *                             metadata: format, preset, system (path and FNV-1a hash of its
+ *                             file), iteration
+ *   optimizer.safetensors     Adam state: "exp_avg.<param>", "exp_avg_sq.<param>"; metadata:
+ *                             step, iteration, next_batch (the sampler position: batches are
+ *                             a pure function of (seed, index)), seed, threads
+ *   log.csv                   iteration,loss,lr,psnr,ssim,mae,sam (metrics only at validation)
+ * Both checkpoint files are written atomically (temp file + rename), optimizer first; resume
+ * checks that they name the same iteration. Resuming with the same thread count reproduces an
+ * uninterrupted run bit for bit (every kernel is deterministic for a given thread count and
+ * batches are a pure function of (seed, batch index)).
+ *
+ * What it is not: the data pipeline (data/dataset.h), the optimizer (train/adam.h), or the
+ * models (models/model.h). */
+#ifndef LM_TRAIN_H
+#define LM_TRAIN_H
+#include <stdint.h>
+#include <stdio.h>
+#include "models/model.h"
+#include "train/adam.h"
+#include "train/metrics.h"
+
+#define LM_TRAIN_CFG_VERSION 1
+#define LM_TRAIN_MAX_PATHS 64
+#define LM_TRAIN_PATH_LEN 512
+
+typedef struct lm_train_cfg {
+    int version;
+    char model[64];                 /* preset name */
+    char system[LM_TRAIN_PATH_LEN]; /* system description file; "" = bundled default */
+    char data[LM_TRAIN_MAX_PATHS][LM_TRAIN_PATH_LEN];
+    int ndata;
+    float synth_fraction;           /* share of synthetic samples (paper 0.33) */
+    int patch_h, patch_w;           /* 66 x 64 */
+    int batch, accum_steps;         /* 14, 2 */
+    long iterations;                /* optimizer updates (paper 50,000) */
+    float lr, lr_min, weight_decay; /* 1e-4, 0, 0 */
+    char schedule[16];              /* constant | cosine | step */
+    long warmup, step_every;
+    float step_gamma;
+    float noise_min, noise_max;     /* Gaussian noise k ~ U[min, max] (0, 0.15) */
+    float val_noise;
+    uint64_t seed;
+    int threads;                    /* 0 = all cores */
+    int workers;                    /* data preparation threads */
+    long val_interval;              /* iterations between validations (0 = only at the end) */
+    int val_patches;                /* fixed validation samples */
+    long checkpoint_interval;       /* iterations between checkpoints (0 = only at the end) */
+    long log_interval;              /* progress lines when stderr is not a tty */
+    char output[LM_TRAIN_PATH_LEN]; /* run folder */
+} lm_train_cfg;
+
+/* Paper defaults (system.md §7) with output "runs/train". */
+void lm_train_cfg_default(lm_train_cfg *cfg);
+/* Merge a JSON config file over cfg. Unknown fields and wrong types are errors naming the
+ * field: "config run.json: field 'batch': must be an integer >= 1". */
+lm_status lm_train_cfg_load(lm_train_cfg *cfg, const char *path, lm_err *err);
+lm_status lm_train_cfg_parse(lm_train_cfg *cfg, const char *json_text, const char *label,
+                             lm_err *err);
+/* Set one field from text, by its JSON name or flag name ("batch", "accum-steps" or
+ * "accum_steps"). Lists: "data" appends one path; "patch" takes "66x64"; "noise" "0,0.15". */
+lm_status lm_train_cfg_set(lm_train_cfg *cfg, const char *key, const char *value, lm_err *err);
+/* Is `key` a field name (JSON or flag spelling)? */
+int lm_train_cfg_has(const char *key);
+/* Cross-field checks (errors name the field). */
+lm_status lm_train_cfg_validate(const lm_train_cfg *cfg, lm_err *err);
+/* Write the resolved config as JSON (atomic). */
+lm_status lm_train_cfg_save(const lm_train_cfg *cfg, const char *path, lm_err *err);
+/* Help text of every field: "  --batch N   ..." lines. */
+void lm_train_cfg_print_help(FILE *f);
+/* The Adam configuration a run uses. */
+void lm_train_cfg_adam(const lm_train_cfg *cfg, lm_adam_cfg *out);
+
+/* ---- data for the loop ------------------------------------------------------------------ */
+/* Where batches come from: data/dataset.h through lm_train_source_dataset, or any other
+ * deterministic generator (tests use fixed in-memory batches). Buffers: raw B x 1 x ph x pw,
+ * target B x 33 x ph x pw, owned by the caller. batch() must be a pure function of index. */
+typedef struct lm_train_source {
+    void *user;
+    lm_status (*batch)(void *user, long index, int B, float *raw, float *target, lm_err *err);
+    int (*eval_count)(void *user);
+    lm_status (*eval_sample)(void *user, int i, float *raw, float *target, lm_err *err);
+} lm_train_source;
+
+typedef struct lm_dataset lm_dataset;
+/* Training batches and the validation split's fixed samples of a dataset (data/dataset.h). */
+lm_train_source lm_train_source_dataset(lm_dataset *d);
+
+/* ---- the loop --------------------------------------------------------------------------- */
+typedef struct lm_train_opts {
+    const char *resume;        /* run folder to continue from, or NULL */
+    long stop_after;           /* stop (with a checkpoint) after this many iterations of this
+                                * invocation; 0 = run to cfg.iterations (tests: interruption) */
+    int progress;              /* 1: progress bar / lines on stderr */
+    FILE *progress_out;        /* NULL = stderr */
+    const char *system_path;   /* recorded in checkpoints ("" = bundled default) */
+    uint64_t system_hash;      /* FNV-1a of the system file (0 = unknown) */
+} lm_train_opts;
+
+typedef struct lm_train_result {
+    long iterations_done;      /* completed optimizer updates, over all invocations */
+    double last_loss;          /* mean L1 of the last completed iteration */
+    double first_loss;         /* mean L1 of the first iteration of this invocation */
+    lm_metrics val;            /* last validation (zeros if none) */
+    int validated;
+    double seconds;
+} lm_train_result;
+
+/* Train `model` (created by the caller from cfg->model with the run's mosaic) on `src`.
+ * LM_ERR_NUMERIC when a loss is NaN/inf: the run stops, the message names the iteration, and
+ * the last checkpoint on disk is left untouched. */
+lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_source *src,
+                       const lm_train_opts *opts, lm_train_result *res, lm_err *err);
+
+/* A whole run from its configuration: loads the system description (cfg->system or the
+ * bundled default), derives the network front (train/mosaic_system.h), creates the model from
+ * cfg->model and cfg->seed, opens the dataset (cfg->data, synthetic share, patch, noise, seed,
+ * workers, validation samples) and runs lm_train_run. opts->system_path / system_hash are
+ * filled in here. */
+lm_status lm_train_session(const lm_train_cfg *cfg, const lm_train_opts *opts,
+                           lm_train_result *res, lm_err *err);
+
+/* Checkpoint files of a run folder (used by resume and by `lumosaic infer`). */
+/* next_batch: the sampler position (index of the next batch; batches are a pure function of
+ * (seed, index), so this and the seed are the whole sampler state). opt may be NULL on load
+ * (weights only). */
+lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_adam *opt,
+                                   long iteration, long next_batch, const lm_train_opts *opts,
+                                   const lm_train_cfg *cfg, lm_err *err);
+lm_status lm_train_load_checkpoint(const char *dir, lm_model *m, lm_adam *opt, long *iteration,
+                                   long *next_batch, uint64_t *seed, lm_err *err);
+/* FNV-1a 64 of a file's bytes (0 if unreadable). */
+uint64_t lm_file_hash(const char *path);
+
+#endif
