@@ -20,44 +20,17 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include "bench/bench_util.h"
 
 #define GM 128
 #define GN 4224
 #define GK 1152
 #define MAXREP 64
 
-static double now(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
-static double minimum(const double *v, int n)
-{
-    double m = v[0];
-    for (int i = 1; i < n; i++) m = v[i] < m ? v[i] : m;
-    return m;
-}
-
-static double median(const double *v, int n)
-{
-    double s[MAXREP];
-    memcpy(s, v, sizeof(double) * (size_t)n);
-    qsort(s, (size_t)n, sizeof(double), cmp_double);
-    return n % 2 ? s[n / 2] : 0.5 * (s[n / 2 - 1] + s[n / 2]);
-}
-
 /* C = A B, 128 x 4224 x 1152, columns split over nt threads, one sgemm each. */
 static double time_sgemm(int nt, const float *A, const float *B, float *C)
 {
-    double t0 = now();
+    double t0 = bench_now();
 #pragma omp parallel num_threads(nt)
     {
         int T = omp_get_num_threads(), id = omp_get_thread_num();
@@ -66,7 +39,7 @@ static double time_sgemm(int nt, const float *A, const float *B, float *C)
         cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, GM, hi - lo, GK, 1.0f, A, GK,
                     B + lo, GN, 0.0f, C + lo, GN);
     }
-    return now() - t0;
+    return bench_now() - t0;
 }
 
 typedef struct bench_io {
@@ -86,10 +59,10 @@ static double time_conv(lm_ctx *c, bench_io *io, int backward)
     lm_ctx_reset(c);
     io->x.grad = io->w.grad = io->b.grad = NULL;
     lm_ctx_set_grad(c, backward);
-    double t0 = now();
+    double t0 = bench_now();
     lm_tensor *y = lm_conv2d(c, &io->x, &io->w, &io->b, &o);
     if (backward && y) lm_backward(c, y, &io->seed);
-    double t = now() - t0;
+    double t = bench_now() - t0;
     if (c->status) {
         fprintf(stderr, "bench_conv: %s\n", c->msg);
         exit(1);
@@ -123,8 +96,8 @@ static void run_config(int nt, int reps, int B, int C, const float *A, const flo
         tb[i] = time_conv(&c, &io, 1);
     }
     double gf = 2.0 * B * C * H * W * C * 9 * 1e-9, gg = 2.0 * GM * GN * GK * 1e-9;
-    double fmin = minimum(tf, reps), fmed = median(tf, reps), bmin = minimum(tb, reps);
-    double bmed = median(tb, reps), gmin = minimum(tg, reps), gmed = median(tg, reps);
+    double fmin = bench_min(tf, reps), fmed = bench_median(tf, reps), bmin = bench_min(tb, reps);
+    double bmed = bench_median(tb, reps), gmin = bench_min(tg, reps), gmed = bench_median(tg, reps);
     printf("%3d %4d | %8.2f %8.2f %7.1f %7.1f | %8.2f %8.2f %7.1f %7.1f | %7.1f %7.1f | %5.2f %5.2f"
            " | %5.2f %5.2f\n",
            B, C, fmin * 1e3, fmed * 1e3, gf / fmin, gf / fmed, bmin * 1e3, bmed * 1e3,

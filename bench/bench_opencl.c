@@ -22,37 +22,10 @@
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
+#include "bench/bench_util.h"
 
 #define MAXREP 32
 #define MAXK 160
-
-static double now(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
-static double median(const double *v, int n)
-{
-    double s[MAXREP];
-    memcpy(s, v, sizeof(double) * (size_t)n);
-    qsort(s, (size_t)n, sizeof(double), cmp_double);
-    return n % 2 ? s[n / 2] : 0.5 * (s[n / 2 - 1] + s[n / 2]);
-}
-
-static double minimum(const double *v, int n)
-{
-    double m = v[0];
-    for (int i = 1; i < n; i++) m = v[i] < m ? v[i] : m;
-    return m;
-}
 
 /* ---- per-kernel profile: a backend wrapping the CPU or the OpenCL backend -------------- */
 typedef struct kstat {
@@ -79,12 +52,12 @@ static int prof_run(lm_backend *b, lm_ctx *c, const lm_kernel *k, lm_tensor *con
                     const void *params)
 {
     lm_backend *in = prof_inner[b == &prof_wrap[1]];
-    double t0 = now();
+    double t0 = bench_now();
     int r = in->run ? in->run(in, c, k, t, nt, params) : k->cpu(c, t, nt, params);
     lm_cl_backend_finish(in);
     kstat *s = kstat_of(k->name);
     if (s) {
-        s->t[prof_side][prof_rep] += now() - t0;
+        s->t[prof_side][prof_rep] += bench_now() - t0;
         if (prof_side == 1 && prof_rep == 0) s->calls++;
     }
     return r;
@@ -103,7 +76,7 @@ static double train_step(lm_ctx *c, bench_model *bm)
 {
     lm_model *m = bm->m;
     int np = m->params.n, *s = bm->shape;
-    double t0 = now();
+    double t0 = bench_now();
     lm_ctx_reset(c);
     lm_tensors_swap_to_device(c, bm->ps, np, bm->saved);
     lm_tensor *x = lm_tensor_from(c, 4, s, bm->x);
@@ -115,7 +88,7 @@ static double train_step(lm_ctx *c, bench_model *bm)
     lm_tensors_swap_back(c, bm->ps, np, bm->saved);
     lm_adam_step(&bm->opt, &m->params, lm_nthreads(c));
     lm_params_zero_grad(&m->params);
-    double t = now() - t0;
+    double t = bench_now() - t0;
     if (c->status) {
         fprintf(stderr, "bench_opencl: %s: %s\n", m->preset, c->msg);
         exit(1);
@@ -179,7 +152,7 @@ static void profile(lm_ctx *ctx[2], bench_model *bm, int reps)
     double ksum[2] = {0, 0};
     for (int i = 0; i < nkst; i++)
         for (int s = 0; s < 2; s++) {
-            kst[i].t[s][0] = median(kst[i].t[s], reps);
+            kst[i].t[s][0] = bench_median(kst[i].t[s], reps);
             ksum[s] += kst[i].t[s][0];
         }
     qsort(kst, (size_t)nkst, sizeof *kst, cmp_kstat);
@@ -191,7 +164,7 @@ static void profile(lm_ctx *ctx[2], bench_model *bm, int reps)
         printf("  %-24s %6ld %10.2f %10.2f %8.2f\n", kst[i].name, kst[i].calls,
                kst[i].t[0][0] * 1e3, kst[i].t[1][0] * 1e3, kst[i].t[1][0] / kst[i].t[0][0]);
     }
-    double m0 = median(tot[0], reps), m1 = median(tot[1], reps);
+    double m0 = bench_median(tot[0], reps), m1 = bench_median(tot[1], reps);
     printf("  %-24s %6s %10.2f %10.2f\n", "(not in kernels)", "", (m0 - ksum[0]) * 1e3,
            (m1 - ksum[1]) * 1e3);
     printf("  %-24s %6s %10.2f %10.2f %8.2f\n", "profiled step", "", m0 * 1e3, m1 * 1e3, m1 / m0);
@@ -206,8 +179,8 @@ static void step_times(lm_ctx *ctx[2], bench_model *bm, int reps)
             for (int r = half * reps / 2; r < (half + 1) * reps / 2 + (half ? reps % 2 : 0); r++)
                 t[s][r] = train_step(ctx[s], bm);
         }
-    double c0 = minimum(t[0], reps), c1 = minimum(t[1], reps);
-    double d0 = median(t[0], reps), d1 = median(t[1], reps);
+    double c0 = bench_min(t[0], reps), c1 = bench_min(t[1], reps);
+    double d0 = bench_median(t[0], reps), d1 = bench_median(t[1], reps);
     printf("training step %-10s B=%d %dx%d | cpu ms %8.1f %8.1f | opencl ms %8.1f %8.1f | "
            "opencl/cpu %5.2f %5.2f (target <= 2)\n", bm->m->preset, bm->shape[0], bm->shape[2],
            bm->shape[3], c0 * 1e3, d0 * 1e3, c1 * 1e3, d1 * 1e3, c1 / c0, d1 / d0);

@@ -15,24 +15,12 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include "bench/bench_util.h"
 
 #define B 4
 #define H 66
 #define W 64
 #define MAXREP 64
-
-static double now(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
 
 typedef struct times { double fwd, bwd, adam, total; } times;
 
@@ -40,20 +28,20 @@ typedef struct times { double fwd, bwd, adam, total; } times;
 static int step(lm_ctx *c, lm_model *m, lm_adam *o, const float *raw, const float *tgt, int train,
                 times *t)
 {
-    double t0 = now();
+    double t0 = bench_now();
     lm_ctx_reset(c);
     lm_ctx_set_grad(c, train);
     lm_tensor *x = lm_tensor_from(c, 4, (int[]){B, 1, H, W}, raw);
     lm_tensor *y = lm_tensor_from(c, 4, (int[]){B, 33, H, W}, tgt);
     lm_tensor *loss = lm_l1_loss(c, lm_model_forward(c, m, x), y);
-    double t1 = now();
+    double t1 = bench_now();
     if (train) {
         lm_params_zero_grad(&m->params);
         lm_backward(c, loss, NULL);
     }
-    double t2 = now();
+    double t2 = bench_now();
     if (train) lm_adam_step(o, &m->params, lm_nthreads(c));
-    double t3 = now();
+    double t3 = bench_now();
     if (lm_ctx_status(c)) {
         fprintf(stderr, "%s: %s\n", m->preset, lm_ctx_message(c));
         return -1;
@@ -90,7 +78,7 @@ static void bench(const char *preset, const lm_mosaic *mo, int threads, int reps
         sum.fwd += t.fwd, sum.bwd += t.bwd, sum.adam += t.adam;
     }
     if (ok) {
-        qsort(tot, (size_t)reps, sizeof *tot, cmp_double);
+        qsort(tot, (size_t)reps, sizeof *tot, bench_cmp_double);
         printf("%-10s %-8s %10ld %9.1f %9.1f %8.1f %8.1f %8.1f %9.2f\n", preset,
                train ? "train" : "forward", lm_params_count(&m->params, 1), 1e3 * tot[0],
                1e3 * tot[reps / 2], 1e3 * sum.fwd / reps, 1e3 * sum.bwd / reps,

@@ -119,6 +119,14 @@ static inline void check_grad_(lm_ctx *c, lm_gradcheck_fn fn, lm_tensor *const *
         check_failures_++;
     }
 }
+/* [y, x] flattened and joined: with x used twice, a backward that writes (=) instead of
+ * adding (+=) into x's gradient loses the other use and fails a gradient check. */
+static inline lm_tensor *check_with_input(lm_ctx *c, lm_tensor *y, lm_tensor *x)
+{
+    lm_tensor *p[2] = {lm_reshape(c, y, 1, (int[]){-1}), lm_reshape(c, x, 1, (int[]){-1})};
+    return lm_concat(c, p, 2, 0);
+}
+
 #define CHECK_GRAD(c, fn, in, nin, user, opts) check_grad_((c), (fn), (in), (nin), (user), (opts), __FILE__, __LINE__)
 
 #endif

@@ -3,22 +3,6 @@
  * holds, and inputs that do not require grad), strided inputs and error cases. */
 #include "tests/check.h"
 
-/* lm_gradcheck leaves its nodes on the tape; clear their grads first so that the nodes of an
- * earlier check in the same ctx are skipped by this check's backward. */
-#define GRADCHECK(c, ...)                                                                     \
-    do {                                                                                      \
-        lm_tape_clear(c);                                                                     \
-        CHECK_GRAD(c, __VA_ARGS__);                                                           \
-    } while (0)
-
-/* [y, x] flattened and joined: x is used twice, so a backward that writes (=) instead of
- * adding (+=) into x's gradient loses the other use and fails the check. */
-static lm_tensor *with_input(lm_ctx *c, lm_tensor *y, lm_tensor *x)
-{
-    lm_tensor *p[2] = {lm_reshape(c, y, 1, (int[]){-1}), lm_reshape(c, x, 1, (int[]){-1})};
-    return lm_concat(c, p, 2, 0);
-}
-
 /* Reference concat of n 3-D tensors along dim (all other dims equal). */
 static void ref_concat3(lm_tensor *const *xs, int n, int dim, float *out, const int *os)
 {
@@ -139,7 +123,7 @@ static lm_tensor *fn_split_mid(lm_ctx *c, lm_tensor *const *in, int nin, void *u
     (void)nin, (void)u;
     lm_tensor *p[3];
     lm_split(c, in[0], 2, 3, (int[]){1, 2, 2}, p);
-    return with_input(c, p[1], in[0]);
+    return check_with_input(c, p[1], in[0]);
 }
 /* split in two and put the parts back swapped (every part reaches the output) */
 static lm_tensor *fn_split_swap(lm_ctx *c, lm_tensor *const *in, int nin, void *u)
@@ -164,16 +148,16 @@ static void test_gradients(void)
         lm_tensor_set_requires_grad(xs[i], 1);
     }
     int dim = 1;
-    GRADCHECK(&c, fn_concat, xs, 11, &dim, NULL);
+    CHECK_GRAD(&c, fn_concat, xs, 11, &dim, NULL);
     /* only some inputs require grad: the others get none, the rest are right */
     lm_tensor_set_requires_grad(xs[0], 0);
     lm_tensor_set_requires_grad(xs[9], 0);
-    GRADCHECK(&c, fn_concat, xs, 11, &dim, NULL);
+    CHECK_GRAD(&c, fn_concat, xs, 11, &dim, NULL);
     CHECK(xs[0]->grad == NULL && xs[9]->grad == NULL && xs[10]->grad != NULL);
     lm_tensor *x = lm_tensor_uniform(&c, 3, (int[]){2, 3, 5}, &r, -1, 1);
     lm_tensor_set_requires_grad(x, 1);
-    GRADCHECK(&c, fn_split_mid, &x, 1, NULL, NULL);
-    GRADCHECK(&c, fn_split_swap, &x, 1, NULL, NULL);
+    CHECK_GRAD(&c, fn_split_mid, &x, 1, NULL, NULL);
+    CHECK_GRAD(&c, fn_split_swap, &x, 1, NULL, NULL);
     CHECK_CTX_OK(&c);
     lm_ctx_free(&c);
 }

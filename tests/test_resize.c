@@ -4,22 +4,6 @@
 #include "tests/check.h"
 #include <stdlib.h>
 
-/* lm_gradcheck leaves its nodes on the tape; clear their grads first so that the nodes of an
- * earlier check in the same ctx are skipped by this check's backward. */
-#define GRADCHECK(c, ...)                                                                     \
-    do {                                                                                      \
-        lm_tape_clear(c);                                                                     \
-        CHECK_GRAD(c, __VA_ARGS__);                                                           \
-    } while (0)
-
-/* [y, x] flattened and joined: x is used twice, so a backward that writes (=) instead of
- * adding (+=) into x's gradient loses the other use and fails the check. */
-static lm_tensor *with_input(lm_ctx *c, lm_tensor *y, lm_tensor *x)
-{
-    lm_tensor *p[2] = {lm_reshape(c, y, 1, (int[]){-1}), lm_reshape(c, x, 1, (int[]){-1})};
-    return lm_concat(c, p, 2, 0);
-}
-
 /* PyTorch's source coordinate, in double; returns i0, i1 and the weight of i1. */
 static void ref_src(int dst, int in, int out, int ac, int *i0, int *i1, double *l)
 {
@@ -141,7 +125,7 @@ static lm_tensor *fn_resize(lm_ctx *c, lm_tensor *const *in, int nin, void *u)
 {
     (void)nin;
     const rs_case *p = u;
-    return with_input(c, lm_resize_bilinear(c, in[0], p->oh, p->ow, p->ac), in[0]);
+    return check_with_input(c, lm_resize_bilinear(c, in[0], p->oh, p->ow, p->ac), in[0]);
 }
 
 static void test_gradients(void)
@@ -153,7 +137,7 @@ static void test_gradients(void)
     lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){2, 2, 4, 5}, &r, -1, 1);
     lm_tensor_set_requires_grad(x, 1);
     const rs_case cases[4] = {{7, 11, 0}, {3, 2, 0}, {7, 11, 1}, {3, 3, 1}};
-    for (int k = 0; k < 4; k++) GRADCHECK(&c, fn_resize, &x, 1, (void *)&cases[k], NULL);
+    for (int k = 0; k < 4; k++) CHECK_GRAD(&c, fn_resize, &x, 1, (void *)&cases[k], NULL);
     CHECK_CTX_OK(&c);
     lm_ctx_free(&c);
 }

@@ -2,22 +2,6 @@
  * index loop, round trips, gradients, strided inputs and error cases. */
 #include "tests/check.h"
 
-/* lm_gradcheck leaves its nodes on the tape; clear their grads first so that the nodes of an
- * earlier check in the same ctx are skipped by this check's backward. */
-#define GRADCHECK(c, ...)                                                                     \
-    do {                                                                                      \
-        lm_tape_clear(c);                                                                     \
-        CHECK_GRAD(c, __VA_ARGS__);                                                           \
-    } while (0)
-
-/* [y, x] flattened and joined: x is used twice, so a backward that writes (=) instead of
- * adding (+=) into x's gradient loses the other use and fails the check. */
-static lm_tensor *with_input(lm_ctx *c, lm_tensor *y, lm_tensor *x)
-{
-    lm_tensor *p[2] = {lm_reshape(c, y, 1, (int[]){-1}), lm_reshape(c, x, 1, (int[]){-1})};
-    return lm_concat(c, p, 2, 0);
-}
-
 /* Reference: out[b, ch*fy*fx + i*fx + j, y, x] = in[b, ch, fy*y + i, fx*x + j]. */
 static void ref_unshuffle(const float *in, float *out, int B, int C, int H, int W, int fy, int fx)
 {
@@ -108,12 +92,12 @@ static void test_strided_input(void)
 static lm_tensor *fn_unshuffle(lm_ctx *c, lm_tensor *const *in, int nin, void *u)
 {
     (void)nin, (void)u;
-    return with_input(c, lm_pixel_unshuffle(c, in[0], 3, 2), in[0]);
+    return check_with_input(c, lm_pixel_unshuffle(c, in[0], 3, 2), in[0]);
 }
 static lm_tensor *fn_shuffle(lm_ctx *c, lm_tensor *const *in, int nin, void *u)
 {
     (void)nin, (void)u;
-    return with_input(c, lm_pixel_shuffle(c, in[0], 2, 3), in[0]);
+    return check_with_input(c, lm_pixel_shuffle(c, in[0], 2, 3), in[0]);
 }
 
 static void test_gradients(void)
@@ -124,10 +108,10 @@ static void test_gradients(void)
     lm_rng_seed(&r, 14);
     lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){2, 2, 6, 4}, &r, -1, 1);
     lm_tensor_set_requires_grad(x, 1);
-    GRADCHECK(&c, fn_unshuffle, &x, 1, NULL, NULL);
+    CHECK_GRAD(&c, fn_unshuffle, &x, 1, NULL, NULL);
     lm_tensor *z = lm_tensor_uniform(&c, 4, (int[]){2, 12, 2, 3}, &r, -1, 1);
     lm_tensor_set_requires_grad(z, 1);
-    GRADCHECK(&c, fn_shuffle, &z, 1, NULL, NULL);
+    CHECK_GRAD(&c, fn_shuffle, &z, 1, NULL, NULL);
     CHECK_CTX_OK(&c);
     lm_ctx_free(&c);
 }
