@@ -45,6 +45,7 @@ static const field fields[] = {
     FLD("val_noise", F_FLOAT, val_noise, "F", "noise level of validation samples"),
     FLD("seed", F_U64, seed, "N", "random seed (init, data)"),
     FLD("threads", F_INT, threads, "N", "compute threads (0 = all cores)"),
+    FLD("device", F_STR, device, "NAME", "cpu | opencl (default: $LM_DEVICE, else cpu)"),
     FLD("workers", F_INT, workers, "N", "data preparation threads"),
     FLD("val_interval", F_LONG, val_interval, "N", "updates between validations (0 = end)"),
     FLD("val_patches", F_INT, val_patches, "N", "fixed validation samples"),
@@ -69,6 +70,8 @@ void lm_train_cfg_default(lm_train_cfg *c)
     c->noise_min = 0.0f, c->noise_max = 0.15f;
     c->seed = 1;
     c->workers = 2;
+    const char *dev = getenv("LM_DEVICE");
+    snprintf(c->device, sizeof c->device, "%s", dev && *dev ? dev : "cpu"); /* checked later */
     c->val_interval = 1000;
     c->val_patches = 64;
     c->checkpoint_interval = 1000;
@@ -352,6 +355,9 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     if (!(c->val_noise >= 0 && c->val_noise <= 1))
         BAD("'val_noise': must be in [0, 1] (got %g)", c->val_noise);
     if (c->threads < 0) BAD("'threads': must be >= 0 (got %d)", c->threads);
+    if (strcmp(c->device, "cpu") && strcmp(c->device, "opencl"))
+        BAD("'device': must be cpu or opencl (got '%s'; --device, the config or $LM_DEVICE)",
+            c->device);
     if (c->workers < 0) BAD("'workers': must be >= 0 (got %d)", c->workers);
     if (c->val_interval < 0) BAD("'val_interval': must be >= 0 (got %ld)", c->val_interval);
     if (c->val_patches < 0) BAD("'val_patches': must be >= 0 (got %d)", c->val_patches);
@@ -371,7 +377,7 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
     for (int i = 0; i < c->ndata; i++) json_array_append_new(data, json_string(c->data[i]));
     json_t *root = json_pack(
         "{s:i, s:s, s:s, s:o, s:f, s:[i,i], s:i, s:i, s:I, s:f, s:s, s:f, s:I, s:I, s:f, s:f, "
-        "s:[f,f], s:f, s:I, s:i, s:i, s:I, s:i, s:I, s:I, s:s}",
+        "s:[f,f], s:f, s:I, s:i, s:s, s:i, s:I, s:i, s:I, s:I, s:s}",
         "version", c->version, "model", c->model, "system", c->system, "data", data,
         "synth_fraction", (double)c->synth_fraction, "patch", c->patch_h, c->patch_w,
         "batch", c->batch, "accum_steps", c->accum_steps, "iterations", (json_int_t)c->iterations,
@@ -379,7 +385,8 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
         "warmup", (json_int_t)c->warmup, "step_every", (json_int_t)c->step_every,
         "step_gamma", (double)c->step_gamma, "weight_decay", (double)c->weight_decay,
         "noise", (double)c->noise_min, (double)c->noise_max, "val_noise", (double)c->val_noise,
-        "seed", (json_int_t)c->seed, "threads", c->threads, "workers", c->workers,
+        "seed", (json_int_t)c->seed, "threads", c->threads, "device", c->device,
+        "workers", c->workers,
         "val_interval", (json_int_t)c->val_interval, "val_patches", c->val_patches,
         "checkpoint_interval", (json_int_t)c->checkpoint_interval,
         "log_interval", (json_int_t)c->log_interval, "output", c->output);

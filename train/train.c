@@ -5,6 +5,7 @@
  * pipeline (data/dataset.h). */
 #include "train/train.h"
 #include "autograd/autograd.h"
+#include "kernels-opencl/cl_backend.h"
 #include <errno.h>
 #include <math.h>
 #include <stdlib.h>
@@ -20,6 +21,9 @@ typedef struct loop {
     lm_model *model;
     lm_adam opt;
     lm_ctx ctx;
+    lm_backend *backend;          /* cfg->device (NULL until opened) */
+    lm_tensor **ps, *held;        /* device runs: the parameters swapped in for each step */
+    int np;                       /* 0 on the CPU: no swapping, the path is unchanged */
     float *raw, *target, *pred;   /* one batch, host */
     FILE *log;
     long it0;                     /* iteration this invocation started at */
@@ -53,6 +57,19 @@ static lm_status make_dir(const char *path, lm_err *err)
     return LM_OK;
 }
 
+/* ---- parameters on the device for one step (no-ops on the CPU) ------------------------ */
+/* Call right after lm_ctx_reset; params_back after backward and before the next reset (it
+ * adds the device gradients into the host gradient block and restores the host tensors). */
+static void params_in(loop *L)
+{
+    if (L->np) lm_tensors_swap_to_device(&L->ctx, L->ps, L->np, L->held);
+}
+
+static void params_back(loop *L)
+{
+    if (L->np) lm_tensors_swap_back(&L->ctx, L->ps, L->np, L->held);
+}
+
 /* ---- one iteration -------------------------------------------------------------------- */
 /* Forward + L1 + backward of batch `index`; adds the unscaled loss to *loss_sum. */
 static lm_status micro_step(loop *L, long index, double *loss_sum, lm_err *err)
@@ -62,6 +79,7 @@ static lm_status micro_step(loop *L, long index, double *loss_sum, lm_err *err)
     if (L->src->batch(L->src->user, index, B, L->raw, L->target, err)) return err->status;
     lm_ctx *c = &L->ctx;
     lm_ctx_reset(c);
+    params_in(L);
     lm_tensor *raw = lm_tensor_from(c, 4, (int[]){B, 1, H, W}, L->raw);
     lm_tensor *tgt = lm_tensor_from(c, 4, (int[]){B, LM_MODEL_OUT_CHANNELS, H, W}, L->target);
     lm_tensor *loss = lm_l1_loss(c, lm_model_forward(c, L->model, raw), tgt);
@@ -69,6 +87,7 @@ static lm_status micro_step(loop *L, long index, double *loss_sum, lm_err *err)
     if (loss) lm_tensor_read(c, loss, &lv);
     if (loss && isfinite(lv))
         lm_backward(c, lm_scale(c, loss, 1.0f / (float)cfg->accum_steps), NULL);
+    params_back(L);
     if (lm_ctx_status(c)) {
         lm_err_set(err, lm_ctx_status(c), "training step: %s", lm_ctx_message(c));
         lm_ctx_clear_error(c);
@@ -135,9 +154,12 @@ static lm_status validate(loop *L, lm_metrics *out, lm_err *err)
             st = L->src->eval_sample(L->src->user, i0 + j, L->raw + j * rn, L->target + j * tn, err);
         if (st) break;
         lm_ctx_reset(c);
+        params_in(L);
         lm_tensor *raw = lm_tensor_from(c, 4, (int[]){b, 1, H, W}, L->raw);
         lm_tensor *pred = lm_model_forward(c, L->model, raw);
-        if (!pred || lm_tensor_read(c, pred, L->pred)) {
+        int bad = !pred || lm_tensor_read(c, pred, L->pred);
+        params_back(L);
+        if (bad) {
             st = lm_err_set(err, lm_ctx_status(c), "validation: %s", lm_ctx_message(c));
             lm_ctx_clear_error(c);
             break;
@@ -229,11 +251,36 @@ static lm_status open_log(loop *L, int resume, long upto, lm_err *err)
 }
 
 /* ---- the run --------------------------------------------------------------------------- */
+/* Open cfg->device once for the run and switch the ctx to it (nothing to do for the CPU). */
+static lm_status open_device(loop *L, lm_err *err)
+{
+    const lm_train_cfg *cfg = L->cfg;
+    if (!strcmp(cfg->device, "cpu")) return LM_OK;
+    lm_err be = {0};
+    L->backend = lm_backend_open(cfg->device, &be);
+    if (!L->backend)
+        return lm_err_set(err, LM_ERR_ARG, "device '%s' is not available: %s", cfg->device,
+                          be.msg);
+    lm_ctx_set_backend(&L->ctx, L->backend);
+    if (L->backend->device == LM_DEVICE_CPU) return LM_OK;
+    lm_params *p = &L->model->params;
+    L->ps = malloc((size_t)p->n * sizeof *L->ps);
+    L->held = malloc((size_t)p->n * sizeof *L->held);
+    if (!L->ps || !L->held) return lm_err_set(err, LM_ERR_NOMEM, "train: out of memory");
+    for (int i = 0; i < p->n; i++) L->ps[i] = &p->items[i]->t;
+    L->np = p->n;
+    if (L->opts->progress)
+        fprintf(L->opts->progress_out ? L->opts->progress_out : stderr, "train: device %s: %s\n",
+                cfg->device, lm_cl_backend_device_name(L->backend));
+    return LM_OK;
+}
+
 static lm_status setup(loop *L, lm_err *err)
 {
     const lm_train_cfg *cfg = L->cfg;
     if (lm_ctx_init(&L->ctx, cfg->threads) != LM_OK)
         return lm_err_set(err, LM_ERR_NOMEM, "train: cannot create the compute context");
+    if (open_device(L, err)) return err->status;
     size_t bn = (size_t)cfg->batch * cfg->patch_h * cfg->patch_w;
     L->raw = malloc(bn * sizeof(float));
     L->target = malloc(bn * LM_MODEL_OUT_CHANNELS * sizeof(float));
@@ -254,7 +301,10 @@ static void teardown(loop *L)
     free(L->target);
     free(L->pred);
     lm_adam_free(&L->opt);
-    lm_ctx_free(&L->ctx);
+    lm_ctx_free(&L->ctx); /* before its backend */
+    lm_backend_close(L->backend);
+    free(L->ps);
+    free(L->held);
 }
 
 /* Fresh run: config.json; resume: checkpoint state. Sets *start (iterations done). */

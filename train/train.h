@@ -48,6 +48,9 @@ typedef struct lm_train_cfg {
     float val_noise;
     uint64_t seed;
     int threads;                    /* 0 = all cores */
+    char device[16];                /* cpu | opencl: where forward/backward run (Adam, data
+                                     * and metrics stay on the host); default $LM_DEVICE, else
+                                     * cpu. Resume is exact only on the same device. */
     int workers;                    /* data preparation threads */
     long val_interval;              /* iterations between validations (0 = only at the end) */
     int val_patches;                /* fixed validation samples */
@@ -113,6 +116,11 @@ typedef struct lm_train_result {
 } lm_train_result;
 
 /* Train `model` (created by the caller from cfg->model with the run's mosaic) on `src`.
+ * The device backend (cfg->device) is opened once per run: each step uploads the batch,
+ * swaps the parameters onto the device (lm_tensors_swap_to_device), runs forward, loss and
+ * backward there, adds the device gradients into the host gradient block and runs Adam on the
+ * host; validation runs its forward passes the same way. A device that cannot be opened is
+ * LM_ERR_ARG with a one-line message naming it.
  * LM_ERR_NUMERIC when a loss is NaN/inf: the run stops, the message names the iteration, and
  * the last checkpoint on disk is left untouched. */
 lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_source *src,

@@ -1,0 +1,45 @@
+/* align.h — temporal alignment of a coded video frame's LED sub-images (system.md §9).
+ * What it is: every LED sub-image of frame i has a timestamp (its window's midpoint over
+ * exposure + readout); each is moved to the reference (lime) timestamp of frame i with dense
+ * optical flow (infer/flow.h) between the same LED's sub-images of two consecutive frames
+ * (same LED, so brightness constancy holds):
+ *   LED before the reference (tau = t_ref - t_l > 0): frames i and i+1, frame time t = tau;
+ *   LED after it (tau < 0): frames i-1 and i, t = 1 + tau = (1 - t_l) + t_ref;
+ *   out = lm_flow_interpolate(first, second, t).
+ * Edge frames: when the preferred neighbour is missing the other one is used and frame i's
+ * sub-image is warped alone under linear motion, out(p) = I_i(p - (tau / dt) F_{i->n}(p))
+ * (dt = +1 for frame i+1, -1 for frame i-1); with no neighbour the sub-image is copied.
+ * Sub-images are the unshuffled tile phases of a raw frame: plane t holds the pixels with
+ * (y mod ty) * tx + (x mod tx) == t, each (H / ty) x (W / tx), row-major.
+ * What it is not: demosaicking, the network, or occlusion handling. */
+#ifndef LM_ALIGN_H
+#define LM_ALIGN_H
+#include "data/system.h"
+#include "infer/flow.h"
+
+/* Normalised timestamp of each tile phase: t[p] = midpoint of the window of the LED at phase p,
+ * in us from the exposure start, divided by (exposure + readout); writes tile_rows * tile_cols
+ * values. *ref = the phase whose LED is named "Lime" (case-insensitive). Errors: LM_ERR_ARG
+ * (no lime LED in the tile, or NULL arguments), message starting "align:". */
+lm_status lm_align_phase_times(const lm_system *s, float *t, int *ref, lm_err *e);
+
+/* Align the np sub-images of frame i (cur, np x h x w) to the timestamp t[ref]; prev / next are
+ * frames i-1 / i+1 (same layout) or NULL. out (np x h x w, not aliasing the inputs) receives the
+ * aligned sub-images; plane ref (and any plane with t[p] == t[ref]) is copied. o: flow options
+ * (NULL = medium preset). Errors: LM_ERR_ARG (NULL cur/t/out, ref outside 0..np-1, np < 1),
+ * those of lm_flow_compute (image too small, non-finite pixels), message naming the plane. */
+lm_status lm_align_frame(const float *prev, const float *cur, const float *next, int np, int h,
+                         int w, const float *t, int ref, const lm_flow_opts *o, float *out,
+                         lm_err *e);
+
+/* Raw frame (height x width, multiples of ty x tx) -> ty * tx planes (see above).
+ * Errors: LM_ERR_SHAPE if the size is not a positive multiple of the tile. */
+lm_status lm_align_unshuffle(const float *raw, int height, int width, int ty, int tx,
+                             float *planes, lm_err *e);
+
+/* The inverse: ty * tx planes of h x w -> raw frame (h * ty) x (w * tx), pixel (y, x) taken
+ * from plane (y mod ty) * tx + (x mod tx). Errors: LM_ERR_SHAPE for non-positive sizes. */
+lm_status lm_align_remosaic(const float *planes, int h, int w, int ty, int tx, float *raw,
+                            lm_err *e);
+
+#endif

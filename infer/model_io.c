@@ -1,0 +1,102 @@
+/* model_io.c — load a trained model for inference (see model_io.h).
+ * What it is not: a checkpoint resumer (no optimizer state is read). */
+#include "infer/model_io.h"
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include "data/spectra.h"
+#include "train/mosaic_system.h"
+#include "train/train.h"
+
+static int is_dir(const char *p)
+{
+    struct stat st;
+    return stat(p, &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+static int is_file(const char *p)
+{
+    struct stat st;
+    return stat(p, &st) == 0 && S_ISREG(st.st_mode);
+}
+
+/* Resolve the weights file and read its metadata: preset, system path, system hash. */
+static lm_status read_meta(const char *path, lm_infer_model *im, char *preset, size_t np,
+                           uint64_t *hash, lm_err *err)
+{
+    if (is_dir(path)) snprintf(im->weights, sizeof im->weights, "%s/model.safetensors", path);
+    else snprintf(im->weights, sizeof im->weights, "%s", path);
+    if (!is_file(im->weights))
+        return lm_err_set(err, LM_ERR_IO, "%s: no such model (a run folder with "
+                          "model.safetensors, or a .safetensors file)", im->weights);
+    lm_err e2;
+    lm_err_clear(&e2);
+    char *p = lm_safetensors_meta(im->weights, "preset", &e2);
+    if (!p && e2.status) return lm_err_set(err, e2.status, "%s", e2.msg);
+    if (!p)
+        return lm_err_set(err, LM_ERR_FORMAT, "%s: not a Lumosaic model (no 'preset' metadata)",
+                          im->weights);
+    snprintf(preset, np, "%s", p);
+    free(p);
+    char *s = lm_safetensors_meta(im->weights, "system", &e2);
+    snprintf(im->system_path, sizeof im->system_path, "%s", s ? s : "");
+    free(s);
+    char *h = lm_safetensors_meta(im->weights, "system_hash", &e2);
+    *hash = h ? strtoull(h, NULL, 16) : 0;
+    free(h);
+    return LM_OK;
+}
+
+/* Load the system (override or recorded; "" = bundled default) and check its hash. */
+static lm_status load_system(lm_infer_model *im, const char *override, uint64_t hash,
+                             lm_err *err)
+{
+    if (override && override[0])
+        snprintf(im->system_path, sizeof im->system_path, "%s", override);
+    else if (!im->system_path[0] &&
+             lm_data_path("systems/default.json", im->system_path, sizeof im->system_path, err))
+        return err->status;
+    if (!is_file(im->system_path))
+        return lm_err_set(err, LM_ERR_IO, "%s: system description '%s' not found (give one with "
+                          "--system)", im->weights, im->system_path);
+    uint64_t got = lm_file_hash(im->system_path);
+    if (hash && got != hash)
+        return lm_err_set(err, LM_ERR_ARG, "model/system mismatch: %s was trained with a system "
+                          "description of hash %016" PRIx64 ", %s has hash %016" PRIx64,
+                          im->weights, hash, im->system_path, got);
+    return lm_system_load(im->system_path, &im->sys, err);
+}
+
+lm_status lm_infer_model_load(const char *path, const char *system_override, lm_infer_model *im,
+                              lm_err *err)
+{
+    memset(im, 0, sizeof *im);
+    char preset[64];
+    uint64_t hash = 0;
+    lm_mosaic mo;
+    lm_status st = read_meta(path, im, preset, sizeof preset, &hash, err);
+    if (!st) st = load_system(im, system_override, hash, err);
+    if (!st) st = lm_mosaic_from_system(&im->sys, &mo, err);
+    if (!st && !(im->model = lm_model_create(preset, &mo, 0, err))) st = err->status;
+    if (!st) {
+        lm_err e2;
+        lm_err_clear(&e2);
+        if (lm_params_load(&im->model->params, im->weights, 0, &e2))
+            st = lm_err_set(err, e2.status, "model/system mismatch or bad weights: %s", e2.msg);
+    }
+    if (st) {
+        lm_infer_model_free(im);
+        return st;
+    }
+    lm_params_set_requires_grad(&im->model->params, 0);
+    return LM_OK;
+}
+
+void lm_infer_model_free(lm_infer_model *im)
+{
+    lm_model_free(im->model);
+    lm_system_free(&im->sys);
+    memset(im, 0, sizeof *im);
+}

@@ -1,0 +1,31 @@
+/* model_io.h — a trained model for inference: from a training run folder (its
+ * model.safetensors) or a .safetensors file written by the trainer (train/train.h).
+ * What it is: read the metadata "preset" (required) and "system" / "system_hash" (the system
+ * description the model was trained for; "" = the bundled default), load that system (or an
+ * override), derive the network front (lm_mosaic_from_system), create the model and load its
+ * weights (shapes must match), trainable parameters switched to no-grad.
+ * What it is not: checkpoint resume (train/checkpoint.c) or the inference loop (infer/tile.h). */
+#ifndef LM_MODEL_IO_H
+#define LM_MODEL_IO_H
+#include "data/system.h"
+#include "models/model.h"
+
+typedef struct lm_infer_model {
+    lm_model *model;
+    lm_system sys;        /* the system description the model runs with */
+    char weights[1024];   /* the .safetensors file loaded */
+    char system_path[1024];
+} lm_infer_model;
+
+/* Load path (a folder holding model.safetensors, or a .safetensors file). system_override
+ * (NULL or "" = the one recorded in the file) replaces the recorded system; its FNV-1a hash must
+ * then equal the recorded system_hash when one is recorded, as must the recorded file's.
+ * Errors (*im zeroed, message names the file): LM_ERR_IO (missing model or system file),
+ * LM_ERR_FORMAT (not a Lumosaic model: no preset, bad weights), LM_ERR_ARG ("model/system
+ * mismatch": the system differs from the one the model was trained for, or its tile does not fit
+ * the model's weights), others from the model / parameter loaders. */
+lm_status lm_infer_model_load(const char *path, const char *system_override, lm_infer_model *im,
+                              lm_err *err);
+void lm_infer_model_free(lm_infer_model *im);
+
+#endif

@@ -1,0 +1,65 @@
+/* tile.h — patch-wise inference (system.md §8): a coded frame is cut into overlapping windows
+ * (66 x 64, stride 30 x 32 by default) whose top-left corners lie on the mosaic tile grid, plus
+ * windows flush with the bottom / right edges (still on the grid) where the regular grid does not
+ * reach them. Windows run through a network in batches; each window's output is multiplied by a
+ * fixed weighting kernel K, accumulated, and divided by the accumulated K.
+ *
+ * K is separable: K(i, j) = k_h(i) * k_w(j) with k_n(i) = f + (1 - f) * sin^2(pi (i + 0.5) / n),
+ * f = LM_TILE_FLOOR (0.05). It is a raised cosine (Hann) that is highest in the centre and falls
+ * to f (small but non-zero) at the edges, so every covered pixel has a positive weight sum and
+ * pixels near a window's border — where the demosaic interpolates differently than in the whole
+ * frame — count little where another window covers them better.
+ *
+ * Windows are folded in raster order of their positions whatever the batch size, so the result
+ * does not depend on the batch size (given a network whose per-sample output does not depend on
+ * the batch). The lm_ctx passed in is used as the per-batch arena: it is lm_ctx_reset after every
+ * batch (peak memory is bounded by one batch of windows, not the frame), so the caller must hold
+ * no tensors in it. Grad mode is switched off for the call and restored afterwards.
+ * What it is not: model loading (infer/model_io.h) or temporal alignment (infer/flow.h). */
+#ifndef LM_TILE_H
+#define LM_TILE_H
+#include "data/cube.h"
+#include "models/model.h"
+
+#define LM_TILE_FLOOR 0.05f
+
+typedef struct lm_tile_opts {
+    int win_h, win_w;       /* window size (66 x 64); multiples of the tile */
+    int stride_y, stride_x; /* window stride (30, 32); multiples of the tile */
+    int batch;              /* windows per network call (>= 1) */
+} lm_tile_opts;
+
+/* 66 x 64, stride (30, 32), batch 8. */
+void lm_tile_default_opts(lm_tile_opts *o);
+
+/* Validate the options and the frame size for a tile of ty x tx pixels: window and stride
+ * multiples of the tile and > 0, frame size a multiple of the tile and >= the window.
+ * Errors: LM_ERR_ARG (options) / LM_ERR_SHAPE (frame), message starting "tile:". */
+lm_status lm_tile_check(const lm_tile_opts *o, int height, int width, int ty, int tx,
+                        lm_err *err);
+
+/* Window start positions along one axis of length n: 0, stride, 2 stride, ... while the window
+ * fits, then n - win if the last one does not end at n. Writes up to max positions into pos
+ * (may be NULL) and returns the count (needs n >= win). */
+int lm_tile_positions(int n, int win, int stride, int *pos, int max);
+
+/* The weighting kernel for one axis of length n (see above): k[i], i < n. */
+void lm_tile_kernel_1d(int n, float *k);
+
+/* A network on a batch: raw B x 1 x h x w in, B x C x h x w out (C = out_ch of lm_tile_fold),
+ * or NULL with the ctx error set. */
+typedef lm_tensor *(*lm_tile_fn)(lm_ctx *c, lm_tensor *raw, void *user);
+
+/* Fold: run fn over every window of frame (height x width, row-major) and write the K-weighted
+ * average into out (out_ch x height x width). Errors: those of lm_tile_check, a wrong output
+ * shape from fn (LM_ERR_SHAPE), the ctx error of fn (its status and message). */
+lm_status lm_tile_fold(lm_ctx *c, const float *frame, int height, int width, int ty, int tx,
+                       const lm_tile_opts *o, lm_tile_fn fn, void *user, int out_ch,
+                       float *out, lm_err *err);
+
+/* A model on a whole frame: lm_tile_fold with lm_model_forward, then channels 1..31 (400-700 nm)
+ * of the 33-channel output as a 31-band cube (allocated here; lm_cube_free). */
+lm_status lm_tile_infer(lm_ctx *c, lm_model *m, const float *frame, int height, int width,
+                        const lm_tile_opts *o, lm_cube *cube, lm_err *err);
+
+#endif

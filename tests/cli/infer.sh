@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# infer.sh — end-to-end tests of `lumosaic infer`: train a linear model briefly on the CAVE scene
+# balloons_crop100, simulate its coded frame, reconstruct it (cube EXR + sRGB PNG written, PSNR
+# against the simulated ground truth well above an untrained model's ~11 dB), a frame sequence
+# (folder) with a progress line per frame, batch size does not change the output; bad input:
+# missing model, not a model, model/system mismatch, frame too small, corrupt frame, used output
+# folder, unknown option — one line on stderr, exit 2, no output left.
+# usage: infer.sh LUMOSAIC MAKE_CUBE CUBE_PSNR
+source "$(dirname "$0")/lib.sh"
+PSNR=$3
+
+R=$T/run
+"$LM" train --model linear --data "$CAVE" --iterations 60 --batch 4 --accum-steps 1 --lr 5e-3 \
+  --synth-fraction 0 --noise 0,0 --val-patches 1 --output "$R" --quiet > "$T/log" 2>&1
+check "train: $(cat "$T/log")" [ -s "$R/model.safetensors" ]
+"$LM" simulate --input "$CAVE" --output "$T/sim" --crop > "$T/log" 2>&1
+check "simulate: $(cat "$T/log")" [ -s "$T/sim/frames/frame_0000.png" ]
+
+# ---- happy path ------------------------------------------------------------------------
+O=$T/out
+"$LM" infer --model "$R" --input "$T/sim/frames/frame_0000.png" --output "$O" 2> "$T/err"
+check "infer run: $(cat "$T/err")" [ $? -eq 0 ]
+check "cube written" [ -s "$O/cube_0000.exr" ]
+check "preview written" grep -q 'PNG' <(head -c 8 "$O/srgb_0000.png")
+check "one progress line" [ "$(grep -c '^frame 1/1' "$T/err")" -eq 1 ]
+check "no staging folder left" no_output "$O.tmp"
+p=$("$PSNR" "$O/cube_0000.exr" "$T/sim/gt/gt_0000.exr")
+echo "PSNR of the briefly trained linear model: $p dB"
+check "PSNR $p dB is sane (> 18 dB)" awk -v p="$p" 'BEGIN { exit !(p > 18 && p < 80) }'
+# the spectral EXR is readable by the cube reader and renders
+"$LM" render --input "$O/cube_0000.exr" --output "$T/r.png" > /dev/null 2>&1
+check "cube EXR reads back" [ -s "$T/r.png" ]
+# the model file itself, batch 1: the same cube bit for bit
+"$LM" infer --model "$R/model.safetensors" --input "$T/sim/frames/frame_0000.png" \
+  --output "$T/b1" --batch 1 --no-align 2> /dev/null
+check "batch 1 = batch 8" cmp -s "$O/cube_0000.exr" "$T/b1/cube_0000.exr"
+
+# a sequence (folder of two frames)
+"$LM" simulate --input "$CAVE" --output "$T/vid" --crop --video --frames 2 > /dev/null 2>&1
+"$LM" infer --model "$R" --input "$T/vid/frames" --output "$T/seq" 2> "$T/err"
+check "sequence run: $(cat "$T/err")" [ $? -eq 0 ]
+for i in 0000 0001; do
+  check "sequence cube $i" [ -s "$T/seq/cube_$i.exr" ] && check "sequence srgb $i" [ -s "$T/seq/srgb_$i.png" ]
+done
+check "progress line per frame" [ "$(grep -c '^frame [12]/2' "$T/err")" -eq 2 ]
+check "help states alignment is not applied" grep -q 'not yet' <("$LM" infer --help)
+
+# ---- bad input ---------------------------------------------------------------------------
+F=$T/sim/frames/frame_0000.png
+expect_error "missing model" 2 "no such model" "$T/e1" -- "$LM" infer --model "$T/nope" --input "$F" --output "$T/e1"
+echo "not safetensors" > "$T/bogus.safetensors"
+expect_error "not a model" 2 "bogus.safetensors" "$T/e2" -- "$LM" infer --model "$T/bogus.safetensors" --input "$F" --output "$T/e2"
+SYS=$(grep -o '"path": "[^"]*default.json"' "$T/sim/simulate.json" | head -1 | cut -d'"' -f4)
+{ cat "$SYS"; echo " "; } > "$T/other.json"
+expect_error "model/system mismatch" 2 "model/system mismatch" "$T/e3" -- "$LM" infer --model "$R" --input "$F" --system "$T/other.json" --output "$T/e3"
+"$MK" "$T/small.exr" good 60 60
+"$LM" simulate --input "$T/small.exr" --output "$T/small" > /dev/null 2>&1
+expect_error "frame too small" 2 "smaller than the 66x64 window" "$T/e4" -- "$LM" infer --model "$R" --input "$T/small/frames/frame_0000.png" --output "$T/e4"
+head -c 300 "$F" > "$T/corrupt.png"
+expect_error "corrupt frame" 2 "corrupt.png" "$T/e5" -- "$LM" infer --model "$R" --input "$T/corrupt.png" --output "$T/e5"
+expect_error "missing frames" 2 "nothing_here" "$T/e6" -- "$LM" infer --model "$R" --input "$T/nothing_here.png" --output "$T/e6"
+expect_error "missing --model" 2 "--model is required" "$T/e7" -- "$LM" infer --input "$F" --output "$T/e7"
+expect_error "unknown option" 2 "unknown option" "$T/e8" -- "$LM" infer --model "$R" --input "$F" --output "$T/e8" --bogus
+expect_error "bad batch" 2 "--batch" "$T/e9" -- "$LM" infer --model "$R" --input "$F" --output "$T/e9" --batch 0
+mkdir -p "$T/used" && touch "$T/used/x"
+"$LM" infer --model "$R" --input "$F" --output "$T/used" > /dev/null 2> "$T/err"
+check "used output folder refused (exit 2)" [ $? -eq 2 ]
+check "used output folder untouched" [ "$(ls "$T/used")" = x ]
+
+finish
