@@ -4,8 +4,11 @@
  * EXR, 400-700 nm) and an sRGB preview DIR/srgb_NNNN.png per frame into a staging folder that is
  * renamed into place at the end, so a failure leaves nothing half-written. Network outputs below
  * 0 are clamped to 0 before writing (reflectance is non-negative and the EXR writer rejects
- * negative values). What it is not: temporal alignment — infer/flow is not there yet, so every
- * frame is reconstructed on its own (--no-align is accepted and is what happens anyway). */
+ * negative values). A sequence of >= 2 frames is temporally aligned first unless --no-align
+ * (system.md §9, infer/align.h): each frame's LED sub-images are moved to its lime timestamp
+ * with frames i-1, i, i+1 (edge frames as align.h says) and re-mosaicked before reconstruction;
+ * only three frames' sub-images are held at a time (read one frame ahead).
+ * What it is not: the flow or the alignment scheme themselves (infer/flow.c, infer/align.c). */
 #include <omp.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -16,6 +19,7 @@
 #include "data/frames.h"
 #include "data/image.h"
 #include "data/srgb.h"
+#include "infer/align.h"
 #include "infer/model_io.h"
 #include "infer/tile.h"
 
@@ -37,8 +41,11 @@ static void help(void)
            "  --threads T      OpenMP threads (1..1024; default: all cores)\n"
            "  --system FILE    system description (default: the one recorded in the model; it\n"
            "                   must be the same file content)\n"
-           "  --no-align       do not align frames in time. Temporal alignment is not yet\n"
-           "                   implemented: frames are always reconstructed independently\n"
+           "  --no-align       do not align a sequence in time. By default, for 2 or more\n"
+           "                   frames, each LED sub-image is moved to the frame's lime-LED\n"
+           "                   time by optical flow to the neighbouring frames (needs\n"
+           "                   sub-images of at least 24 x 24 pixels; smaller frames are\n"
+           "                   reconstructed unaligned, with a warning)\n"
            "  --help           this text\n");
 }
 
@@ -84,6 +91,17 @@ static int fail(const lm_cli *c, const lm_err *e, int runtime)
     return runtime || e->status == LM_ERR_NOMEM ? 1 : 2;
 }
 
+/* Temporal alignment state: the sub-images (np planes of ph x pw) of frames i-1, i, i+1. */
+typedef struct infer_align {
+    int on;
+    int np, ph, pw, ty, tx, ref;
+    float *t;                /* np normalised timestamps */
+    lm_flow_opts fo;
+    float *prev, *cur, *next; /* np * ph * pw each; prev / next NULL-able views */
+    float *buf[3];           /* the storage behind prev / cur / next */
+    float *aligned, *raw;    /* aligned planes, re-mosaicked frame */
+} infer_align;
+
 typedef struct infer_run {
     const lm_cli *c;
     const infer_opts *o;
@@ -92,6 +110,7 @@ typedef struct infer_run {
     lm_srgb srgb;
     lm_ctx ctx;
     float *rgb;
+    infer_align al;
     char tmp[1100];
 } infer_run;
 
@@ -111,6 +130,97 @@ static int write_frame(infer_run *r, lm_cube *cube, int number, lm_err *e)
     return 0;
 }
 
+static void align_free(infer_align *a)
+{
+    for (int k = 0; k < 3; k++) free(a->buf[k]);
+    free(a->t);
+    free(a->aligned);
+    free(a->raw);
+    memset(a, 0, sizeof *a);
+}
+
+/* Decide whether to align and allocate its buffers. 0 ok, else an exit status (printed). */
+static int align_init(infer_run *r, lm_err *e)
+{
+    infer_align *a = &r->al;
+    const lm_system *s = &r->im.sys;
+    if (r->o->no_align || r->seq.count < 2) return 0;
+    a->ty = s->tile_rows;
+    a->tx = s->tile_cols;
+    a->np = a->ty * a->tx;
+    a->ph = r->seq.height / a->ty;
+    a->pw = r->seq.width / a->tx;
+    lm_flow_default_opts(&a->fo, LM_FLOW_MEDIUM);
+    a->fo.nthreads = r->o->threads > 0 ? (int)r->o->threads : omp_get_max_threads();
+    int need = lm_flow_min_size(&a->fo);
+    if (a->ph < need || a->pw < need) {
+        fprintf(stderr, "lumosaic infer: warning: sub-images %dx%d are smaller than %dx%d: "
+                "frames are reconstructed without temporal alignment\n", a->pw, a->ph, need,
+                need);
+        return 0;
+    }
+    size_t n = (size_t)a->np * a->ph * a->pw;
+    a->t = malloc(sizeof(float) * a->np);
+    a->aligned = malloc(sizeof(float) * n);
+    a->raw = malloc(sizeof(float) * n);
+    for (int k = 0; k < 3; k++) a->buf[k] = malloc(sizeof(float) * n);
+    if (!a->t || !a->aligned || !a->raw || !a->buf[0] || !a->buf[1] || !a->buf[2]) {
+        lm_cli_error(r->c, "out of memory (alignment buffers)");
+        return 1;
+    }
+    if (lm_align_phase_times(s, a->t, &a->ref, e)) return fail(r->c, e, 0);
+    a->on = 1;
+    return 0;
+}
+
+/* Read frame i of the sequence and unshuffle it into dst (np planes). */
+static lm_status load_planes(infer_run *r, int i, float *dst, lm_err *e)
+{
+    lm_frame f;
+    if (lm_frame_seq_read(&r->seq, i, &f, e)) return e->status;
+    lm_status st = lm_align_unshuffle(f.data, f.height, f.width, r->al.ty, r->al.tx, dst, e);
+    lm_frame_free(&f);
+    return st;
+}
+
+/* Frame i aligned and re-mosaicked into al.raw; keeps cur = frame i, next = frame i + 1 loaded
+ * (frame i - 1 stays as prev). On entry cur holds frame i (and next frame i+1 if i > 0). */
+static lm_status align_step(infer_run *r, int i, lm_err *e)
+{
+    infer_align *a = &r->al;
+    if (i == 0) {
+        a->cur = a->buf[0];
+        if (load_planes(r, 0, a->cur, e)) return e->status;
+    }
+    if (i + 1 < r->seq.count) {
+        a->next = a->buf[(i + 1) % 3];
+        if (load_planes(r, i + 1, a->next, e)) return e->status;
+    } else {
+        a->next = NULL;
+    }
+    lm_err ae;
+    lm_err_clear(&ae);
+    if (lm_align_frame(a->prev, a->cur, a->next, a->np, a->ph, a->pw, a->t, a->ref, &a->fo,
+                       a->aligned, &ae) ||
+        lm_align_remosaic(a->aligned, a->ph, a->pw, a->ty, a->tx, a->raw, &ae))
+        return lm_err_set(e, ae.status, "%s: %s", r->seq.paths[i], ae.msg);
+    return LM_OK;
+}
+
+/* Frame i's input to the network: aligned, or read as is into *f. *data points at it. */
+static lm_status frame_input(infer_run *r, int i, lm_frame *f, const float **data, lm_err *e)
+{
+    memset(f, 0, sizeof *f);
+    if (r->al.on) {
+        if (align_step(r, i, e)) return e->status;
+        *data = r->al.raw;
+        return LM_OK;
+    }
+    if (lm_frame_seq_read(&r->seq, i, f, e)) return e->status;
+    *data = f->data;
+    return LM_OK;
+}
+
 static int run_frames(infer_run *r)
 {
     lm_err e;
@@ -122,9 +232,15 @@ static int run_frames(infer_run *r)
         double t0 = omp_get_wtime();
         lm_frame f;
         lm_cube cube;
-        if (lm_frame_seq_read(&r->seq, i, &f, &e)) return fail(r->c, &e, 0);
-        lm_status st = lm_tile_infer(&r->ctx, r->im.model, f.data, f.height, f.width, &to, &cube,
-                                     &e);
+        const float *in = NULL;
+        lm_status st = frame_input(r, i, &f, &in, &e);
+        if (st) {
+            lm_frame_free(&f);
+            return fail(r->c, &e, 0);
+        }
+        double ta = omp_get_wtime();
+        st = lm_tile_infer(&r->ctx, r->im.model, in, f.height ? f.height : r->seq.height,
+                           f.width ? f.width : r->seq.width, &to, &cube, &e);
         lm_frame_free(&f);
         double t1 = omp_get_wtime();
         if (st) {
@@ -134,9 +250,15 @@ static int run_frames(infer_run *r)
         int rc = write_frame(r, &cube, r->seq.first_index + i, &e);
         lm_cube_free(&cube);
         if (rc) return rc;
+        if (r->al.on) { /* rotate: i -> prev, i + 1 -> cur */
+            r->al.prev = r->al.cur;
+            r->al.cur = r->al.next;
+        }
         double t2 = omp_get_wtime();
-        fprintf(stderr, "frame %d/%d %s: %.2f s (reconstruction %.2f s, writing %.2f s)\n",
-                i + 1, r->seq.count, r->seq.paths[i], t2 - t0, t1 - t0, t2 - t1);
+        char al[48] = "alignment off";
+        if (r->al.on) snprintf(al, sizeof al, "alignment %.2f s", ta - t0);
+        fprintf(stderr, "frame %d/%d %s: %.2f s (%s, reconstruction %.2f s, writing %.2f s)\n",
+                i + 1, r->seq.count, r->seq.paths[i], t2 - t0, al, t1 - ta, t2 - t1);
     }
     return 0;
 }
@@ -159,7 +281,7 @@ static int open_inputs(infer_run *r, lm_err *e)
         lm_cli_error(r->c, "out of memory (%d x %d frame)", r->seq.width, r->seq.height);
         return 1;
     }
-    return 0;
+    return align_init(r, e);
 }
 
 int lm_cmd_infer(int argc, char **argv)
@@ -192,6 +314,7 @@ int lm_cmd_infer(int argc, char **argv)
     }
     if (have_ctx) lm_ctx_free(&r.ctx);
     free(r.rgb);
+    align_free(&r.al);
     lm_frame_seq_free(&r.seq);
     lm_infer_model_free(&r.im);
     return rc;

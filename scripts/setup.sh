@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 
 pkgs=(build-essential cmake pkg-config libopenblas-dev libjansson-dev libopenimageio-dev
       libmatio-dev libopenexr-dev zlib1g-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd
-      clinfo)
+      clinfo python3)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -2,7 +2,12 @@
 # infer.sh — end-to-end tests of `lumosaic infer`: train a linear model briefly on the CAVE scene
 # balloons_crop100, simulate its coded frame, reconstruct it (cube EXR + sRGB PNG written, PSNR
 # against the simulated ground truth well above an untrained model's ~11 dB), a frame sequence
-# (folder) with a progress line per frame, batch size does not change the output; bad input:
+# (folder) with a progress line per frame, batch size does not change the output; temporal
+# alignment of a sequence (on by default, timed in the progress line, off with --no-align or for
+# a single frame; a still video is unchanged by it; on a translating video the aligned middle
+# frame's cube is closer to the cube reconstructed from the still scene at its lime time, i.e.
+# simulated from its ground truth, than the unaligned one; a frame's result depends only on
+# its neighbours); bad input:
 # missing model, not a model, model/system mismatch, frame too small, corrupt frame, used output
 # folder, unknown option — one line on stderr, exit 2, no output left.
 # usage: infer.sh LUMOSAIC MAKE_CUBE CUBE_PSNR
@@ -43,7 +48,40 @@ for i in 0000 0001; do
   check "sequence cube $i" [ -s "$T/seq/cube_$i.exr" ] && check "sequence srgb $i" [ -s "$T/seq/srgb_$i.png" ]
 done
 check "progress line per frame" [ "$(grep -c '^frame [12]/2' "$T/err")" -eq 2 ]
-check "help states alignment is not applied" grep -q 'not yet' <("$LM" infer --help)
+check "sequence progress lines time the alignment" [ "$(grep -c '^frame [12]/2 .*(alignment [0-9.]* s,' "$T/err")" -eq 2 ]
+check "single frame: no alignment" grep -q '^frame 1/1 .*(alignment off,' <(
+  "$LM" infer --model "$R" --input "$T/sim/frames/frame_0000.png" --output "$T/single" 2>&1)
+check "help describes alignment" grep -q 'lime-LED' <("$LM" infer --help)
+"$LM" infer --model "$R" --input "$T/vid/frames" --output "$T/seqn" --no-align 2> "$T/err"
+check "--no-align sequence: $(cat "$T/err")" [ $? -eq 0 ]
+check "--no-align progress lines" [ "$(grep -c '^frame [12]/2 .*(alignment off,' "$T/err")" -eq 2 ]
+for i in 0000 0001; do  # the simulator's default video is still: alignment changes ~nothing
+  p=$("$PSNR" "$T/seq/cube_$i.exr" "$T/seqn/cube_$i.exr")
+  check "still video $i: aligned ~ unaligned ($p dB)" awk -v p="$p" 'BEGIN { exit !(p > 60) }'
+done
+
+# temporal alignment on a translating scene (~5 px right, 2 px up per frame)
+"$LM" simulate --input "$CAVE" --output "$T/mv" --crop --video --frames 3 \
+  --motion translate:150,-60 > /dev/null 2>&1
+"$LM" infer --model "$R" --input "$T/mv/frames" --output "$T/mva" 2> "$T/err"
+check "moving sequence aligned: $(cat "$T/err")" [ $? -eq 0 ]
+"$LM" infer --model "$R" --input "$T/mv/frames" --output "$T/mvn" --no-align 2> /dev/null
+# the reference: frame 1's ground truth (the scene at its lime time) coded and reconstructed
+"$LM" simulate --input "$T/mv/gt/gt_0001.exr" --output "$T/mvr" > /dev/null 2>&1
+"$LM" infer --model "$R" --input "$T/mvr/frames/frame_0000.png" --output "$T/mvrc" 2> /dev/null
+pa=$("$PSNR" "$T/mva/cube_0001.exr" "$T/mvrc/cube_0000.exr")
+pn=$("$PSNR" "$T/mvn/cube_0001.exr" "$T/mvrc/cube_0000.exr")
+echo "moving frame 1 vs lime-time reconstruction: aligned $pa dB, unaligned $pn dB"
+check "alignment brings frame 1 closer ($pa vs $pn dB)" \
+  awk -v a="$pa" -v n="$pn" 'BEGIN { exit !(a > n + 1) }'
+# the sliding window of frames i-1, i, i+1: frame 3 of a 5-frame video aligned in the full
+# sequence is bit-identical to the middle one of frames 2-4 on their own
+"$LM" simulate --input "$CAVE" --output "$T/v5" --crop --video --frames 5 \
+  --motion translate:150,-60 > /dev/null 2>&1
+mkdir -p "$T/v3" && cp "$T"/v5/frames/frame_000[123].png "$T/v3/"
+"$LM" infer --model "$R" --input "$T/v5/frames" --output "$T/v5o" 2> /dev/null
+"$LM" infer --model "$R" --input "$T/v3" --output "$T/v3o" 2> /dev/null
+check "5-frame sequence, frame 2 = middle of frames 1-3" cmp -s "$T/v5o/cube_0002.exr" "$T/v3o/cube_0001.exr"
 
 # ---- bad input ---------------------------------------------------------------------------
 F=$T/sim/frames/frame_0000.png

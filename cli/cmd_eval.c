@@ -1,0 +1,382 @@
+/* cmd_eval.c — `lumosaic eval`: score a trained model on scenes (system.md §10) and on the
+ * rainbow scene (§7).
+ * What it is: list the scenes of the given paths (data/dataset.h), keep the chosen split (by the
+ * scene-name hash; `all` keeps every scene), per scene crop to the tile and normalise by its own
+ * maximum, simulate the coded frame at each noise level (Gaussian, k % of the largest clean
+ * value, seeded per scene name and level), reconstruct (infer/tile.h) and score PSNR / SSIM /
+ * MAE / SAM on the 31 bands (infer/eval.h); then the rainbow peak-wavelength test. Prints a table
+ * (rows: noise levels, means over scenes) and writes eval.json + eval.csv into --output
+ * atomically (a staging folder renamed into place).
+ * What it is not: training-time validation (train/), or a benchmark of speed. */
+#include <omp.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include "cli/cli_util.h"
+#include "cli/commands.h"
+#include "data/cube_io.h"
+#include "data/dataset.h"
+#include "infer/eval.h"
+
+static void help(void)
+{
+    printf("usage: lumosaic eval --model RUN DATA... [--split test|val|train|all]\n"
+           "                     [--noise 0,5,10,15,20] [--output DIR] [--seed S]\n"
+           "                     [--threads T] [--rainbow SIZE] [--batch N] [--system FILE]\n\n"
+           "Score a trained model (system.md §10): each scene is cropped to the mosaic tile,\n"
+           "divided by its own maximum, simulated at each noise level and reconstructed\n"
+           "patch-wise; PSNR (peak 1), SSIM, MAE and SAM (degrees) on the 31 bands 400-700 nm.\n"
+           "Then the rainbow scene: per row, the recovered peak wavelength (parabolic fit\n"
+           "around the largest band of the row's mean spectrum) against the true one.\n\n"
+           "  --model RUN      a training run folder or a .safetensors written by 'lumosaic train'\n"
+           "  DATA...          scenes (CAVE folders, .mat, spectral .exr) or folders of scenes\n"
+           "  --split S        test (default), val, train (by scene-name hash, as in training)\n"
+           "                   or all (every scene given)\n"
+           "  --noise LIST     Gaussian noise levels in %% of the largest clean value\n"
+           "                   (default 0,5,10,15,20; at most %d levels, each 0..100)\n"
+           "  --output DIR     write DIR/eval.json and DIR/eval.csv (DIR must not exist, or be\n"
+           "                   empty; written atomically). Without it only the table is printed\n"
+           "  --seed S         noise seed (default 1)\n"
+           "  --threads T      OpenMP threads (1..1024; default: all cores)\n"
+           "  --rainbow SIZE   rainbow scene size (0 = skip, else 66..4096; default 256)\n"
+           "  --batch N        windows per network call (1..4096; default 8)\n"
+           "  --system FILE    system description (default: the one recorded in the model)\n"
+           "  --help           this text\n", LM_EVAL_MAX_NOISE);
+}
+
+typedef struct eval_opts {
+    const char *model, *output, *system;
+    const char **data;
+    int ndata, split; /* split: 0 test, 1 val, 2 train, 3 all */
+    float k[LM_EVAL_MAX_NOISE];
+    int nnoise;
+    long long seed, threads, rainbow, batch;
+} eval_opts;
+
+static const char *const split_names[] = {"test", "val", "train", "all", NULL};
+
+static int parse_noise(lm_cli *c, const char *s, eval_opts *o)
+{
+    o->nnoise = 0;
+    char buf[512];
+    if (strlen(s) >= sizeof buf || !*s) return lm_cli_error(c, "--noise: bad list '%s'", s);
+    strcpy(buf, s);
+    for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
+        double v;
+        if (lm_cli_parse_real(t, &v) || v < 0 || v > 100)
+            return lm_cli_error(c, "--noise: '%s' is not a level in 0..100 (%%)", t);
+        if (o->nnoise == LM_EVAL_MAX_NOISE)
+            return lm_cli_error(c, "--noise: more than %d levels", LM_EVAL_MAX_NOISE);
+        o->k[o->nnoise++] = (float)(v / 100.0);
+    }
+    if (!o->nnoise) return lm_cli_error(c, "--noise: bad list '%s'", s);
+    return 0;
+}
+
+static int parse_opt(lm_cli *c, eval_opts *o)
+{
+    const char *noise = NULL;
+    int r;
+    if ((r = lm_cli_value(c, "--model", &o->model)) ||
+        (r = lm_cli_value(c, "--output", &o->output)) ||
+        (r = lm_cli_value(c, "--system", &o->system)) ||
+        (r = lm_cli_choice(c, "--split", split_names, &o->split)) ||
+        (r = lm_cli_int(c, "--seed", 0, (long long)1 << 62, &o->seed)) ||
+        (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
+        (r = lm_cli_int(c, "--rainbow", 0, 4096, &o->rainbow)) ||
+        (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
+        (r = lm_cli_value(c, "--noise", &noise))) {
+        if (r < 0) return 2;
+        if (noise && parse_noise(c, noise, o)) return 2;
+        return 1;
+    }
+    return 0;
+}
+
+/* 1: run, 0: help printed, 2: bad usage (printed). */
+static int parse(lm_cli *c, eval_opts *o)
+{
+    *o = (eval_opts){.seed = 1, .rainbow = 256, .batch = 8, .nnoise = 5,
+                     .k = {0.0f, 0.05f, 0.10f, 0.15f, 0.20f}};
+    o->data = calloc((size_t)c->argc + 1, sizeof *o->data);
+    if (!o->data) return lm_cli_error(c, "out of memory");
+    while (!lm_cli_done(c)) {
+        if (lm_cli_is_help(c)) {
+            help();
+            return 0;
+        }
+        int r = parse_opt(c, o);
+        if (r == 2) return 2;
+        if (r == 1) continue;
+        const char *a = c->argv[c->i];
+        if (a[0] == '-' && a[1] == '-') return lm_cli_unknown(c);
+        o->data[o->ndata++] = a;
+        c->i++;
+    }
+    if (!o->model) return lm_cli_error(c, "--model is required (see 'lumosaic eval --help')");
+    if (!o->ndata)
+        return lm_cli_error(c, "no DATA given: name scenes or folders of scenes "
+                               "(see 'lumosaic eval --help')");
+    if (o->rainbow > 0 && o->rainbow < 66)
+        return lm_cli_error(c, "--rainbow %lld: need 0 (skip) or at least 66 (the window)",
+                            o->rainbow);
+    return 1;
+}
+
+typedef struct scene_res {
+    char name[256], path[1024];
+    int height, width;
+    lm_metrics m[LM_EVAL_MAX_NOISE];
+} scene_res;
+
+typedef struct eval_run {
+    const lm_cli *c;
+    const eval_opts *o;
+    lm_infer_model im;
+    lm_ctx ctx;
+    int have_ctx;
+    scene_res *sc;
+    int nsc;
+    lm_metrics mean[LM_EVAL_MAX_NOISE];
+    lm_eval_rainbow rb;
+    char tmp[1100]; /* staging folder of --output ("" until created) */
+} eval_run;
+
+static int fail(const lm_cli *c, const lm_err *e)
+{
+    lm_cli_error(c, "%s", e->msg);
+    return e->status == LM_ERR_NOMEM ? 1 : 2;
+}
+
+static int seen(const eval_run *r, const char *path)
+{
+    for (int i = 0; i < r->nsc; i++)
+        if (!strcmp(r->sc[i].path, path)) return 1;
+    return 0;
+}
+
+/* The scenes of the chosen split among those the DATA paths name (union over the dataset's
+ * split lists, which may borrow when fewer than 3 scenes exist, filtered by the name hash). */
+static int list_scenes(eval_run *r, lm_err *e)
+{
+    lm_dataset_cfg cfg;
+    lm_dataset_default_cfg(&cfg);
+    cfg.paths = r->o->data;
+    cfg.npaths = r->o->ndata;
+    cfg.sys = &r->im.sys;
+    cfg.workers = 0;
+    cfg.synth_fraction = 0.0f;
+    lm_dataset *d = lm_dataset_open(&cfg, e);
+    if (!d) return fail(r->c, e);
+    int total = 0;
+    for (int k = 0; k < 3; k++) total += lm_dataset_num_scenes(d, (lm_data_split)k);
+    r->sc = calloc((size_t)total + 1, sizeof *r->sc);
+    if (!r->sc) {
+        lm_dataset_close(d);
+        return lm_cli_error(r->c, "out of memory"), 1;
+    }
+    static const lm_data_split want[3] = {LM_SPLIT_TEST, LM_SPLIT_VAL, LM_SPLIT_TRAIN};
+    for (int k = 0; k < 3; k++)
+        for (int i = 0; i < lm_dataset_num_scenes(d, (lm_data_split)k); i++) {
+            const char *name = lm_dataset_scene_name(d, (lm_data_split)k, i);
+            const char *path = lm_dataset_scene_path(d, (lm_data_split)k, i);
+            if (seen(r, path)) continue;
+            scene_res *s = &r->sc[r->nsc++];
+            snprintf(s->name, sizeof s->name, "%s", name);
+            snprintf(s->path, sizeof s->path, "%s", path);
+        }
+    lm_dataset_close(d);
+    int given = r->nsc;
+    if (r->o->split < 3) {
+        r->nsc = 0;
+        for (int i = 0; i < given; i++)
+            if (lm_dataset_split_of(r->sc[i].name) == want[r->o->split]) r->sc[r->nsc++] = r->sc[i];
+    }
+    if (r->nsc == 0)
+        return lm_cli_error(r->c, "no scene of split '%s' among the %d given (try --split all)",
+                            split_names[r->o->split], given);
+    return 0;
+}
+
+static uint64_t fnv1a(const char *s)
+{
+    uint64_t h = 1469598103934665603ull;
+    for (; *s; s++) h = (h ^ (unsigned char)*s) * 1099511628211ull;
+    return h;
+}
+
+static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
+{
+    lm_rng base;
+    lm_rng_seed(&base, (uint64_t)r->o->seed);
+    lm_metrics_acc acc[LM_EVAL_MAX_NOISE];
+    memset(acc, 0, sizeof acc);
+    for (int i = 0; i < r->nsc; i++) {
+        scene_res *s = &r->sc[i];
+        double t0 = omp_get_wtime();
+        lm_cube cube;
+        if (lm_cube_read(s->path, &cube, e)) return fail(r->c, e);
+        lm_status st = lm_eval_prepare(&cube, r->im.model->mosaic.ty, r->im.model->mosaic.tx, e);
+        lm_rng rs = lm_rng_split(&base, fnv1a(s->name));
+        if (!st) st = lm_eval_scene(&r->ctx, &r->im, &cube, r->o->k, r->o->nnoise, to, &rs,
+                                    s->m, e);
+        s->height = cube.height;
+        s->width = cube.width;
+        lm_cube_free(&cube);
+        if (st) {
+            lm_cli_error(r->c, "%s: %s", s->path, e->msg);
+            return st == LM_ERR_NOMEM ? 1 : 2;
+        }
+        for (int n = 0; n < r->o->nnoise; n++) lm_metrics_acc_add(&acc[n], &s->m[n]);
+        fprintf(stderr, "scene %d/%d %s (%d x %d): %.2f s\n", i + 1, r->nsc, s->name, s->width,
+                s->height, omp_get_wtime() - t0);
+    }
+    for (int n = 0; n < r->o->nnoise; n++) r->mean[n] = lm_metrics_acc_mean(&acc[n]);
+    return 0;
+}
+
+static void print_table(const eval_run *r)
+{
+    printf("%d scene(s), split %s\n", r->nsc, split_names[r->o->split]);
+    printf("%9s %10s %8s %9s %9s\n", "noise %", "PSNR dB", "SSIM", "MAE", "SAM deg");
+    for (int n = 0; n < r->o->nnoise; n++)
+        printf("%9g %10.3f %8.4f %9.5f %9.3f\n", 100.0 * r->o->k[n], r->mean[n].psnr,
+               r->mean[n].ssim, r->mean[n].mae, r->mean[n].sam);
+    if (r->o->rainbow > 0)
+        printf("rainbow %d x %d: peak error mean %.2f nm, max %.2f nm (row %d); PSNR %.3f dB\n",
+               r->rb.width, r->rb.height, r->rb.mean_err_nm, r->rb.max_err_nm, r->rb.worst_row,
+               r->rb.m.psnr);
+}
+
+/* JSON string body: the characters that need escaping in paths. */
+static void json_str(FILE *f, const char *s)
+{
+    fputc('"', f);
+    for (; *s; s++) {
+        if (*s == '"' || *s == '\\') fprintf(f, "\\%c", *s);
+        else if ((unsigned char)*s < 0x20) fprintf(f, "\\u%04x", (unsigned char)*s);
+        else fputc(*s, f);
+    }
+    fputc('"', f);
+}
+
+static void json_metrics(FILE *f, const eval_opts *o, const lm_metrics *m, const char *ind)
+{
+    for (int n = 0; n < o->nnoise; n++)
+        fprintf(f, "%s{\"noise_percent\": %g, \"psnr\": %.6f, \"ssim\": %.6f, \"mae\": %.8f, "
+                   "\"sam\": %.6f}%s\n", ind, 100.0 * o->k[n], m[n].psnr, m[n].ssim, m[n].mae,
+                m[n].sam, n + 1 < o->nnoise ? "," : "");
+}
+
+static void write_json(FILE *f, const eval_run *r)
+{
+    const eval_opts *o = r->o;
+    fprintf(f, "{\n  \"model\": ");
+    json_str(f, r->im.weights);
+    fprintf(f, ",\n  \"split\": \"%s\",\n  \"seed\": %lld,\n  \"noise_percent\": [",
+            split_names[o->split], o->seed);
+    for (int n = 0; n < o->nnoise; n++) fprintf(f, "%s%g", n ? ", " : "", 100.0 * o->k[n]);
+    fprintf(f, "],\n  \"scenes\": [\n");
+    for (int i = 0; i < r->nsc; i++) {
+        fprintf(f, "    {\"name\": ");
+        json_str(f, r->sc[i].name);
+        fprintf(f, ", \"path\": ");
+        json_str(f, r->sc[i].path);
+        fprintf(f, ", \"height\": %d, \"width\": %d, \"results\": [\n", r->sc[i].height,
+                r->sc[i].width);
+        json_metrics(f, o, r->sc[i].m, "      ");
+        fprintf(f, "    ]}%s\n", i + 1 < r->nsc ? "," : "");
+    }
+    fprintf(f, "  ],\n  \"mean\": [\n");
+    json_metrics(f, o, r->mean, "    ");
+    fprintf(f, "  ]");
+    if (o->rainbow > 0)
+        fprintf(f, ",\n  \"rainbow\": {\"size\": %d, \"height\": %d, \"width\": %d, "
+                   "\"peak_error_mean_nm\": %.4f, \"peak_error_max_nm\": %.4f, \"worst_row\": %d, "
+                   "\"psnr\": %.6f, \"ssim\": %.6f, \"mae\": %.8f, \"sam\": %.6f}",
+                r->rb.size, r->rb.height, r->rb.width, r->rb.mean_err_nm, r->rb.max_err_nm,
+                r->rb.worst_row, r->rb.m.psnr, r->rb.m.ssim, r->rb.m.mae, r->rb.m.sam);
+    fprintf(f, "\n}\n");
+}
+
+static void write_csv(FILE *f, const eval_run *r)
+{
+    fprintf(f, "scene,noise_percent,psnr,ssim,mae,sam\n");
+    for (int i = 0; i <= r->nsc; i++) {
+        const lm_metrics *m = i < r->nsc ? r->sc[i].m : r->mean;
+        for (int n = 0; n < r->o->nnoise; n++)
+            fprintf(f, "%s,%g,%.6f,%.6f,%.8f,%.6f\n", i < r->nsc ? r->sc[i].name : "mean",
+                    100.0 * r->o->k[n], m[n].psnr, m[n].ssim, m[n].mae, m[n].sam);
+    }
+}
+
+/* Into the staging folder, then renamed onto --output. */
+static int write_outputs(eval_run *r)
+{
+    char path[1200];
+    const char *tmp = r->tmp;
+    for (int k = 0; k < 2; k++) {
+        snprintf(path, sizeof path, "%s/%s", tmp, k ? "eval.csv" : "eval.json");
+        FILE *f = fopen(path, "w");
+        if (f) {
+            if (k) write_csv(f, r);
+            else write_json(f, r);
+        }
+        if (!f || ferror(f) | fclose(f)) {
+            lm_cli_error(r->c, "%s: cannot write", path);
+            return 1;
+        }
+    }
+    int rc = lm_cli_commit_dir(r->c, tmp, r->o->output) ? 1 : 0;
+    r->tmp[0] = '\0'; /* renamed, or removed by lm_cli_commit_dir on failure */
+    return rc;
+}
+
+static int run(eval_run *r)
+{
+    lm_err e;
+    lm_err_clear(&e);
+    if (lm_infer_model_load(r->o->model, r->o->system, &r->im, &e)) return fail(r->c, &e);
+    int rc = list_scenes(r, &e);
+    if (rc) return rc;
+    if (r->o->output && lm_cli_stage_dir(r->c, r->o->output, r->tmp, sizeof r->tmp)) {
+        r->tmp[0] = '\0';
+        return 2;
+    }
+    if (lm_ctx_init(&r->ctx, (int)r->o->threads) != 0)
+        return lm_cli_error(r->c, "out of memory (compute context)"), 1;
+    r->have_ctx = 1;
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    to.batch = (int)r->o->batch;
+    if ((rc = eval_scenes(r, &to, &e))) return rc;
+    if (r->o->rainbow > 0 &&
+        lm_eval_rainbow_run(&r->ctx, &r->im, (int)r->o->rainbow, &to, &r->rb, &e)) {
+        lm_cli_error(r->c, "rainbow: %s", e.msg);
+        return e.status == LM_ERR_NOMEM ? 1 : 2;
+    }
+    print_table(r);
+    return r->o->output ? write_outputs(r) : 0;
+}
+
+int lm_cmd_eval(int argc, char **argv)
+{
+    lm_cli c;
+    eval_opts o;
+    lm_cli_init(&c, "lumosaic eval", argc, argv);
+    int rc = parse(&c, &o);
+    if (rc == 1) {
+        if (o.threads > 0) omp_set_num_threads((int)o.threads);
+        eval_run r;
+        memset(&r, 0, sizeof r);
+        r.c = &c;
+        r.o = &o;
+        rc = run(&r);
+        if (r.tmp[0]) lm_cli_remove_tree(r.tmp);
+        if (r.have_ctx) lm_ctx_free(&r.ctx);
+        free(r.sc);
+        lm_infer_model_free(&r.im);
+    }
+    free(o.data);
+    return rc;
+}

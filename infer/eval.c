@@ -1,0 +1,149 @@
+/* eval.c — evaluation of a trained model on prepared cubes and on the rainbow scene (see
+ * eval.h). What it is not: scene listing or output (cli/cmd_eval.c). */
+#include "infer/eval.h"
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include "data/forward.h"
+#include "data/synth.h"
+
+lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err)
+{
+    if (cube->bands != 31 || fabsf(cube->wavelength[0] - 400.0f) > 0.5f ||
+        fabsf(cube->wavelength[30] - 700.0f) > 0.5f)
+        return lm_err_set(err, LM_ERR_SHAPE, "eval: the cube needs 31 bands at 400..700 nm "
+                          "(has %d bands)", cube->bands);
+    if (ty <= 0 || tx <= 0 || cube->height < ty || cube->width < tx)
+        return lm_err_set(err, LM_ERR_SHAPE, "eval: the cube (%d x %d) is smaller than the "
+                          "%d x %d mosaic tile", cube->width, cube->height, tx, ty);
+    int H = cube->height - cube->height % ty, W = cube->width - cube->width % tx;
+    float mx = lm_cube_max(cube);
+    if (!(mx > 0.0f) || !isfinite(mx))
+        return lm_err_set(err, LM_ERR_NUMERIC, "eval: the cube's maximum is %g (need > 0)",
+                          (double)mx);
+    float inv = 1.0f / mx;
+    /* Compact in place: row (b, y) moves to an index <= its old one, so forward order is safe. */
+    for (int b = 0; b < cube->bands; b++)
+        for (int y = 0; y < H; y++) {
+            const float *src = cube->data + ((size_t)b * cube->height + y) * cube->width;
+            float *dst = cube->data + ((size_t)b * H + y) * W;
+            for (int x = 0; x < W; x++) dst[x] = src[x] * inv;
+        }
+    cube->height = H;
+    cube->width = W;
+    return LM_OK;
+}
+
+/* Simulate bucket 1 of truth with noise k from rng, reconstruct, score. */
+static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth, float k,
+                          const lm_tile_opts *to, lm_rng *rng, float *frame, lm_metrics *out,
+                          lm_err *err)
+{
+    lm_forward_opts fo;
+    memset(&fo, 0, sizeof fo);
+    fo.noise.gauss_k = k;
+    fo.nthreads = lm_nthreads(c);
+    lm_status st = lm_forward_simulate31(&im->sys, truth, &fo, rng, frame, NULL, err);
+    if (st) return st;
+    lm_cube pred;
+    st = lm_tile_infer(c, im->model, frame, truth->height, truth->width, to, &pred, err);
+    if (st) return st;
+    st = lm_metrics_compute(pred.data, truth->data, 31, truth->height, truth->width, 0, 31, out,
+                            err);
+    lm_cube_free(&pred);
+    return st;
+}
+
+lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
+                        const float *k, int nnoise, const lm_tile_opts *to, const lm_rng *rng,
+                        lm_metrics *out, lm_err *err)
+{
+    if (nnoise < 1 || nnoise > LM_EVAL_MAX_NOISE)
+        return lm_err_set(err, LM_ERR_ARG, "eval: %d noise levels (need 1..%d)", nnoise,
+                          LM_EVAL_MAX_NOISE);
+    for (int i = 0; i < nnoise; i++)
+        if (!(k[i] >= 0.0f) || !isfinite(k[i]))
+            return lm_err_set(err, LM_ERR_ARG, "eval: noise level %g is not >= 0", (double)k[i]);
+    float *frame = malloc(sizeof(float) * (size_t)truth->height * truth->width);
+    if (!frame) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    lm_status st = LM_OK;
+    for (int i = 0; i < nnoise && !st; i++) {
+        /* keyed on the level, not its position: 10 % draws the same noise in any list */
+        lm_rng r = lm_rng_split(rng, (uint64_t)llround((double)k[i] * 1e6));
+        st = eval_one(c, im, truth, k[i], to, &r, frame, &out[i], err);
+    }
+    free(frame);
+    return st;
+}
+
+double lm_eval_peak_nm(const float *spec, int n, double wl0, double step)
+{
+    int m = 0;
+    for (int i = 1; i < n; i++)
+        if (spec[i] > spec[m]) m = i;
+    double pos = m;
+    if (m > 0 && m < n - 1) {
+        double a = spec[m - 1], b = spec[m], d = spec[m + 1];
+        double den = a - 2.0 * b + d;
+        if (den < 0.0) pos = m + 0.5 * (a - d) / den;
+    }
+    return wl0 + pos * step;
+}
+
+/* Per row: the row-averaged reconstructed spectrum's peak against the true peak. */
+static void rainbow_errors(const lm_cube *pred, int size, lm_eval_rainbow *out)
+{
+    int H = pred->height, W = pred->width;
+    double sum = 0.0;
+    out->max_err_nm = -1.0;
+    for (int y = 0; y < H; y++) {
+        float spec[31];
+        for (int b = 0; b < 31; b++) {
+            const float *row = lm_cube_band(pred, b) + (size_t)y * W;
+            double s = 0.0;
+            for (int x = 0; x < W; x++) s += row[x];
+            spec[b] = (float)(s / W);
+        }
+        double e = fabs(lm_eval_peak_nm(spec, 31, 400.0, 10.0) - lm_synth_rainbow_peak(y, size));
+        sum += e;
+        if (e > out->max_err_nm) {
+            out->max_err_nm = e;
+            out->worst_row = y;
+        }
+    }
+    out->mean_err_nm = sum / H;
+}
+
+lm_status lm_eval_rainbow_run(lm_ctx *c, const lm_infer_model *im, int size,
+                              const lm_tile_opts *to, lm_eval_rainbow *out, lm_err *err)
+{
+    memset(out, 0, sizeof *out);
+    out->size = size;
+    if (size < 2) return lm_err_set(err, LM_ERR_ARG, "eval: rainbow size %d (need >= 2)", size);
+    lm_cube truth;
+    lm_status st = lm_synth_rainbow(size, size, &truth, err);
+    if (st) return st;
+    st = lm_eval_prepare(&truth, im->model->mosaic.ty, im->model->mosaic.tx, err);
+    float *frame = st ? NULL : malloc(sizeof(float) * (size_t)truth.height * truth.width);
+    if (!st && !frame) st = lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    lm_cube pred;
+    memset(&pred, 0, sizeof pred);
+    if (!st) {
+        lm_forward_opts fo;
+        memset(&fo, 0, sizeof fo);
+        fo.nthreads = lm_nthreads(c);
+        st = lm_forward_simulate31(&im->sys, &truth, &fo, NULL, frame, NULL, err);
+    }
+    if (!st) st = lm_tile_infer(c, im->model, frame, truth.height, truth.width, to, &pred, err);
+    if (!st) st = lm_metrics_compute(pred.data, truth.data, 31, truth.height, truth.width, 0, 31,
+                                     &out->m, err);
+    if (!st) {
+        out->height = truth.height;
+        out->width = truth.width;
+        rainbow_errors(&pred, size, out);
+    }
+    lm_cube_free(&pred);
+    free(frame);
+    lm_cube_free(&truth);
+    return st;
+}

@@ -1,0 +1,93 @@
+#!/usr/bin/env bash
+# eval.sh — end-to-end tests of `lumosaic eval`: train a linear model briefly on the CAVE scene
+# balloons_crop100, evaluate it (--split all, noise 0 and 10 %, rainbow 96): eval.json holds the
+# per-scene, mean and rainbow fields with sane values, PSNR at noise 0 >= PSNR at noise 10,
+# eval.csv has a row per scene and level plus the means, the printed table has a row per level,
+# the same seed gives the same files and another seed other noisy numbers; the scene belongs to
+# exactly one of the test/val/train splits; bad input: missing model, not a model, no DATA,
+# missing scene, bad noise list, too small rainbow, bad split, unknown option, used output
+# folder — one line on stderr, exit 2, no output left.
+# usage: eval.sh LUMOSAIC MAKE_CUBE
+source "$(dirname "$0")/lib.sh"
+
+R=$T/run
+"$LM" train --model linear --data "$CAVE" --iterations 60 --batch 4 --accum-steps 1 --lr 5e-3 \
+  --synth-fraction 0 --noise 0,0 --val-patches 1 --output "$R" --quiet > "$T/log" 2>&1
+check "train: $(cat "$T/log")" [ -s "$R/model.safetensors" ]
+
+# ---- happy path ------------------------------------------------------------------------
+O=$T/ev
+"$LM" eval --model "$R" "$CAVE" --split all --noise 0,10 --rainbow 96 --output "$O" \
+  > "$T/table" 2> "$T/err"
+check "eval run: $(cat "$T/err")" [ $? -eq 0 ]
+cat "$T/table"
+check "json written" [ -s "$O/eval.json" ]
+check "no staging folder left" no_output "$O.tmp"
+check "table has a row per noise level" \
+  [ "$(grep -cE '^ +(0|10) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/table")" -eq 2 ]
+check "table reports the rainbow" grep -q '^rainbow 96 x 96: peak error mean' "$T/table"
+# fields, ranges and PSNR(noise 0) >= PSNR(noise 10), per scene and for the mean
+python3 - "$O/eval.json" <<'PY'
+import json, math, sys
+j = json.load(open(sys.argv[1]))
+assert j["split"] == "all" and j["noise_percent"] == [0, 10], j
+assert len(j["scenes"]) == 1 and j["scenes"][0]["name"] == "balloons_crop100"
+s = j["scenes"][0]
+assert s["height"] % 3 == 0 and s["width"] % 4 == 0 and s["height"] >= 66, s
+for rows in (s["results"], j["mean"]):
+    assert [r["noise_percent"] for r in rows] == [0, 10]
+    for r in rows:
+        assert 5 < r["psnr"] < 100 and 0 < r["ssim"] <= 1 and 0 < r["mae"] < 1 \
+            and 0 < r["sam"] < 90, r
+    assert rows[0]["psnr"] >= rows[1]["psnr"], rows
+    assert rows[0]["ssim"] >= rows[1]["ssim"], rows
+assert s["results"] == j["mean"]  # one scene: the mean is that scene
+rb = j["rainbow"]
+assert rb["size"] == 96 and rb["height"] == 96 and rb["width"] == 96
+assert 0 <= rb["peak_error_mean_nm"] <= rb["peak_error_max_nm"] <= 300, rb
+assert 0 <= rb["worst_row"] < 96 and math.isfinite(rb["psnr"])
+PY
+check "eval.json fields and PSNR(0) >= PSNR(10)" [ $? -eq 0 ]
+check "csv header" [ "$(head -1 "$O/eval.csv")" = "scene,noise_percent,psnr,ssim,mae,sam" ]
+check "csv rows: scene and mean per level" [ "$(grep -cE '^(balloons_crop100|mean),(0|10),' "$O/eval.csv")" -eq 4 ]
+
+# determinism: the same seed, the same numbers; another seed, other noise
+"$LM" eval --model "$R/model.safetensors" "$CAVE" --split all --noise 0,10 --rainbow 96 \
+  --output "$T/ev2" > /dev/null 2>&1
+check "same seed, same csv" cmp -s "$O/eval.csv" "$T/ev2/eval.csv"
+"$LM" eval --model "$R" "$CAVE" --split all --noise 0,10 --rainbow 0 --seed 7 --output "$T/ev3" \
+  > /dev/null 2>&1
+check "rainbow 0 skips the rainbow" bash -c "! grep -q rainbow '$T/ev3/eval.json'"
+check "another seed, the same noise-free rows" \
+  cmp -s <(grep ',0,' "$O/eval.csv") <(grep ',0,' "$T/ev3/eval.csv")
+check_not "another seed, other noise" cmp -s <(grep ',10,' "$O/eval.csv") <(grep ',10,' "$T/ev3/eval.csv")
+
+# the scene is in exactly one split (by its name hash); the others have nothing to evaluate
+n_ok=0
+for s in test val train; do
+  "$LM" eval --model "$R" "$CAVE" --split $s --noise 0 --rainbow 0 > /dev/null 2> "$T/err_$s"
+  rc=$?
+  if [ $rc -eq 0 ]; then n_ok=$((n_ok + 1))
+  else check "split $s empty: exit 2 one line" [ $rc -eq 2 ] && check "split $s message" \
+    grep -q "no scene of split '$s' among the 1 given" "$T/err_$s"; fi
+done
+check "the scene is in exactly one split ($n_ok)" [ $n_ok -eq 1 ]
+
+# ---- bad input ---------------------------------------------------------------------------
+expect_error "missing model" 2 "no such model" "$T/e1" -- "$LM" eval --model "$T/nope" "$CAVE" --output "$T/e1"
+echo "not safetensors" > "$T/bogus.safetensors"
+expect_error "not a model" 2 "bogus.safetensors" "$T/e2" -- "$LM" eval --model "$T/bogus.safetensors" "$CAVE" --output "$T/e2"
+expect_error "no DATA" 2 "no DATA given" "$T/e3" -- "$LM" eval --model "$R" --output "$T/e3"
+expect_error "missing scene" 2 "nothing_here" "$T/e4" -- "$LM" eval --model "$R" "$T/nothing_here" --split all --output "$T/e4"
+expect_error "bad noise" 2 "--noise" "$T/e5" -- "$LM" eval --model "$R" "$CAVE" --noise 0,abc --output "$T/e5"
+expect_error "noise > 100" 2 "--noise" "$T/e6" -- "$LM" eval --model "$R" "$CAVE" --noise 0,150 --output "$T/e6"
+expect_error "rainbow too small" 2 "--rainbow" "$T/e7" -- "$LM" eval --model "$R" "$CAVE" --rainbow 10 --output "$T/e7"
+expect_error "bad split" 2 "--split" "$T/e8" -- "$LM" eval --model "$R" "$CAVE" --split bogus --output "$T/e8"
+expect_error "unknown option" 2 "unknown option" "$T/e9" -- "$LM" eval --model "$R" "$CAVE" --bogus --output "$T/e9"
+expect_error "missing --model" 2 "--model is required" "$T/e10" -- "$LM" eval "$CAVE" --output "$T/e10"
+mkdir -p "$T/used" && touch "$T/used/x"
+"$LM" eval --model "$R" "$CAVE" --split all --noise 0 --rainbow 0 --output "$T/used" > /dev/null 2> "$T/err"
+check "used output folder refused (exit 2)" [ $? -eq 2 ]
+check "used output folder untouched" [ "$(ls "$T/used")" = x ]
+
+finish
