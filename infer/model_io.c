@@ -58,6 +58,15 @@ static lm_status load_system(lm_infer_model *im, const char *override, uint64_t 
     else if (!im->system_path[0] &&
              lm_data_path("systems/default.json", im->system_path, sizeof im->system_path, err))
         return err->status;
+    if (!is_file(im->system_path) && hash) {
+        /* Recorded on another machine or checkout: the bundled default, if it is the same
+         * file (same hash), is the system the model was trained with. */
+        char def[sizeof im->system_path];
+        lm_err e2 = {0};
+        if (lm_data_path("systems/default.json", def, sizeof def, &e2) == LM_OK && is_file(def) &&
+            lm_file_hash(def) == hash)
+            snprintf(im->system_path, sizeof im->system_path, "%s", def);
+    }
     if (!is_file(im->system_path))
         return lm_err_set(err, LM_ERR_IO, "%s: system description '%s' not found (give one with "
                           "--system)", im->weights, im->system_path);
