@@ -5,6 +5,7 @@
  * CAVE samples are checked against a minimal PNG decoder of this file. */
 #define _GNU_SOURCE
 #include "tests/check.h"
+#include "tests/fixture.h"
 #include "data/cube_io.h"
 #include "data/image.h"
 #include <dirent.h>
@@ -17,37 +18,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
-
-static char tmpdir[256];
-
-static int rm_entry(const char *p, const struct stat *st, int flag, struct FTW *f)
-{
-    (void)st, (void)flag, (void)f;
-    return remove(p);
-}
-
-static const char *tpath(char *buf, const char *name)
-{
-    snprintf(buf, 1024, "%s/%s", tmpdir, name);
-    return buf;
-}
-
-static int msg_has(const lm_err *e, const char *a, const char *b)
-{
-    return strstr(e->msg, a) && (!b || strstr(e->msg, b));
-}
-
-/* The error must have status s, mention `a` (and `b`), and be a single line. */
-#define CHECK_ERR(e, s, a, b)                                                                 \
-    CHECK_MSG((e).status == (s) && msg_has(&(e), (a), (b)) && !strchr((e).msg, '\n'),         \
-              "status %d (want %d), msg '%s' should mention '%s' %s", (int)(e).status, (int)(s), \
-              (e).msg, (a), (b) ? (b) : "")
-
-static long file_size(const char *p)
-{
-    struct stat st;
-    return stat(p, &st) == 0 ? (long)st.st_size : -1;
-}
 
 static int exists(const char *p) { return file_size(p) >= 0; }
 
@@ -769,6 +739,6 @@ int main(void)
     RUN(test_exr_half_channels);
     RUN(test_exr_bad_files);
     RUN(test_exr_write_is_atomic);
-    nftw(tmpdir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
+    fixture_cleanup();
     return check_summary();
 }
