@@ -342,8 +342,19 @@ static lm_status load_checked(const lm_dataset *d, int s, lm_cube *c, lm_err *er
                         "31 bands 400..700 nm of %d x %d (file changed?)", sc->path, c->bands,
                         c->height, c->width, sc->height, sc->width);
         lm_cube_free(c);
+        return st;
     }
-    return st;
+    /* system.md §10: every scene is divided by its own maximum, for training as for scoring. */
+    float mx = lm_cube_max(c);
+    if (!(mx > 0.0f) || !isfinite(mx)) {
+        st = lm_err_set(err, LM_ERR_NUMERIC, "%s: the cube's maximum is %g; a scene needs a "
+                        "positive, finite maximum to be normalised", sc->path, (double)mx);
+        lm_cube_free(c);
+        return st;
+    }
+    size_t n = (size_t)c->bands * (size_t)c->height * (size_t)c->width;
+    for (size_t i = 0; i < n; i++) c->data[i] /= mx;
+    return LM_OK;
 }
 
 /* Under the lock: pin entry r->entry for a sample. */

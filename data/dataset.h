@@ -50,7 +50,9 @@ typedef struct lm_dataset lm_dataset;
 
 /* Defaults of system.md: 66 x 64, synth 0.33, noise U[0, 0.15], flips on, 2 workers. */
 void lm_dataset_default_cfg(lm_dataset_cfg *cfg);
-/* Lists and checks the scenes (reads headers, not pixels: CAVE band 01 and EXR headers; a .mat
+/* Scenes are divided by their own maximum when read (system.md §10), so training targets,
+ * validation and `lumosaic eval` share one scale.
+ * Lists and checks the scenes (reads headers, not pixels: CAVE band 01 and EXR headers; a .mat
  * file is read whole, matio offering no cheap header read). A folder is a CAVE scene if it
  * holds band images (or its single sub-folder does, scene/scene/); otherwise it is a folder of
  * scenes: its .mat/.exr files and CAVE scene folders, in name order. Scenes smaller than the

@@ -48,10 +48,14 @@ static float pos_value(int b, int y, int x)
 {
     if (b == 0) return (float)(y + 1) / 1000.0f;
     if (b == 1) return (float)(x + 1) / 1000.0f;
+    if (b == 30 && y == 0 && x == 0) return 1.0f; /* the peak: normalisation leaves it as is */
     return 0.05f + (float)((b * 7 + y * 3 + x * 5) % 17) / 20.0f;
 }
 
-static void write_scene(const char *path, int h, int w, int kind)
+/* Every fixture peaks at exactly 1 (band 30, pixel 0,0), so the dataset's normalisation by the
+ * scene maximum (system.md §10) leaves it unchanged; `scale` then multiplies the whole scene
+ * (test_scene_normalised: a darker copy must give the same samples). */
+static void write_scene_scaled(const char *path, int h, int w, int kind, float scale)
 {
     lm_cube c;
     CHECK(lm_cube_alloc(&c, 31, h, w, 400, 10) == LM_OK);
@@ -60,10 +64,17 @@ static void write_scene(const char *path, int h, int w, int kind)
             for (int x = 0; x < w; x++)
                 lm_cube_band(&c, b)[y * w + x] = kind ? pos_value(b, y, x)
                                                       : 0.1f + 0.02f * (float)((b + y + x) % 9);
+    lm_cube_band(&c, 30)[0] = 1.0f;
+    for (size_t i = 0; i < (size_t)31 * h * w; i++) c.data[i] *= scale;
     lm_err e;
     lm_err_clear(&e);
     CHECK_MSG(lm_cube_write_exr(path, &c, &e) == LM_OK, "%s", e.msg);
     lm_cube_free(&c);
+}
+
+static void write_scene(const char *path, int h, int w, int kind)
+{
+    write_scene_scaled(path, h, w, kind, 1.0f);
 }
 
 static void subdir(char *out, size_t n, const char *name)
@@ -638,6 +649,35 @@ static void rm_tree(const char *dir)
     rmdir(dir);
 }
 
+/* system.md §10: scenes are divided by their own maximum when read, so a copy of the position
+ * scene at a quarter of its brightness yields the same targets and raw frames. */
+static void test_scene_normalised(void)
+{
+    char dark[1200];
+    snprintf(dark, sizeof dark, "%s/dark_pos.exr", tmpdir);
+    write_scene_scaled(dark, POS_H, POS_W, 1, 0.25f);
+    const char *pa[1] = {g_pospath}, *pb[1] = {dark};
+    lm_dataset_cfg ca = base_cfg(pa, 1), cb = base_cfg(pb, 1);
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *a = lm_dataset_open(&ca, &e), *b = lm_dataset_open(&cb, &e);
+    CHECK_MSG(a && b, "%s", e.msg);
+    enum { NB = 2 };
+    static float ra[NB * PH * PW], ta[NB * 33 * PH * PW], rb[NB * PH * PW], tb[NB * 33 * PH * PW];
+    if (a && b) {
+        CHECK(lm_dataset_batch(a, 3, NB, ra, ta, &e) == LM_OK);
+        CHECK(lm_dataset_batch(b, 3, NB, rb, tb, &e) == LM_OK);
+        float mx = 0.0f;
+        for (size_t i = 0; i < sizeof ta / sizeof *ta; i++) mx = fmaxf(mx, ta[i]);
+        CHECK(mx > 0.3f);
+        CHECK_ARRAY_CLOSE(tb, ta, sizeof ta / sizeof *ta, 1e-6, 1e-5);
+        CHECK_ARRAY_CLOSE(rb, ra, sizeof ra / sizeof *ra, 1e-6, 1e-5);
+    }
+    lm_dataset_close(a);
+    lm_dataset_close(b);
+    remove(dark);
+}
+
 int main(void)
 {
     g_ok = lm_system_default(&g_sys, &g_err) == LM_OK;
@@ -663,6 +703,7 @@ int main(void)
     RUN(test_noise_levels);
     RUN(test_synthetic_share);
     RUN(test_lru_bound);
+    RUN(test_scene_normalised);
     RUN(test_bad_input);
     rm_tree(tmpdir);
     lm_system_free(&g_sys);
