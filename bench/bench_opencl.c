@@ -6,7 +6,9 @@
  *
  * Training step = upload of the parameters (OpenCL only) + forward + L1 loss + backward +
  * gradients to the host parameter block + Adam on the host + zeroing the gradients, reported
- * as min and median, the backends in alternating blocks of repetitions. Once PoCL's worker
+ * as min and median, the backends in alternating blocks of repetitions; the time of the
+ * OpenCL step spent in the parameter swaps (lm_tensors_swap_to_device / _swap_back) is
+ * printed under it. Once PoCL's worker
  * threads exist in the process, the CPU backend's OpenMP threads spinning at barriers
  * (libgomp's default) fight them for the 2 cores and its steps measured 10-20x slow; so the
  * bench re-executes itself with OMP_WAIT_POLICY=passive unless that variable is set. The profile runs the same step through a wrapping backend that times
@@ -72,20 +74,26 @@ typedef struct bench_model {
     int shape[4];
 } bench_model;
 
+static double swap_t; /* seconds of the last step in the parameter swaps (both ways) */
+
 static double train_step(lm_ctx *c, bench_model *bm)
 {
     lm_model *m = bm->m;
     int np = m->params.n, *s = bm->shape;
     double t0 = bench_now();
     lm_ctx_reset(c);
+    double ts = bench_now();
     lm_tensors_swap_to_device(c, bm->ps, np, bm->saved);
+    swap_t = bench_now() - ts;
     lm_tensor *x = lm_tensor_from(c, 4, s, bm->x);
     lm_tensor *tg = lm_tensor_from(c, 4, (int[]){s[0], 33, s[2], s[3]}, bm->target);
     lm_tensor *loss = lm_l1_loss(c, lm_model_forward(c, m, x), tg);
     lm_backward(c, loss, NULL);
     float l = 0;
     if (loss) lm_tensor_read(c, loss, &l);
+    double t1 = bench_now();
     lm_tensors_swap_back(c, bm->ps, np, bm->saved);
+    swap_t += bench_now() - t1;
     lm_adam_step(&bm->opt, &m->params, lm_nthreads(c));
     lm_params_zero_grad(&m->params);
     double t = bench_now() - t0;
@@ -172,18 +180,23 @@ static void profile(lm_ctx *ctx[2], bench_model *bm, int reps)
 
 static void step_times(lm_ctx *ctx[2], bench_model *bm, int reps)
 {
-    double t[2][MAXREP];
+    double t[2][MAXREP], sw[MAXREP];
     for (int half = 0; half < 2; half++) /* blocks: cpu, opencl, cpu, opencl */
         for (int s = 0; s < 2; s++) {
             train_step(ctx[s], bm); /* warm-up */
-            for (int r = half * reps / 2; r < (half + 1) * reps / 2 + (half ? reps % 2 : 0); r++)
+            for (int r = half * reps / 2; r < (half + 1) * reps / 2 + (half ? reps % 2 : 0); r++) {
                 t[s][r] = train_step(ctx[s], bm);
+                if (s) sw[r] = swap_t;
+            }
         }
     double c0 = bench_min(t[0], reps), c1 = bench_min(t[1], reps);
     double d0 = bench_median(t[0], reps), d1 = bench_median(t[1], reps);
     printf("training step %-10s B=%d %dx%d | cpu ms %8.1f %8.1f | opencl ms %8.1f %8.1f | "
            "opencl/cpu %5.2f %5.2f (target <= 2)\n", bm->m->preset, bm->shape[0], bm->shape[2],
            bm->shape[3], c0 * 1e3, d0 * 1e3, c1 * 1e3, d1 * 1e3, c1 / c0, d1 / d0);
+    printf("  of the opencl step: parameter swap (upload + gradients back, train.c's per-step "
+           "swap) min %.1f median %.1f ms\n", bench_min(sw, reps) * 1e3,
+           bench_median(sw, reps) * 1e3);
     fflush(stdout);
 }
 

@@ -279,6 +279,8 @@ lm_backend *lm_cl_backend_create(lm_err *e)
     b->conv_scratch = 1L << 22;
     const char *cs = getenv("LM_OPENCL_CONV_SCRATCH");
     if (cs && atol(cs) > 0) b->conv_scratch = atol(cs);
+    const char *ci = getenv("LM_OPENCL_CONV_IM2COL");
+    b->conv_im2col = ci && *ci && *ci != '0';
     lm_cl_memory_install(&b->base);
     if (open_device(b, &l, i, e) != LM_OK || build_program(b, e) != LM_OK ||
         build_table(b, e) != LM_OK) {

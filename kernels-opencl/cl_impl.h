@@ -45,6 +45,7 @@ struct lm_cl {
     size_t max_wg;                /* CL_DEVICE_MAX_WORK_GROUP_SIZE */
     cl_ulong local_mem;           /* CL_DEVICE_LOCAL_MEM_SIZE */
     long conv_scratch;            /* floats of im2col scratch per conv chunk */
+    int conv_im2col;              /* env LM_OPENCL_CONV_IM2COL: no implicit stride-1 convs */
     char platform_name[128];
     char device_name[128];
 };
@@ -110,6 +111,10 @@ int lm_cl_run_nd(lm_cl_args *a, int dims, const size_t *global, const size_t *lo
 /* Shape and strides of t right-aligned into 8 ints (unused leading entries 1 / 0), for kernels
  * that index strided views (5 dims used). */
 void lm_cl_shape8(const lm_tensor *t, cl_int8 *shape, cl_int8 *stride);
+/* Run a chunked 1-d kernel (CHUNK_RANGE in common.cl) over n elements: one work-item per
+ * LM_CL_CHUNK of them. */
+#define LM_CL_CHUNK 16
+int lm_cl_run_chunks(lm_cl_args *a, size_t n);
 /* Run a work-group kernel: ngroups groups of LM_CL_WG items. */
 int lm_cl_run_groups(lm_cl_args *a, size_t ngroups);
 

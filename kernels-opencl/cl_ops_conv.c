@@ -2,12 +2,16 @@
  * "conv2d_bwd_x", "conv2d_bwd_w", "conv2d_bwd_bias"), conv_transpose2d.c
  * ("conv_transpose2d_fwd/_bwd_x/_bwd_w/_bwd_b") and conv3d.c ("conv3d_fwd/_bwd_x/_bwd_w/
  * _bwd_b").
- * conv2d runs as im2col (conv.cl) + batched GEMM (gemm.cl) over chunks of columns that fit a
- * device scratch (4M floats, or env LM_OPENCL_CONV_SCRATCH); the input gradient is GEMM + a
- * gathering col2im. conv_transpose2d is conv2d's adjoint on the same weight layout
- * (Cin x Cout/groups x kh x kw): its forward is conv2d's input gradient, its input gradient
- * conv2d's forward, its weight gradient conv2d's with input and output exchanged. conv3d uses direct
- * kernels (the channel counts used are tiny). Bias gradients are sums (lm_cl_reduce). */
+ * Stride-1 conv2d runs without im2col (conv.cl: a zero-padded copy of the input, then one
+ * launch of a direct "implicit GEMM" kernel over the whole batch, bias in its epilogue; the
+ * input gradient is the same kernel on dy with flipped weights; the weight gradient a direct
+ * kernel over the padded input). Other strides run as im2col (conv.cl) + batched GEMM
+ * (gemm.cl) over chunks of columns that fit a device scratch (4M floats, or env
+ * LM_OPENCL_CONV_SCRATCH); their input gradient is GEMM + a gathering col2im.
+ * conv_transpose2d is conv2d's adjoint on the same weight layout (Cin x Cout/groups x kh x kw):
+ * its forward is conv2d's input gradient, its input gradient conv2d's forward, its weight
+ * gradient conv2d's with input and output exchanged. conv3d uses direct kernels (the channel
+ * counts used are tiny). Bias gradients: one work-group per channel. */
 #include "kernels-opencl/cl_impl.h"
 #include "kernels-opencl/cl_params.h"
 #include "tensor/ops/gemm_internal.h"
@@ -95,12 +99,119 @@ static lm_cl_mat weights(const lm_tensor *w, const conv_plan *p, int trans)
     return m;
 }
 
+/* ---- stride-1 conv2d without im2col (conv.cl "conv_pad", "conv_fwd_implicit", ...) ---- */
+/* Whether the implicit kernels take this product: stride 1, no negative padding; the input
+ * gradient (a convolution of dy with flipped weights and padding (k - 1) d - p) also needs
+ * p <= (k - 1) d. Env LM_OPENCL_CONV_IM2COL=1 at backend creation forces im2col (tests). */
+static int implicit_ok(const lm_cl *b, const lm_conv_geom *g, int which)
+{
+    if (b->conv_im2col || g->sh != 1 || g->sw != 1 || g->ph < 0 || g->pw < 0) return 0;
+    return which != 1 || (g->ph <= (g->kh - 1) * g->dh && g->pw <= (g->kw - 1) * g->dw);
+}
+
+/* The padded copy of x (B x C x H x W) for geometry g (see conv.cl); NULL on error. */
+static lm_tensor *pad_input(lm_cl *b, lm_ctx *c, const lm_tensor *x, const lm_conv_geom *g,
+                            int *Hp, int *Wp)
+{
+    *Hp = g->H + 2 * g->ph;
+    *Wp = (g->Wo + 31) / 32 * 32 + (g->kw - 1) * g->dw;
+    int n = g->B * g->Cin * *Hp * *Wp;
+    lm_tensor *xp = lm_tensor_new_on(c, LM_DEVICE_OPENCL, 1, &n);
+    lm_cl_args a;
+    if (!xp || lm_cl_begin(&a, b, c, "conv_pad")) return NULL;
+    lm_cl_arg_tensor(&a, x);
+    lm_cl_arg_tensor(&a, xp);
+    int v[7] = {g->H, g->W, *Hp, *Wp, g->ph, g->pw, g->B * g->Cin * *Hp};
+    for (int i = 0; i < 7; i++) lm_cl_arg_int(&a, v[i]);
+    size_t global = (size_t)v[6], local = 16;
+    return lm_cl_run_nd(&a, 1, &global, &local) ? NULL : xp;
+}
+
+/* wt for conv_fwd_implicit of geometry g (conv.cl "conv_wprep"); flip: w is the weight of
+ * the forward conv whose input gradient g computes. NULL on error. */
+static lm_tensor *prep_weights(lm_cl *b, lm_ctx *c, const lm_conv_geom *g, const lm_tensor *w,
+                               int flip, int *cogp)
+{
+    int cog = g->Cout / g->groups, cig = g->Cin / g->groups;
+    *cogp = (cog + 7) / 8 * 8;
+    int n = g->groups * cig * g->kh * g->kw * *cogp;
+    lm_tensor *wt = lm_tensor_new_on(c, LM_DEVICE_OPENCL, 1, &n);
+    lm_cl_args a;
+    if (!wt || lm_cl_begin(&a, b, c, "conv_wprep")) return NULL;
+    lm_cl_arg_tensor(&a, w);
+    lm_cl_arg_tensor(&a, wt);
+    int v[7] = {cog, cig, g->kh, g->kw, *cogp, flip, n};
+    for (int i = 0; i < 7; i++) lm_cl_arg_int(&a, v[i]);
+    return lm_cl_run_1d(&a, (size_t)n) ? NULL : wt;
+}
+
+/* y (= when beta 0, else +=) stride-1 conv2d(x, w) [+ bias]; flip as prep_weights. */
+static int conv_fwd_implicit(lm_cl *b, lm_ctx *c, const lm_conv_geom *g, const lm_tensor *x,
+                             const lm_tensor *w, int flip, const lm_tensor *bias, lm_tensor *y,
+                             float beta)
+{
+    int Hp, Wp, cogp;
+    lm_tensor *xp = pad_input(b, c, x, g, &Hp, &Wp);
+    lm_tensor *wt = xp ? prep_weights(b, c, g, w, flip, &cogp) : NULL;
+    cl_int16 g16;
+    memcpy(&g16, g, sizeof g16);
+    lm_cl_args a;
+    if (!wt || lm_cl_begin(&a, b, c, "conv_fwd_implicit")) return c->status;
+    lm_cl_arg_tensor(&a, xp);
+    lm_cl_arg_tensor(&a, wt);
+    lm_cl_arg_tensor(&a, y);
+    lm_cl_arg_tensor_opt(&a, bias);
+    lm_cl_arg_raw(&a, sizeof g16, &g16);
+    int v[4] = {Hp, Wp, cogp, bias != NULL};
+    for (int i = 0; i < 4; i++) lm_cl_arg_int(&a, v[i]);
+    lm_cl_arg_float(&a, beta);
+    size_t nb = (size_t)(g->Wo + 31) / 32 * (size_t)g->Ho;
+    size_t global[3] = {(size_t)cogp / 8, nb, (size_t)g->B * (size_t)g->groups};
+    size_t local[3] = {1, 1, 1}; /* PoCL: single-item groups beat 2, 4 and 8 here */
+    return lm_cl_run_nd(&a, 3, global, local);
+}
+
+/* dx += stride-1 conv2d input gradient: conv2d(dy, flipped w) with padding (k - 1) d - p. */
+static int conv_bwd_x_implicit(lm_cl *b, lm_ctx *c, const lm_conv_geom *g, const lm_tensor *dy,
+                               const lm_tensor *w, lm_tensor *dx)
+{
+    lm_conv_geom t = {g->B, g->Cout, g->Ho, g->Wo, g->Cin, g->H, g->W, g->kh, g->kw, 1, 1,
+                      (g->kh - 1) * g->dh - g->ph, (g->kw - 1) * g->dw - g->pw, g->dh, g->dw,
+                      g->groups};
+    return conv_fwd_implicit(b, c, &t, dy, w, 1, NULL, dx, 1.0f);
+}
+
+/* dw += stride-1 conv2d weight gradient of dy and x. */
+static int conv_bwd_w_implicit(lm_cl *b, lm_ctx *c, const lm_conv_geom *g, const lm_tensor *dy,
+                               const lm_tensor *x, lm_tensor *dw)
+{
+    int Hp, Wp;
+    lm_tensor *xp = pad_input(b, c, x, g, &Hp, &Wp);
+    cl_int16 g16;
+    memcpy(&g16, g, sizeof g16);
+    lm_cl_args a;
+    if (!xp || lm_cl_begin(&a, b, c, "conv_bwd_w_implicit")) return c->status;
+    lm_cl_arg_tensor(&a, xp);
+    lm_cl_arg_tensor(&a, dy);
+    lm_cl_arg_tensor(&a, dw);
+    lm_cl_arg_raw(&a, sizeof g16, &g16);
+    lm_cl_arg_int(&a, Hp);
+    lm_cl_arg_int(&a, Wp);
+    size_t K = (size_t)(g->Cin / g->groups * g->kh * g->kw), cog = (size_t)(g->Cout / g->groups);
+    size_t global[3] = {(K + 3) / 4, (cog + 3) / 4, (size_t)g->groups}, local[3] = {1, 1, 1};
+    return lm_cl_run_nd(&a, 3, global, local);
+}
+
 /* which 0: y (=, or += when acc) conv(x, w) [+ bias]; 1: dx += input gradient (a = dy);
  * 2: dw += weight gradient (a = dy, x = input). */
 static int conv2d_run(lm_cl *b, lm_ctx *c, const lm_conv_geom *g, int which, const lm_tensor *a,
                       const lm_tensor *x, const lm_tensor *w, const lm_tensor *bias,
                       lm_tensor *out, int acc)
 {
+    if (implicit_ok(b, g, which))
+        return which == 0 ? conv_fwd_implicit(b, c, g, a, w, 0, bias, out, acc ? 1.0f : 0.0f)
+             : which == 1 ? conv_bwd_x_implicit(b, c, g, a, w, out)
+                          : conv_bwd_w_implicit(b, c, g, a, x, out);
     conv_plan p = plan_of(g, b->conv_scratch);
     lm_tensor *col = lm_tensor_new_on(c, LM_DEVICE_OPENCL, 1,
                                       (int[]){p.nimg * g->groups * p.K * p.P});
@@ -141,16 +252,19 @@ static int conv2d_run(lm_cl *b, lm_ctx *c, const lm_conv_geom *g, int which, con
     return 0;
 }
 
-/* db[co] += sum of dy over batch and the vol positions of each channel. */
+/* db[co] += sum of dy over batch and the vol positions of each channel: one work-group per
+ * channel (conv.cl "bias_grad_wg", a fixed-order sum). */
 static int bias_grad(lm_cl *b, lm_ctx *c, const lm_tensor *dy, lm_tensor *db, int B, int C,
                      long vol)
 {
-    lm_cl_reduction r;
-    lm_cl_reduction_init(&r);
-    r.kshp.s[4] = C, r.kst.s[4] = (cl_int)vol, r.ny = C;
-    r.rshp.s[3] = B, r.rst.s[3] = (cl_int)(C * vol);
-    r.rshp.s[4] = (cl_int)vol, r.rst.s[4] = 1, r.nr = B * vol;
-    return lm_cl_reduce(b, c, dy, &r, db, 1.0f, 1);
+    lm_cl_args a;
+    if (lm_cl_begin(&a, b, c, "bias_grad_wg")) return c->status;
+    lm_cl_arg_tensor(&a, dy);
+    lm_cl_arg_tensor(&a, db);
+    lm_cl_arg_int(&a, B);
+    lm_cl_arg_int(&a, C);
+    lm_cl_arg_int(&a, (int)vol);
+    return lm_cl_run_groups(&a, (size_t)C);
 }
 
 /* ---- conv2d ------------------------------------------------------------------------------ */
@@ -232,9 +346,10 @@ static int launch_convt_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, 
 }
 
 /* ---- conv3d ------------------------------------------------------------------------------- */
-/* Tensors in order, then the geometry, then n (work-items) unless groups is set. */
+/* Tensors in order, then the geometry, then: groups set: n work-groups (conv3d_bwd_w); else
+ * n rows of width `width`, one work-item per 16 of a row (conv3d_fwd, conv3d_bwd_x). */
 static int run_conv3d(lm_cl *b, lm_ctx *c, const char *kname, lm_tensor *const *ts, int nts,
-                      const conv3d_params *p, long n, int groups)
+                      const conv3d_params *p, long n, int groups, int width)
 {
     cl_int16 g16;
     memcpy(&g16, p, sizeof g16);
@@ -244,7 +359,8 @@ static int run_conv3d(lm_cl *b, lm_ctx *c, const char *kname, lm_tensor *const *
     lm_cl_arg_raw(&a, sizeof g16, &g16);
     if (groups) return lm_cl_run_groups(&a, (size_t)n);
     lm_cl_arg_int(&a, (int)n);
-    return lm_cl_run_1d(&a, (size_t)n);
+    size_t global[2] = {(size_t)(width + 15) / 16, (size_t)n}, local[2] = {1, 4};
+    return lm_cl_run_nd(&a, 2, global, local);
 }
 
 /* t = {x, w, y[, bias]} */
@@ -253,19 +369,20 @@ static int launch_conv3d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     conv3d_params p = *(const conv3d_params *)pp;
     p.has_bias = nt > 3;
     lm_tensor *ts[4] = {t[0], t[1], t[2], nt > 3 ? t[3] : NULL};
-    return run_conv3d(b, c, "conv3d_fwd", ts, 4, &p, lm_tensor_numel(t[2]), 0);
+    return run_conv3d(b, c, "conv3d_fwd", ts, 4, &p, lm_tensor_numel(t[2]) / p.Wo, 0, p.Wo);
 }
 /* t = {dy, w, dx} */
 static int launch_conv3d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    return run_conv3d(b, c, "conv3d_bwd_x", t, 3, pp, lm_tensor_numel(t[2]), 0);
+    const conv3d_params *p = pp;
+    return run_conv3d(b, c, "conv3d_bwd_x", t, 3, p, lm_tensor_numel(t[2]) / p->W, 0, p->W);
 }
 /* t = {x, dy, dw} */
 static int launch_conv3d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    return run_conv3d(b, c, "conv3d_bwd_w", t, 3, pp, lm_tensor_numel(t[2]), 1);
+    return run_conv3d(b, c, "conv3d_bwd_w", t, 3, pp, lm_tensor_numel(t[2]), 1, 0);
 }
 /* t = {dy, db} */
 static int launch_conv3d_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)

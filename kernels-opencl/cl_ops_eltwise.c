@@ -44,7 +44,7 @@ static int launch_binary_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     lm_cl_arg_raw(&a, sizeof shp, &shp);
     lm_cl_arg_int(&a, n);
     lm_cl_arg_int(&a, p->op);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 /* t = {g, a, b, d}: d (+)= contribution of operand `which`. */
@@ -66,7 +66,7 @@ static int launch_binary_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     lm_cl_arg_int(&a, p->op);
     lm_cl_arg_int(&a, p->which);
     lm_cl_arg_int(&a, p->accumulate);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 /* d += k s (contiguous, same numel). */
@@ -79,7 +79,7 @@ static int run_scaled_add(lm_cl *b, lm_ctx *c, lm_tensor *d, const lm_tensor *s,
     lm_cl_arg_tensor(&a, s);
     lm_cl_arg_int(&a, n);
     lm_cl_arg_float(&a, k);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 /* t = {d, s}: d += scale s. */
@@ -102,7 +102,7 @@ static int launch_affine_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     lm_cl_arg_int(&a, n);
     lm_cl_arg_float(&a, p->s);
     lm_cl_arg_float(&a, p->t);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 /* t = {gy, gx}: gx += s gy. */
@@ -125,7 +125,7 @@ static int launch_act_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
     lm_cl_arg_int(&a, n);
     lm_cl_arg_int(&a, p->kind);
     lm_cl_arg_float(&a, p->slope);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 /* t = {x, y, gy, gx}: gx += f'(x) gy. */
@@ -140,7 +140,7 @@ static int launch_act_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
     lm_cl_arg_int(&a, n);
     lm_cl_arg_int(&a, p->kind);
     lm_cl_arg_float(&a, p->slope);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 const lm_cl_entry lm_cl_entries_eltwise[] = {

@@ -21,7 +21,7 @@ int lm_cl_view_copy(lm_cl *b, lm_ctx *c, const lm_tensor *src, const lm_tensor *
     lm_cl_arg_raw(&a, sizeof shp, &shp);
     lm_cl_arg_int(&a, n);
     lm_cl_arg_int(&a, add);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 /* t with a new 5-d shape and strides (a view of the same buffer). */

@@ -86,7 +86,7 @@ static int run_bcast_add(lm_cl *b, lm_ctx *c, lm_tensor *d, const lm_tensor *s, 
     lm_cl_arg_raw(&a, sizeof st, &st);
     lm_cl_arg_int(&a, n);
     lm_cl_arg_float(&a, k);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 /* ---- sum / mean --------------------------------------------------------------------------- */

@@ -13,7 +13,7 @@ static int launch_fill(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const v
     lm_cl_arg_tensor(&a, t[0]);
     lm_cl_arg_int(&a, n);
     lm_cl_arg_float(&a, *(const float *)params);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 /* t[0] += t[1], same numel, contiguous. */
@@ -26,7 +26,7 @@ static int launch_flat_add(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, con
     lm_cl_arg_tensor(&a, t[0]);
     lm_cl_arg_tensor(&a, t[1]);
     lm_cl_arg_int(&a, n);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 /* strided_copy: t[1] (contiguous) = t[0] (strided view);
@@ -43,7 +43,7 @@ static int launch_strided(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const char *
     lm_cl_arg_raw(&a, sizeof st, &st);
     lm_cl_arg_tensor(&a, t[1]);
     lm_cl_arg_int(&a, n);
-    return lm_cl_run_1d(&a, (size_t)n);
+    return lm_cl_run_chunks(&a, (size_t)n);
 }
 
 static int launch_strided_copy(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,

@@ -1,5 +1,5 @@
 /* eltwise.cl - elementwise ops: binary with broadcasting (tensor/ops/binary.c), affine
- * (scalar.c), activations (activation.c). One work-item per output element.
+ * (scalar.c), activations (activation.c). One work-item per CHUNK output elements.
  * Broadcast operands: the output's 5-d shape shp and the operand's strides (0 along broadcast
  * dims); flat = 1 when the operand has the output's size (offset = i, no index arithmetic). */
 
@@ -18,11 +18,15 @@ __kernel void binary_fwd(__global const float *a, int ao, int8 sa, int fa,
                          __global const float *b, int bo, int8 sb, int fb,
                          __global float *y, int yo, int8 shp, int n, int op)
 {
-    int i = get_global_id(0);
-    if (i >= n) return;
-    float av = a[ao + (fa ? i : view_offset(i, shp, sa))];
-    float bv = b[bo + (fb ? i : view_offset(i, shp, sb))];
-    y[yo + i] = binary_apply(op, av, bv);
+    CHUNK_RANGE(i0, i1, n);
+    if (i0 >= n) return;
+    int ja = 0, jb = 0, oa = fa ? i0 : vc_start(i0, shp, sa, &ja);
+    int ob = fb ? i0 : vc_start(i0, shp, sb, &jb);
+    for (int i = i0; i < i1; i++) {
+        y[yo + i] = binary_apply(op, a[ao + oa], b[bo + ob]);
+        oa = fa ? i + 1 : vc_step(oa, &ja, i + 1, shp, sa);
+        ob = fb ? i + 1 : vc_step(ob, &jb, i + 1, shp, sb);
+    }
 }
 
 /* d (n, the output's size) += (or = when !accumulate) d(a op b)/d(operand `which`) * g. */
@@ -32,29 +36,32 @@ __kernel void binary_bwd(__global const float *g, int go,
                          __global float *d, int dof, int8 shp, int n, int op, int which,
                          int accumulate)
 {
-    int i = get_global_id(0);
-    if (i >= n) return;
-    float gv = g[go + i];
-    float av = a[ao + (fa ? i : view_offset(i, shp, sa))];
-    float bv = b[bo + (fb ? i : view_offset(i, shp, sb))];
-    float r;
-    switch (op * 2 + which) {
-    case 0: case 1: case 2: r = gv; break;
-    case 3: r = -gv; break;
-    case 4: r = gv * bv; break;
-    case 5: r = gv * av; break;
-    case 6: r = gv / bv; break;
-    default: r = -gv * av / (bv * bv); break;
+    CHUNK_RANGE(i0, i1, n);
+    if (i0 >= n) return;
+    int ja = 0, jb = 0, oa = fa ? i0 : vc_start(i0, shp, sa, &ja);
+    int ob = fb ? i0 : vc_start(i0, shp, sb, &jb);
+    for (int i = i0; i < i1; i++) {
+        float gv = g[go + i], av = a[ao + oa], bv = b[bo + ob], r;
+        switch (op * 2 + which) {
+        case 0: case 1: case 2: r = gv; break;
+        case 3: r = -gv; break;
+        case 4: r = gv * bv; break;
+        case 5: r = gv * av; break;
+        case 6: r = gv / bv; break;
+        default: r = -gv * av / (bv * bv); break;
+        }
+        d[dof + i] = accumulate ? d[dof + i] + r : r;
+        oa = fa ? i + 1 : vc_step(oa, &ja, i + 1, shp, sa);
+        ob = fb ? i + 1 : vc_step(ob, &jb, i + 1, shp, sb);
     }
-    d[dof + i] = accumulate ? d[dof + i] + r : r;
 }
 
 /* d[i] += k * s[i], i < n (contiguous). Writes +=. */
 __kernel void scaled_add(__global float *d, int dof, __global const float *s, int so, int n,
                          float k)
 {
-    int i = get_global_id(0);
-    if (i < n) d[dof + i] += k * s[so + i];
+    CHUNK_RANGE(i0, i1, n);
+    for (int i = i0; i < i1; i++) d[dof + i] += k * s[so + i];
 }
 
 /* d (n, contiguous, 5-d shape shp) += k * s broadcast (strides st, 0 along broadcast dims).
@@ -62,16 +69,18 @@ __kernel void scaled_add(__global float *d, int dof, __global const float *s, in
 __kernel void bcast_add(__global float *d, int dof, __global const float *s, int so, int8 shp,
                         int8 st, int n, float k)
 {
-    int i = get_global_id(0);
-    if (i < n) d[dof + i] += k * s[so + view_offset(i, shp, st)];
+    CHUNK_RANGE(i0, i1, n);
+    if (i0 >= n) return;
+    int j, o = vc_start(i0, shp, st, &j);
+    for (int i = i0; i < i1; i++, o = vc_step(o, &j, i, shp, st)) d[dof + i] += k * s[so + o];
 }
 
 /* y = s x + t. Writes =. */
 __kernel void affine_fwd(__global const float *x, int xo, __global float *y, int yo, int n,
                          float s, float t)
 {
-    int i = get_global_id(0);
-    if (i < n) y[yo + i] = s * x[xo + i] + t;
+    CHUNK_RANGE(i0, i1, n);
+    for (int i = i0; i < i1; i++) y[yo + i] = s * x[xo + i] + t;
 }
 
 /* Activations; kind: 0 relu, 1 leaky relu, 2 sigmoid, 3 tanh, 4 exact GELU. */
@@ -86,17 +95,18 @@ float sigmoid_stable(float x)
 __kernel void activation_fwd(__global const float *x, int xo, __global float *y, int yo, int n,
                              int kind, float slope)
 {
-    int i = get_global_id(0);
-    if (i >= n) return;
-    float v = x[xo + i], r;
-    switch (kind) {
-    case 0: r = v > 0.0f ? v : 0.0f; break;
-    case 1: r = v > 0.0f ? v : slope * v; break;
-    case 2: r = sigmoid_stable(v); break;
-    case 3: r = tanh(v); break;
-    default: r = 0.5f * v * (1.0f + erf(v * 0.70710678118654752440f)); break;
+    CHUNK_RANGE(i0, i1, n);
+    for (int i = i0; i < i1; i++) {
+        float v = x[xo + i], r;
+        switch (kind) {
+        case 0: r = v > 0.0f ? v : 0.0f; break;
+        case 1: r = v > 0.0f ? v : slope * v; break;
+        case 2: r = sigmoid_stable(v); break;
+        case 3: r = tanh(v); break;
+        default: r = 0.5f * v * (1.0f + erf(v * 0.70710678118654752440f)); break;
+        }
+        y[yo + i] = r;
     }
-    y[yo + i] = r;
 }
 
 /* gx += f'(x) gy (f' from x, or from y for sigmoid and tanh). Writes +=. */
@@ -104,18 +114,19 @@ __kernel void activation_bwd(__global const float *x, int xo, __global const flo
                              __global const float *gy, int gyo, __global float *gx, int gxo,
                              int n, int kind, float slope)
 {
-    int i = get_global_id(0);
-    if (i >= n) return;
-    float v = x[xo + i], yv = y[yo + i], g = gy[gyo + i], r;
-    switch (kind) {
-    case 0: r = v > 0.0f ? g : 0.0f; break;
-    case 1: r = v > 0.0f ? g : slope * g; break;
-    case 2: r = g * yv * (1.0f - yv); break;
-    case 3: r = g * (1.0f - yv * yv); break;
-    default: {
-        float cdf = 0.5f * (1.0f + erf(v * 0.70710678118654752440f));
-        r = g * (cdf + v * 0.39894228040143267794f * exp(-0.5f * v * v)); /* 1/sqrt(2 pi) */
+    CHUNK_RANGE(i0, i1, n);
+    for (int i = i0; i < i1; i++) {
+        float v = x[xo + i], yv = y[yo + i], g = gy[gyo + i], r;
+        switch (kind) {
+        case 0: r = v > 0.0f ? g : 0.0f; break;
+        case 1: r = v > 0.0f ? g : slope * g; break;
+        case 2: r = g * yv * (1.0f - yv); break;
+        case 3: r = g * (1.0f - yv * yv); break;
+        default: {
+            float cdf = 0.5f * (1.0f + erf(v * 0.70710678118654752440f));
+            r = g * (cdf + v * 0.39894228040143267794f * exp(-0.5f * v * v)); /* 1/sqrt(2 pi) */
+        }
+        }
+        gx[gxo + i] += r;
     }
-    }
-    gx[gxo + i] += r;
 }

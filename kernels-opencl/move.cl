@@ -10,11 +10,15 @@
 __kernel void view_copy(__global const float *s, int so, int8 sst, __global float *d, int dof,
                         int8 dst, int8 shp, int n, int add)
 {
-    int i = get_global_id(0);
-    if (i >= n) return;
-    float v = s[so + view_offset(i, shp, sst)];
-    int k = dof + view_offset(i, shp, dst);
-    d[k] = add ? d[k] + v : v;
+    CHUNK_RANGE(i0, i1, n);
+    if (i0 >= n) return;
+    int js, jd, os = vc_start(i0, shp, sst, &js), od = vc_start(i0, shp, dst, &jd);
+    for (int i = i0; i < i1; i++) {
+        float v = s[so + os];
+        d[dof + od] = add ? d[dof + od] + v : v;
+        os = vc_step(os, &js, i + 1, shp, sst);
+        od = vc_step(od, &jd, i + 1, shp, dst);
+    }
 }
 
 /* ---- pad ----------------------------------------------------------------------------------- */

@@ -6,7 +6,8 @@
  * enumerates the output elements, "reduced" (rshp, rst) the elements summed into each. */
 
 /* y[j] = k * sum_q x[view(j, kept) + view(q, reduced)], q < nr (acc: y[j] += instead); one
- * work-group per output j (global = ny * WG). Writes = or +=. */
+ * work-group per output j (global = ny * WG), item l summing the l-th of WG contiguous ranges
+ * of q (offsets stepped without divisions, vc_step). Writes = or +=. */
 __kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
 void reduce_rows_wg(__global const float *x, int xo, int8 kshp, int8 kst, int8 rshp, int8 rst,
                     int nr, __global float *y, int yo, float k, int acc)
@@ -15,7 +16,12 @@ void reduce_rows_wg(__global const float *x, int xo, int8 kshp, int8 kst, int8 r
     int j = get_group_id(0), l = get_local_id(0);
     int base = xo + view_offset(j, kshp, kst);
     float s = 0.0f, c = 0.0f;
-    for (int q = l; q < nr; q += WG) kahan_add(&s, &c, x[base + view_offset(q, rshp, rst)]);
+    int per = (nr + WG - 1) / WG, q0 = min(nr, l * per), q1 = min(nr, q0 + per);
+    if (q0 < q1) {
+        int jr, o = vc_start(q0, rshp, rst, &jr);
+        for (int q = q0; q < q1; q++, o = vc_step(o, &jr, q, rshp, rst))
+            kahan_add(&s, &c, x[base + o]);
+    }
     float tot = wg_sum(scratch, s - c);
     if (l == 0) y[yo + j] = acc ? y[yo + j] + k * tot : k * tot;
 }
@@ -29,7 +35,8 @@ __kernel void reduce_rows_serial(__global const float *x, int xo, int8 kshp, int
     if (j >= ny) return;
     int base = xo + view_offset(j, kshp, kst);
     float s = 0.0f, c = 0.0f;
-    for (int q = 0; q < nr; q++) kahan_add(&s, &c, x[base + view_offset(q, rshp, rst)]);
+    int jr, o = vc_start(0, rshp, rst, &jr);
+    for (int q = 0; q < nr; q++, o = vc_step(o, &jr, q, rshp, rst)) kahan_add(&s, &c, x[base + o]);
     y[yo + j] = acc ? y[yo + j] + k * (s - c) : k * (s - c);
 }
 

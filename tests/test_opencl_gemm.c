@@ -90,14 +90,39 @@ static void test_conv2d(void)
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) check_agree(&cases[i], 200 + i);
 }
 
-/* A scratch budget far below one image forces several images per chunk and split columns. */
+/* The stride-1 kernels without im2col (conv_fwd_implicit, conv_bwd_w_implicit, the flipped
+ * input gradient) on rows wider than their 16-pixel blocks: Wo 37 (blocks of 16, 16, 5),
+ * 33 with a 3x5 dilated kernel and unequal pads, 9 output channels (a partial block of 8) and
+ * 2 groups of 5; bias gradients over 185 positions per image (more than a work-group).
+ * Padding beyond the kernel reach (1x1, pad 1) sends the input gradient to col2im. */
+static void test_conv2d_implicit(void)
+{
+    lm_conv2d_opts p1 = {.pad_h = 1, .pad_w = 1}, asym = {.pad_h = 2, .pad_w = 1, .dil_h = 2},
+                   g2 = {.pad_h = 1, .pad_w = 2, .groups = 2};
+    agree_case cases[] = {
+        {"conv2d implicit Wo 37 bias", f_conv2d, &p1, 3, {4, 4, 1},
+         {SHAPE(2, 3, 5, 37), SHAPE(9, 3, 3, 3), SHAPE(9)}, TOL},
+        {"conv2d implicit 3x5 dil pads", f_conv2d, &asym, 3, {4, 4, 1},
+         {SHAPE(2, 4, 6, 35), SHAPE(5, 4, 3, 5), SHAPE(5)}, TOL},
+        {"conv2d implicit groups", f_conv2d, &g2, 3, {4, 4, 1},
+         {SHAPE(3, 4, 4, 20), SHAPE(10, 2, 3, 5), SHAPE(10)}, TOL},
+        {"conv2d 1x1 pad 1", f_conv2d, &p1, 3, {4, 4, 1},
+         {SHAPE(2, 3, 4, 20), SHAPE(5, 3, 1, 1), SHAPE(5)}, TOL},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) check_agree(&cases[i], 250 + i);
+}
+
+/* A scratch budget far below one image forces several images per chunk and split columns;
+ * LM_OPENCL_CONV_IM2COL sends stride-1 convs through im2col too. */
 static void test_conv2d_chunked(void)
 {
     lm_err e = {0};
     setenv("LM_OPENCL_CONV_SCRATCH", "3000", 1);
+    setenv("LM_OPENCL_CONV_IM2COL", "1", 1);
     lm_backend *saved = clb_;
     clb_ = lm_cl_backend_create(&e);
     unsetenv("LM_OPENCL_CONV_SCRATCH");
+    unsetenv("LM_OPENCL_CONV_IM2COL");
     CHECK_MSG(clb_ != NULL, "%s", e.msg);
     if (!clb_) {
         clb_ = saved;
@@ -144,8 +169,12 @@ static void test_conv3d(void)
                      {SHAPE(2, 1, 6, 7, 8), SHAPE(1, 1, 3, 3, 3), SHAPE(1)}, TOL};
     agree_case k2 = {"conv3d 2->3 mixed pads", f_conv3d, &mixed, 2, {5, 5},
                      {SHAPE(1, 2, 5, 6, 4), SHAPE(3, 2, 2, 3, 3)}, TOL};
+    /* rows wider than the kernels' 16-wide segments: W = Wo = 37 (16, 16, 5) */
+    agree_case k3 = {"conv3d 2->2 wide rows", f_conv3d, &mixed, 3, {5, 5, 1},
+                     {SHAPE(2, 2, 3, 4, 37), SHAPE(2, 2, 3, 3, 5), SHAPE(2)}, TOL};
     check_agree(&k1, 500);
     check_agree(&k2, 501);
+    check_agree(&k3, 502);
 }
 
 int main(void)
@@ -155,6 +184,7 @@ int main(void)
     RUN(test_matmul);
     RUN(test_linear);
     RUN(test_conv2d);
+    RUN(test_conv2d_implicit);
     RUN(test_conv2d_chunked);
     RUN(test_conv_transpose2d);
     RUN(test_conv3d);
