@@ -4,9 +4,12 @@
  * scene-name hash; `all` keeps every scene), per scene crop to the tile and normalise by its own
  * maximum, simulate the coded frame at each noise level (Gaussian, k % of the largest clean
  * value, seeded per scene name and level), reconstruct (infer/tile.h) and score PSNR / SSIM /
- * MAE / SAM on the 31 bands (infer/eval.h); then the rainbow peak-wavelength test. Prints a table
- * (rows: noise levels, means over scenes) and writes eval.json + eval.csv into --output
- * atomically (a staging folder renamed into place).
+ * MAE / SAM on the 31 bands (infer/eval.h); with --motion, per scene and speed a 3-frame coded
+ * video of the scene translating at that speed, its middle frame reconstructed with and without
+ * temporal alignment (lm_eval_motion_run); then the rainbow peak-wavelength test. Prints tables
+ * (rows: noise levels / speeds, means over scenes) and writes eval.json + eval.csv (+
+ * eval_motion.csv with --motion) into --output atomically (a staging folder renamed into place).
+ * --device opencl runs the network on an OpenCL device (weights uploaded once, lm_tile_device).
  * What it is not: training-time validation (train/), or a benchmark of speed. */
 #include <omp.h>
 #include <stdio.h>
@@ -22,7 +25,8 @@ static void help(void)
 {
     printf("usage: lumosaic eval --model RUN DATA... [--split test|val|train|all]\n"
            "                     [--noise 0,5,10,15,20] [--output DIR] [--seed S]\n"
-           "                     [--threads T] [--rainbow SIZE] [--batch N] [--system FILE]\n\n"
+           "                     [--threads T] [--rainbow SIZE] [--batch N] [--system FILE]\n"
+           "                     [--motion 0,60,120,240] [--device cpu|opencl]\n\n"
            "Score a trained model (system.md §10): each scene is cropped to the mosaic tile,\n"
            "divided by its own maximum, simulated at each noise level and reconstructed\n"
            "patch-wise; PSNR (peak 1), SSIM, MAE and SAM (degrees) on the 31 bands 400-700 nm.\n"
@@ -41,15 +45,24 @@ static void help(void)
            "  --rainbow SIZE   rainbow scene size (0 = skip, else 66..4096; default 256)\n"
            "  --batch N        windows per network call (1..4096; default 8)\n"
            "  --system FILE    system description (default: the one recorded in the model)\n"
-           "  --help           this text\n", LM_EVAL_MAX_NOISE);
+           "  --motion LIST    also score moving scenes: speeds in px/s (0..10000, at most %d),\n"
+           "                   each a 3-frame noise-free coded video of the scene translating\n"
+           "                   along (0.8, 0.6); the middle frame is reconstructed with and\n"
+           "                   without temporal alignment and scored against the scene at its\n"
+           "                   lime instant (sub-images must be >= 24 x 24). Default: off\n"
+           "  --device D       where the network runs: cpu or opencl (default: env LM_DEVICE,\n"
+           "                   else cpu); the weights are copied to the device once\n"
+           "  --help           this text\n", LM_EVAL_MAX_NOISE, LM_EVAL_MAX_MOTION);
 }
 
 typedef struct eval_opts {
-    const char *model, *output, *system;
+    const char *model, *output, *system, *device;
     const char **data;
     int ndata, split; /* split: 0 test, 1 val, 2 train, 3 all */
     float k[LM_EVAL_MAX_NOISE];
     int nnoise;
+    double speed[LM_EVAL_MAX_MOTION];
+    int nmotion;
     long long seed, threads, rainbow, batch;
 } eval_opts;
 
@@ -73,21 +86,42 @@ static int parse_noise(lm_cli *c, const char *s, eval_opts *o)
     return 0;
 }
 
+static int parse_motion(lm_cli *c, const char *s, eval_opts *o)
+{
+    o->nmotion = 0;
+    char buf[512];
+    if (strlen(s) >= sizeof buf || !*s) return lm_cli_error(c, "--motion: bad list '%s'", s);
+    strcpy(buf, s);
+    for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
+        double v;
+        if (lm_cli_parse_real(t, &v) || v < 0 || v > 10000)
+            return lm_cli_error(c, "--motion: '%s' is not a speed in 0..10000 (px/s)", t);
+        if (o->nmotion == LM_EVAL_MAX_MOTION)
+            return lm_cli_error(c, "--motion: more than %d speeds", LM_EVAL_MAX_MOTION);
+        o->speed[o->nmotion++] = v;
+    }
+    if (!o->nmotion) return lm_cli_error(c, "--motion: bad list '%s'", s);
+    return 0;
+}
+
 static int parse_opt(lm_cli *c, eval_opts *o)
 {
-    const char *noise = NULL;
+    const char *noise = NULL, *motion = NULL;
     int r;
     if ((r = lm_cli_value(c, "--model", &o->model)) ||
         (r = lm_cli_value(c, "--output", &o->output)) ||
         (r = lm_cli_value(c, "--system", &o->system)) ||
+        (r = lm_cli_value(c, "--device", &o->device)) ||
         (r = lm_cli_choice(c, "--split", split_names, &o->split)) ||
         (r = lm_cli_int(c, "--seed", 0, (long long)1 << 62, &o->seed)) ||
         (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
         (r = lm_cli_int(c, "--rainbow", 0, 4096, &o->rainbow)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
-        (r = lm_cli_value(c, "--noise", &noise))) {
+        (r = lm_cli_value(c, "--noise", &noise)) ||
+        (r = lm_cli_value(c, "--motion", &motion))) {
         if (r < 0) return 2;
         if (noise && parse_noise(c, noise, o)) return 2;
+        if (motion && parse_motion(c, motion, o)) return 2;
         return 1;
     }
     return 0;
@@ -127,6 +161,7 @@ typedef struct scene_res {
     char name[256], path[1024];
     int height, width;
     lm_metrics m[LM_EVAL_MAX_NOISE];
+    lm_eval_motion mo[LM_EVAL_MAX_MOTION];
 } scene_res;
 
 typedef struct eval_run {
@@ -135,9 +170,11 @@ typedef struct eval_run {
     lm_infer_model im;
     lm_ctx ctx;
     int have_ctx;
+    lm_tile_device dev;
     scene_res *sc;
     int nsc;
     lm_metrics mean[LM_EVAL_MAX_NOISE];
+    lm_eval_motion mo_mean[LM_EVAL_MAX_MOTION];
     lm_eval_rainbow rb;
     char tmp[1100]; /* staging folder of --output ("" until created) */
 } eval_run;
@@ -205,6 +242,37 @@ static uint64_t fnv1a(const char *s)
     return h;
 }
 
+/* The --motion speeds on one prepared scene. */
+static lm_status scene_motion(eval_run *r, scene_res *s, const lm_cube *cube,
+                              const lm_tile_opts *to, lm_err *e)
+{
+    lm_status st = LM_OK;
+    lm_err me;
+    lm_err_clear(&me);
+    int k = 0;
+    for (; k < r->o->nmotion && !st; k++)
+        st = lm_eval_motion_run(&r->ctx, &r->im, cube, r->o->speed[k], to, NULL, &s->mo[k], &me);
+    if (st) lm_err_set(e, st, "--motion %g px/s: %s", r->o->speed[k - 1], me.msg);
+    return st;
+}
+
+/* Means over the scenes of the motion rows. */
+static void motion_means(eval_run *r)
+{
+    for (int k = 0; k < r->o->nmotion; k++) {
+        lm_metrics_acc a, u;
+        memset(&a, 0, sizeof a);
+        memset(&u, 0, sizeof u);
+        for (int i = 0; i < r->nsc; i++) {
+            lm_metrics_acc_add(&a, &r->sc[i].mo[k].aligned);
+            lm_metrics_acc_add(&u, &r->sc[i].mo[k].unaligned);
+        }
+        r->mo_mean[k].speed = r->o->speed[k];
+        r->mo_mean[k].aligned = lm_metrics_acc_mean(&a);
+        r->mo_mean[k].unaligned = lm_metrics_acc_mean(&u);
+    }
+}
+
 static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
 {
     lm_rng base;
@@ -220,6 +288,7 @@ static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
         lm_rng rs = lm_rng_split(&base, fnv1a(s->name));
         if (!st) st = lm_eval_scene(&r->ctx, &r->im, &cube, r->o->k, r->o->nnoise, to, &rs,
                                     s->m, e);
+        if (!st) st = scene_motion(r, s, &cube, to, e);
         s->height = cube.height;
         s->width = cube.width;
         lm_cube_free(&cube);
@@ -232,6 +301,7 @@ static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
                 s->height, omp_get_wtime() - t0);
     }
     for (int n = 0; n < r->o->nnoise; n++) r->mean[n] = lm_metrics_acc_mean(&acc[n]);
+    motion_means(r);
     return 0;
 }
 
@@ -242,6 +312,17 @@ static void print_table(const eval_run *r)
     for (int n = 0; n < r->o->nnoise; n++)
         printf("%9g %10.3f %8.4f %9.5f %9.3f\n", 100.0 * r->o->k[n], r->mean[n].psnr,
                r->mean[n].ssim, r->mean[n].mae, r->mean[n].sam);
+    if (r->o->nmotion) {
+        printf("motion (3-frame video, middle frame, no noise; means over scenes)\n");
+        printf("%11s %12s %14s %8s %10s %11s %13s\n", "motion px/s", "PSNR aligned",
+               "PSNR unaligned", "SSIM al", "SSIM unal", "SAM aligned", "SAM unaligned");
+        for (int k = 0; k < r->o->nmotion; k++) {
+            const lm_eval_motion *m = &r->mo_mean[k];
+            printf("%11g %12.3f %14.3f %8.4f %10.4f %11.3f %13.3f\n", m->speed, m->aligned.psnr,
+                   m->unaligned.psnr, m->aligned.ssim, m->unaligned.ssim, m->aligned.sam,
+                   m->unaligned.sam);
+        }
+    }
     if (r->o->rainbow > 0)
         printf("rainbow %d x %d: peak error mean %.2f nm, max %.2f nm (row %d); PSNR %.3f dB\n",
                r->rb.width, r->rb.height, r->rb.mean_err_nm, r->rb.max_err_nm, r->rb.worst_row,
@@ -268,6 +349,17 @@ static void json_metrics(FILE *f, const eval_opts *o, const lm_metrics *m, const
                 m[n].sam, n + 1 < o->nnoise ? "," : "");
 }
 
+static void json_motion(FILE *f, const eval_opts *o, const lm_eval_motion *m, const char *ind)
+{
+    for (int k = 0; k < o->nmotion; k++)
+        fprintf(f, "%s{\"speed_px_s\": %g, \"psnr_aligned\": %.6f, \"psnr_unaligned\": %.6f, "
+                   "\"ssim_aligned\": %.6f, \"ssim_unaligned\": %.6f, \"mae_aligned\": %.8f, "
+                   "\"mae_unaligned\": %.8f, \"sam_aligned\": %.6f, \"sam_unaligned\": %.6f}%s\n",
+                ind, m[k].speed, m[k].aligned.psnr, m[k].unaligned.psnr, m[k].aligned.ssim,
+                m[k].unaligned.ssim, m[k].aligned.mae, m[k].unaligned.mae, m[k].aligned.sam,
+                m[k].unaligned.sam, k + 1 < o->nmotion ? "," : "");
+}
+
 static void write_json(FILE *f, const eval_run *r)
 {
     const eval_opts *o = r->o;
@@ -285,11 +377,24 @@ static void write_json(FILE *f, const eval_run *r)
         fprintf(f, ", \"height\": %d, \"width\": %d, \"results\": [\n", r->sc[i].height,
                 r->sc[i].width);
         json_metrics(f, o, r->sc[i].m, "      ");
-        fprintf(f, "    ]}%s\n", i + 1 < r->nsc ? "," : "");
+        fprintf(f, "    ]");
+        if (o->nmotion) {
+            fprintf(f, ", \"motion\": [\n");
+            json_motion(f, o, r->sc[i].mo, "      ");
+            fprintf(f, "    ]");
+        }
+        fprintf(f, "}%s\n", i + 1 < r->nsc ? "," : "");
     }
     fprintf(f, "  ],\n  \"mean\": [\n");
     json_metrics(f, o, r->mean, "    ");
     fprintf(f, "  ]");
+    if (o->nmotion) {
+        fprintf(f, ",\n  \"motion_speeds_px_s\": [");
+        for (int k = 0; k < o->nmotion; k++) fprintf(f, "%s%g", k ? ", " : "", o->speed[k]);
+        fprintf(f, "],\n  \"motion_mean\": [\n");
+        json_motion(f, o, r->mo_mean, "    ");
+        fprintf(f, "  ]");
+    }
     if (o->rainbow > 0)
         fprintf(f, ",\n  \"rainbow\": {\"size\": %d, \"height\": %d, \"width\": %d, "
                    "\"peak_error_mean_nm\": %.4f, \"peak_error_max_nm\": %.4f, \"worst_row\": %d, "
@@ -310,16 +415,32 @@ static void write_csv(FILE *f, const eval_run *r)
     }
 }
 
+static void write_motion_csv(FILE *f, const eval_run *r)
+{
+    fprintf(f, "scene,motion_px_s,psnr_aligned,psnr_unaligned,ssim_aligned,ssim_unaligned,"
+               "mae_aligned,mae_unaligned,sam_aligned,sam_unaligned\n");
+    for (int i = 0; i <= r->nsc; i++) {
+        const lm_eval_motion *m = i < r->nsc ? r->sc[i].mo : r->mo_mean;
+        for (int k = 0; k < r->o->nmotion; k++)
+            fprintf(f, "%s,%g,%.6f,%.6f,%.6f,%.6f,%.8f,%.8f,%.6f,%.6f\n",
+                    i < r->nsc ? r->sc[i].name : "mean", m[k].speed, m[k].aligned.psnr,
+                    m[k].unaligned.psnr, m[k].aligned.ssim, m[k].unaligned.ssim,
+                    m[k].aligned.mae, m[k].unaligned.mae, m[k].aligned.sam, m[k].unaligned.sam);
+    }
+}
+
 /* Into the staging folder, then renamed onto --output. */
 static int write_outputs(eval_run *r)
 {
     char path[1200];
     const char *tmp = r->tmp;
-    for (int k = 0; k < 2; k++) {
-        snprintf(path, sizeof path, "%s/%s", tmp, k ? "eval.csv" : "eval.json");
+    static const char *const names[3] = {"eval.json", "eval.csv", "eval_motion.csv"};
+    for (int k = 0; k < (r->o->nmotion ? 3 : 2); k++) {
+        snprintf(path, sizeof path, "%s/%s", tmp, names[k]);
         FILE *f = fopen(path, "w");
         if (f) {
-            if (k) write_csv(f, r);
+            if (k == 2) write_motion_csv(f, r);
+            else if (k) write_csv(f, r);
             else write_json(f, r);
         }
         if (!f || ferror(f) | fclose(f)) {
@@ -346,6 +467,9 @@ static int run(eval_run *r)
     if (lm_ctx_init(&r->ctx, (int)r->o->threads) != 0)
         return lm_cli_error(r->c, "out of memory (compute context)"), 1;
     r->have_ctx = 1;
+    if (lm_tile_device_open(&r->dev, r->o->device, r->im.model, &r->ctx, &e)) return fail(r->c, &e);
+    if (r->dev.backend->device != LM_DEVICE_CPU)
+        fprintf(stderr, "device: %s\n", lm_tile_device_name(&r->dev));
     lm_tile_opts to;
     lm_tile_default_opts(&to);
     to.batch = (int)r->o->batch;
@@ -373,6 +497,7 @@ int lm_cmd_eval(int argc, char **argv)
         r.o = &o;
         rc = run(&r);
         if (r.tmp[0]) lm_cli_remove_tree(r.tmp);
+        lm_tile_device_close(&r.dev);
         if (r.have_ctx) lm_ctx_free(&r.ctx);
         free(r.sc);
         lm_infer_model_free(&r.im);

@@ -7,7 +7,8 @@
  * negative values). A sequence of >= 2 frames is temporally aligned first unless --no-align
  * (system.md §9, infer/align.h): each frame's LED sub-images are moved to its lime timestamp
  * with frames i-1, i, i+1 (edge frames as align.h says) and re-mosaicked before reconstruction;
- * only three frames' sub-images are held at a time (read one frame ahead).
+ * only three frames' sub-images are held at a time (read one frame ahead). --device opencl runs
+ * the network on an OpenCL device, the weights uploaded once for the run (lm_tile_device).
  * What it is not: the flow or the alignment scheme themselves (infer/flow.c, infer/align.c). */
 #include <omp.h>
 #include <stdio.h>
@@ -26,7 +27,8 @@
 static void help(void)
 {
     printf("usage: lumosaic infer --model RUN --input FRAMES --output DIR [--batch N]\n"
-           "                      [--threads T] [--system FILE] [--no-align]\n\n"
+           "                      [--threads T] [--system FILE] [--no-align]\n"
+           "                      [--device cpu|opencl]\n\n"
            "Reconstruct 31-band cubes (400-700 nm) from coded frames with a trained model,\n"
            "patch-wise: 66 x 64 windows, stride 30 x 32, on the tile grid, blended by a raised-\n"
            "cosine weight. Writes DIR/cube_NNNN.exr (spectral OpenEXR, channels T.<nm>nm;\n"
@@ -46,11 +48,13 @@ static void help(void)
            "                   time by optical flow to the neighbouring frames (needs\n"
            "                   sub-images of at least 24 x 24 pixels; smaller frames are\n"
            "                   reconstructed unaligned, with a warning)\n"
+           "  --device D       where the network runs: cpu or opencl (default: env LM_DEVICE,\n"
+           "                   else cpu); the weights are copied to the device once\n"
            "  --help           this text\n");
 }
 
 typedef struct infer_opts {
-    const char *model, *input, *output, *system;
+    const char *model, *input, *output, *system, *device;
     long long batch, threads;
     int no_align;
 } infer_opts;
@@ -69,6 +73,7 @@ static int parse(lm_cli *c, infer_opts *o)
             (r = lm_cli_value(c, "--input", &o->input)) ||
             (r = lm_cli_value(c, "--output", &o->output)) ||
             (r = lm_cli_value(c, "--system", &o->system)) ||
+            (r = lm_cli_value(c, "--device", &o->device)) ||
             (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
             (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
             (r = lm_cli_flag(c, "--no-align", &o->no_align))) {
@@ -109,6 +114,7 @@ typedef struct infer_run {
     lm_frame_seq seq;
     lm_srgb srgb;
     lm_ctx ctx;
+    lm_tile_device dev;
     float *rgb;
     infer_align al;
     char tmp[1100];
@@ -305,6 +311,10 @@ int lm_cmd_infer(int argc, char **argv)
         rc = 1;
     } else if (!rc) {
         have_ctx = 1;
+        if (lm_tile_device_open(&r.dev, o.device, r.im.model, &r.ctx, &e))
+            rc = fail(&c, &e, 0);
+        else if (r.dev.backend->device != LM_DEVICE_CPU)
+            fprintf(stderr, "device: %s\n", lm_tile_device_name(&r.dev));
     }
     if (!rc && lm_cli_stage_dir(&c, o.output, r.tmp, sizeof r.tmp) != 0) rc = 2;
     else if (!rc) {
@@ -312,6 +322,7 @@ int lm_cmd_infer(int argc, char **argv)
         if (rc) lm_cli_remove_tree(r.tmp);
         else if (lm_cli_commit_dir(&c, r.tmp, o.output)) rc = 1;
     }
+    lm_tile_device_close(&r.dev);
     if (have_ctx) lm_ctx_free(&r.ctx);
     free(r.rgb);
     align_free(&r.al);

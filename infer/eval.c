@@ -5,7 +5,10 @@
 #include <stdlib.h>
 #include <string.h>
 #include "data/forward.h"
+#include "data/spectra.h"
 #include "data/synth.h"
+#include "data/video.h"
+#include "infer/align.h"
 
 lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err)
 {
@@ -73,6 +76,118 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
         st = eval_one(c, im, truth, k[i], to, &r, frame, &out[i], err);
     }
     free(frame);
+    return st;
+}
+
+#define MOTION_FRAMES 3
+
+/* Buffers of one motion run: frames, their sub-images, the aligned frame. */
+typedef struct motion_buf {
+    float *raw[MOTION_FRAMES], *planes[MOTION_FRAMES], *aligned, *remos;
+    lm_cube truth;  /* frame 1's lime-instant scene, 31 bands */
+} motion_buf;
+
+static void motion_buf_free(motion_buf *b)
+{
+    for (int i = 0; i < MOTION_FRAMES; i++) {
+        free(b->raw[i]);
+        free(b->planes[i]);
+    }
+    free(b->aligned);
+    free(b->remos);
+    lm_cube_free(&b->truth);
+}
+
+/* Simulate the frames (noise-free) and frame 1's truth (bins 400..700 of its scene). */
+static lm_status motion_simulate(const lm_infer_model *im, const lm_cube *cube31, double speed,
+                                 int nthreads, motion_buf *b, lm_err *err)
+{
+    lm_cube c41, gt;
+    if (lm_cube_mirror41(cube31, &c41, err)) return err->status;
+    lm_video_opts vo;
+    memset(&vo, 0, sizeof vo);
+    vo.motion.vx = speed * LM_EVAL_MOTION_DIR_X;
+    vo.motion.vy = speed * LM_EVAL_MOTION_DIR_Y;
+    vo.nthreads = nthreads;
+    lm_status st = LM_OK;
+    for (int i = 0; i < MOTION_FRAMES && !st; i++) {
+        st = lm_video_frame(&im->sys, &c41, &vo, i, NULL, b->raw[i], NULL, i == 1 ? &gt : NULL,
+                            err);
+        if (!st && i == 1) {
+            if (lm_cube_alloc(&b->truth, 31, gt.height, gt.width, 400.0f, 10.0f))
+                st = lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+            else
+                memcpy(b->truth.data, lm_cube_band(&gt, 2),
+                       sizeof(float) * 31 * (size_t)gt.height * gt.width);
+            lm_cube_free(&gt);
+        }
+    }
+    lm_cube_free(&c41);
+    return st;
+}
+
+/* Frame 1 aligned to its lime instant with frames 0 and 2, re-mosaicked into b->remos. */
+static lm_status motion_align(const lm_system *sys, int H, int W, const lm_flow_opts *fo,
+                              motion_buf *b, lm_err *err)
+{
+    int ty = sys->tile_rows, tx = sys->tile_cols, np = ty * tx, ref;
+    float t[LM_SYSTEM_MAX_TILE];
+    lm_status st = lm_align_phase_times(sys, t, &ref, err);
+    for (int i = 0; i < MOTION_FRAMES && !st; i++)
+        st = lm_align_unshuffle(b->raw[i], H, W, ty, tx, b->planes[i], err);
+    if (!st) st = lm_align_frame(b->planes[0], b->planes[1], b->planes[2], np, H / ty, W / tx,
+                                 t, ref, fo, b->aligned, err);
+    if (!st) st = lm_align_remosaic(b->aligned, H / ty, W / tx, ty, tx, b->remos, err);
+    return st;
+}
+
+/* Reconstruct frame and score it against b->truth. */
+static lm_status motion_score(lm_ctx *c, const lm_infer_model *im, const float *frame,
+                              const lm_tile_opts *to, const motion_buf *b, lm_metrics *m,
+                              lm_err *err)
+{
+    lm_cube pred;
+    int H = b->truth.height, W = b->truth.width;
+    lm_status st = lm_tile_infer(c, im->model, frame, H, W, to, &pred, err);
+    if (st) return st;
+    st = lm_metrics_compute(pred.data, b->truth.data, 31, H, W, 0, 31, m, err);
+    lm_cube_free(&pred);
+    return st;
+}
+
+lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
+                             double speed, const lm_tile_opts *to, const lm_flow_opts *fo,
+                             lm_eval_motion *out, lm_err *err)
+{
+    memset(out, 0, sizeof *out);
+    out->speed = speed;
+    if (!(speed >= 0.0) || !isfinite(speed))
+        return lm_err_set(err, LM_ERR_ARG, "eval: motion speed %g px/s (need >= 0)", speed);
+    lm_flow_opts dfo;
+    if (!fo) {
+        lm_flow_default_opts(&dfo, LM_FLOW_MEDIUM);
+        dfo.nthreads = lm_nthreads(c);
+        fo = &dfo;
+    }
+    int H = truth->height, W = truth->width;
+    size_t n = (size_t)H * W;
+    motion_buf b;
+    memset(&b, 0, sizeof b);
+    int ok = 1;
+    for (int i = 0; i < MOTION_FRAMES; i++) {
+        b.raw[i] = malloc(sizeof(float) * n);
+        b.planes[i] = malloc(sizeof(float) * n);
+        ok = ok && b.raw[i] && b.planes[i];
+    }
+    b.aligned = malloc(sizeof(float) * n);
+    b.remos = malloc(sizeof(float) * n);
+    lm_status st = ok && b.aligned && b.remos ? LM_OK
+                                              : lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    if (!st) st = motion_simulate(im, truth, speed, lm_nthreads(c), &b, err);
+    if (!st) st = motion_align(&im->sys, H, W, fo, &b, err);
+    if (!st) st = motion_score(c, im, b.raw[1], to, &b, &out->unaligned, err);
+    if (!st) st = motion_score(c, im, b.remos, to, &b, &out->aligned, err);
+    motion_buf_free(&b);
     return st;
 }
 

@@ -5,11 +5,16 @@
  * PSNR / SSIM / MAE / SAM on the 31 bands (train/metrics.h); and the rainbow test (§7): per row
  * the recovered peak wavelength (parabolic interpolation around the largest band of the
  * row-averaged reconstructed spectrum) against the row's true peak.
+ * Motion: the prepared cube translating at a given speed in a fixed direction is simulated as
+ * a short coded video (data/video.h, §5 timing, noise-free), and its middle frame is
+ * reconstructed with and without temporal alignment (infer/align.h), both scored against the
+ * scene at that frame's lime instant.
  * Reconstructions are scored as the network returns them (no clamping).
  * What it is not: scene listing, printing or file output (cli/cmd_eval.c). */
 #ifndef LM_EVAL_H
 #define LM_EVAL_H
 #include "data/cube.h"
+#include "infer/flow.h"
 #include "infer/model_io.h"
 #include "infer/tile.h"
 #include "tensor/rng.h"
@@ -36,6 +41,27 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
  * one on ties), refined by the vertex of the parabola through m - 1, m, m + 1 when both
  * neighbours exist and the parabola is concave; else wl0 + m * step. */
 double lm_eval_peak_nm(const float *spec, int n, double wl0, double step);
+
+/* Direction of the simulated translation (a unit vector: 3-4-5). */
+#define LM_EVAL_MOTION_DIR_X 0.8
+#define LM_EVAL_MOTION_DIR_Y 0.6
+#define LM_EVAL_MAX_MOTION 16
+
+typedef struct lm_eval_motion {
+    double speed;          /* px/s along (LM_EVAL_MOTION_DIR_X, LM_EVAL_MOTION_DIR_Y) */
+    lm_metrics aligned;    /* frame 1 aligned with frames 0 and 2, then reconstructed */
+    lm_metrics unaligned;  /* frame 1 reconstructed as recorded */
+} lm_eval_motion;
+
+/* Frames 0, 1, 2 of the prepared 31-band cube moving at `speed` px/s (mirrored to the
+ * system's 41-bin grid, lm_video_frame with the default motion-blur samples, no noise); the
+ * truth is frame 1's scene at its lime instant (bands 400..700 nm). fo: flow options (NULL =
+ * medium preset with lm_nthreads(c) threads). c must hold no tensors. Errors: LM_ERR_ARG for a
+ * negative or non-finite speed; those of the video model, the alignment (sub-images smaller
+ * than lm_flow_min_size: LM_ERR_SHAPE), lm_tile_infer and the metrics. */
+lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
+                             double speed, const lm_tile_opts *to, const lm_flow_opts *fo,
+                             lm_eval_motion *out, lm_err *err);
 
 typedef struct lm_eval_rainbow {
     int size;                 /* the scene simulated: size x size */

@@ -1,7 +1,9 @@
 /* tile.c — patch-wise inference: window grid, weighting kernel, batched fold (see tile.h).
  * What it is not: a tensor op (no autograd: inference only) or model loading. */
 #include "infer/tile.h"
+#include "kernels-opencl/cl_backend.h"
 #include <math.h>
+#include <omp.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -174,6 +176,16 @@ lm_status lm_tile_fold(lm_ctx *c, const float *frame, int height, int width, int
                        const lm_tile_opts *o, lm_tile_fn fn, void *user, int out_ch,
                        float *out, lm_err *err)
 {
+    return lm_tile_fold_timed(c, frame, height, width, ty, tx, o, fn, user, out_ch, out, NULL,
+                              err);
+}
+
+static double now_s(lm_tile_timing *t) { return t ? omp_get_wtime() : 0.0; }
+
+lm_status lm_tile_fold_timed(lm_ctx *c, const float *frame, int height, int width, int ty,
+                             int tx, const lm_tile_opts *o, lm_tile_fn fn, void *user,
+                             int out_ch, float *out, lm_tile_timing *t, lm_err *err)
+{
     if (lm_tile_check(o, height, width, ty, tx, err)) return err->status;
     if (out_ch <= 0) return lm_err_set(err, LM_ERR_ARG, "tile: %d output channels", out_ch);
     fold f;
@@ -182,18 +194,33 @@ lm_status lm_tile_fold(lm_ctx *c, const float *frame, int height, int width, int
     memset(out, 0, sizeof(float) * plane * out_ch);
     int grad = lm_ctx_set_grad(c, 0);
     lm_status st = LM_OK;
+    double t0 = now_s(t), t1, t2, t3;
     for (int w0 = 0; w0 < f.nwin && !st; w0 += o->batch) {
         int nb = f.nwin - w0 < o->batch ? f.nwin - w0 : o->batch;
         fold_gather(&f, frame, w0, nb);
+        t1 = now_s(t);
         st = fold_batch(c, &f, nb, fn, user, err);
+        t2 = now_s(t);
         if (!st) fold_accumulate(&f, out, w0, nb, lm_nthreads(c));
         lm_ctx_reset(c);
+        t3 = now_s(t);
+        if (t) {
+            t->gather += t1 - t0;
+            t->network += t2 - t1;
+            t->fold += t3 - t2;
+            t->batches++;
+        }
+        t0 = t3;
     }
     lm_ctx_set_grad(c, grad);
     if (!st) {
         #pragma omp parallel for schedule(static) num_threads(lm_nthreads(c))
         for (int ch = 0; ch < out_ch; ch++)
             for (size_t p = 0; p < plane; p++) out[ch * plane + p] /= f.wsum[p];
+    }
+    if (t) {
+        t->fold += now_s(t) - t0;
+        t->windows += f.nwin;
     }
     fold_free(&f);
     return st;
@@ -223,4 +250,56 @@ lm_status lm_tile_infer(lm_ctx *c, lm_model *m, const float *frame, int height, 
     if (!st) memcpy(cube->data, full + plane, sizeof(float) * plane * 31);
     free(full);
     return st;
+}
+
+lm_status lm_tile_device_open(lm_tile_device *d, const char *name, lm_model *m, lm_ctx *c,
+                              lm_err *err)
+{
+    memset(d, 0, sizeof *d);
+    lm_err be;
+    lm_err_clear(&be);
+    lm_backend *b = lm_backend_open(name, &be);
+    if (!b) return lm_err_set(err, be.status, "device: %s", be.msg);
+    d->backend = b;
+    d->ctx = c;
+    if (b->device == LM_DEVICE_CPU) return LM_OK;
+    lm_ctx_set_backend(c, b);
+    lm_params *p = &m->params;
+    d->ps = malloc(sizeof *d->ps * (size_t)(p->n > 0 ? p->n : 1));
+    d->held = malloc(sizeof *d->held * (size_t)(p->n > 0 ? p->n : 1));
+    if (!d->ps || !d->held || lm_ctx_init(&d->pctx, lm_nthreads(c)) != 0) {
+        lm_tile_device_close(d);
+        return lm_err_set(err, LM_ERR_NOMEM, "device: out of memory");
+    }
+    d->have_pctx = 1;
+    lm_ctx_set_backend(&d->pctx, b);
+    for (int i = 0; i < p->n; i++) d->ps[i] = &p->items[i]->t;
+    d->np = p->n;
+    if (lm_tensors_swap_to_device(&d->pctx, d->ps, d->np, d->held)) {
+        lm_status s = lm_err_set(err, lm_ctx_status(&d->pctx), "device: %s",
+                                 lm_ctx_message(&d->pctx));
+        for (int i = 0; i < d->np; i++) *d->ps[i] = d->held[i];
+        d->np = 0;
+        lm_tile_device_close(d);
+        return s;
+    }
+    return LM_OK;
+}
+
+const char *lm_tile_device_name(const lm_tile_device *d)
+{
+    if (!d->backend || d->backend->device == LM_DEVICE_CPU) return "cpu";
+    return lm_cl_backend_device_name(d->backend);
+}
+
+void lm_tile_device_close(lm_tile_device *d)
+{
+    if (!d->backend) return;
+    if (d->np) lm_tensors_swap_back(&d->pctx, d->ps, d->np, d->held);
+    if (d->have_pctx) lm_ctx_free(&d->pctx);
+    if (d->ctx) lm_ctx_set_backend(d->ctx, NULL);
+    lm_backend_close(d->backend);
+    free(d->ps);
+    free(d->held);
+    memset(d, 0, sizeof *d);
 }

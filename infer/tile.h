@@ -57,9 +57,47 @@ lm_status lm_tile_fold(lm_ctx *c, const float *frame, int height, int width, int
                        const lm_tile_opts *o, lm_tile_fn fn, void *user, int out_ch,
                        float *out, lm_err *err);
 
+/* Seconds spent by lm_tile_fold_timed in each stage (added to, not reset). */
+typedef struct lm_tile_timing {
+    double gather;    /* window extraction into the batch buffer */
+    double network;   /* fn on the batches, including the upload and the read-back */
+    double fold;      /* K-weighted accumulation and the final division by the sum of K */
+    int windows, batches;
+} lm_tile_timing;
+
+/* lm_tile_fold, adding the time of each stage into *t (NULL: no timing; same result). */
+lm_status lm_tile_fold_timed(lm_ctx *c, const float *frame, int height, int width, int ty,
+                             int tx, const lm_tile_opts *o, lm_tile_fn fn, void *user,
+                             int out_ch, float *out, lm_tile_timing *t, lm_err *err);
+
 /* A model on a whole frame: lm_tile_fold with lm_model_forward, then channels 1..31 (400-700 nm)
  * of the 33-channel output as a 31-band cube (allocated here; lm_cube_free). */
 lm_status lm_tile_infer(lm_ctx *c, lm_model *m, const float *frame, int height, int width,
                         const lm_tile_opts *o, lm_cube *cube, lm_err *err);
+
+/* A model running on a compute device for a whole run (the CLI's --device): the backend is
+ * opened once, the run's ctx switched to it, and the model's parameters are copied to the
+ * device once (lm_tensors_swap_to_device into a ctx of their own that is never reset), so every
+ * batch of lm_tile_fold / lm_tile_infer on that ctx runs there without re-uploading them.
+ * For "cpu" nothing moves. The model and the ctx must outlive the device; close it before
+ * freeing them (it puts the host parameters back and the ctx back on the CPU). */
+typedef struct lm_tile_device {
+    lm_backend *backend;     /* NULL when not open */
+    lm_ctx pctx;             /* holds the device copies of the parameters */
+    lm_ctx *ctx;             /* the run's ctx, switched to backend */
+    lm_tensor **ps, *held;   /* the swapped parameters and their host structs */
+    int np, have_pctx;
+} lm_tile_device;
+
+/* Open device `name` ("cpu", "opencl"; NULL or "" = env LM_DEVICE, else cpu) for model m and
+ * ctx c (which must hold no tensors). Errors (d left closed): LM_ERR_ARG for an unknown name,
+ * LM_ERR_UNSUPPORTED when no OpenCL platform exists, LM_ERR_BACKEND / LM_ERR_NOMEM otherwise;
+ * messages start with "device". */
+lm_status lm_tile_device_open(lm_tile_device *d, const char *name, lm_model *m, lm_ctx *c,
+                              lm_err *err);
+/* "cpu", or the OpenCL device's name. */
+const char *lm_tile_device_name(const lm_tile_device *d);
+/* Parameters back on the host, c back on the CPU backend, the backend closed. Idempotent. */
+void lm_tile_device_close(lm_tile_device *d);
 
 #endif

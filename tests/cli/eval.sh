@@ -4,8 +4,10 @@
 # per-scene, mean and rainbow fields with sane values, PSNR at noise 0 >= PSNR at noise 10,
 # eval.csv has a row per scene and level plus the means, the printed table has a row per level,
 # the same seed gives the same files and another seed other noisy numbers; the scene belongs to
-# exactly one of the test/val/train splits; bad input: missing model, not a model, no DATA,
-# missing scene, bad noise list, too small rainbow, bad split, unknown option, used output
+# exactly one of the test/val/train splits; --motion 0,240: per-scene and mean motion rows in
+# eval.json and eval_motion.csv, the still row equals the static frame, aligned >= unaligned
+# (- 0.1 dB) at 240 px/s; bad input: missing model, not a model, no DATA,
+# missing scene, bad noise / motion list, too small rainbow, bad split, unknown option, used output
 # folder — one line on stderr, exit 2, no output left.
 # usage: eval.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
@@ -73,6 +75,38 @@ for s in test val train; do
 done
 check "the scene is in exactly one split ($n_ok)" [ $n_ok -eq 1 ]
 
+# ---- motion (--motion): fields, rows, and alignment not worse at the largest speed --------
+"$LM" eval --model "$R" "$CAVE" --split all --noise 0 --rainbow 0 --motion 0,240 \
+  --output "$T/evm" > "$T/mtable" 2> "$T/merr"
+check "eval --motion: $(cat "$T/merr")" [ $? -eq 0 ]
+cat "$T/mtable"
+check "motion table has a row per speed" \
+  [ "$(grep -cE '^ +(0|240) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/mtable")" -eq 2 ]
+python3 - "$T/evm/eval.json" "$O/eval.json" <<'PY'
+import json, math, sys
+j = json.load(open(sys.argv[1])); j0 = json.load(open(sys.argv[2]))
+assert j["motion_speeds_px_s"] == [0, 240], j
+keys = ["speed_px_s", "psnr_aligned", "psnr_unaligned", "ssim_aligned", "ssim_unaligned",
+        "mae_aligned", "mae_unaligned", "sam_aligned", "sam_unaligned"]
+for rows in (j["scenes"][0]["motion"], j["motion_mean"]):
+    assert [r["speed_px_s"] for r in rows] == [0, 240], rows
+    for r in rows:
+        assert sorted(r) == sorted(keys), r
+        assert all(math.isfinite(r[k]) for k in keys), r
+    still, fast = rows
+    # still scene: the middle frame is the static frame, alignment keeps it
+    assert abs(still["psnr_aligned"] - still["psnr_unaligned"]) < 0.05, still
+    assert abs(still["psnr_unaligned"] - j0["mean"][0]["psnr"]) < 1e-3, (still, j0["mean"])
+    assert fast["psnr_aligned"] >= fast["psnr_unaligned"] - 0.1, fast
+    assert fast["sam_aligned"] <= fast["sam_unaligned"] + 0.1, fast
+PY
+check "eval.json motion fields, still = static, aligned >= unaligned at 240 px/s" [ $? -eq 0 ]
+check "motion csv header" [ "$(head -1 "$T/evm/eval_motion.csv")" = \
+  "scene,motion_px_s,psnr_aligned,psnr_unaligned,ssim_aligned,ssim_unaligned,mae_aligned,mae_unaligned,sam_aligned,sam_unaligned" ]
+check "motion csv rows: scene and mean per speed" \
+  [ "$(grep -cE '^(balloons_crop100|mean),(0|240),' "$T/evm/eval_motion.csv")" -eq 4 ]
+check "no motion csv without --motion" [ ! -e "$O/eval_motion.csv" ]
+
 # ---- bad input ---------------------------------------------------------------------------
 expect_error "missing model" 2 "no such model" "$T/e1" -- "$LM" eval --model "$T/nope" "$CAVE" --output "$T/e1"
 echo "not safetensors" > "$T/bogus.safetensors"
@@ -83,6 +117,8 @@ expect_error "bad noise" 2 "--noise" "$T/e5" -- "$LM" eval --model "$R" "$CAVE" 
 expect_error "noise > 100" 2 "--noise" "$T/e6" -- "$LM" eval --model "$R" "$CAVE" --noise 0,150 --output "$T/e6"
 expect_error "rainbow too small" 2 "--rainbow" "$T/e7" -- "$LM" eval --model "$R" "$CAVE" --rainbow 10 --output "$T/e7"
 expect_error "bad split" 2 "--split" "$T/e8" -- "$LM" eval --model "$R" "$CAVE" --split bogus --output "$T/e8"
+expect_error "bad motion" 2 "--motion" "$T/e11" -- "$LM" eval --model "$R" "$CAVE" --motion 0,fast --output "$T/e11"
+expect_error "negative motion" 2 "--motion" "$T/e12" -- "$LM" eval --model "$R" "$CAVE" --motion -5 --output "$T/e12"
 expect_error "unknown option" 2 "unknown option" "$T/e9" -- "$LM" eval --model "$R" "$CAVE" --bogus --output "$T/e9"
 expect_error "missing --model" 2 "--model is required" "$T/e10" -- "$LM" eval "$CAVE" --output "$T/e10"
 mkdir -p "$T/used" && touch "$T/used/x"
