@@ -19,6 +19,7 @@ int lm_cmd_infer(int argc, char **argv);
 int lm_cmd_info(int argc, char **argv);
 int lm_cmd_render(int argc, char **argv);
 int lm_cmd_simulate(int argc, char **argv);
+int lm_cmd_study(int argc, char **argv);
 int lm_cmd_train(int argc, char **argv);
 
 #endif

@@ -12,6 +12,7 @@ static const lm_command commands[] = {
     {"info", lm_cmd_info, "layer table of a model (shapes, parameters, MACs), presets, system"},
     {"render", lm_cmd_render, "render a spectral cube as an sRGB PNG (D65, CIE 1931)"},
     {"simulate", lm_cmd_simulate, "simulate coded frames (static or video) from a spectral cube"},
+    {"study", lm_cmd_study, "speed against accuracy: train, score and time presets; charts"},
     {"train", lm_cmd_train, "train a network (config/flags, checkpoints, --resume)"},
 };
 #define NCOMMANDS (int)(sizeof commands / sizeof commands[0])

@@ -1,0 +1,153 @@
+/* cmd_study.c — `lumosaic study`: the speed-against-accuracy study (study/study.h): train every
+ * preset of a study config with the same budget, evaluate, time, count, and write
+ * results.{json,csv,md} plus gnuplot charts (study/charts.h) into the output folder. Re-running
+ * resumes: presets whose runs/<preset>/result.json exists are not run again.
+ * What it is not: the study itself (study/), or `lumosaic eval` on one model. */
+#include <jansson.h>
+#include <malloc.h>
+#include <omp.h>
+#include <stdio.h>
+#include <string.h>
+#include "cli/cli_util.h"
+#include "cli/commands.h"
+#include "study/charts.h"
+#include "study/study.h"
+
+static void help(void)
+{
+    printf("usage: lumosaic study --config STUDY.json [--output DIR] [--threads T]\n"
+           "                      [--no-charts] [--dry-run] [--quiet]\n\n"
+           "Speed against accuracy: every preset of the config is trained with the same budget\n"
+           "into DIR/runs/<preset>/, scored on the held-out scenes (the data's test split, or\n"
+           "procedural scenes when it is empty) at each noise level, run through the rainbow\n"
+           "test, timed on a 640 x 480 frame (fastest of a few runs) and counted (parameters,\n"
+           "multiply-adds per frame). Writes DIR/results.json, results.csv, results.md and\n"
+           "DIR/charts/ (data, gnuplot scripts, PNG and SVG). Running again resumes: presets\n"
+           "with a DIR/runs/<preset>/result.json are skipped, interrupted training continues.\n\n"
+           "  --config FILE  study config (see study/ci.json, study/full.json)\n"
+           "  --output DIR   output folder (default: the config's \"output\")\n"
+           "  --threads T    compute threads (1..1024; default: all cores)\n"
+           "  --no-charts    do not draw charts (gnuplot not needed)\n"
+           "  --dry-run      check the config and print the plan; nothing is run or written\n"
+           "  --quiet        no training progress\n"
+           "  --help         this text\n\n"
+           "Exit status: 0 done, 1 a run or the charts failed (e.g. gnuplot missing), 2 bad\n"
+           "options, config or data.\n");
+}
+
+typedef struct study_args {
+    const char *config, *output;
+    long long threads;
+    int no_charts, quiet, dry_run;
+} study_args;
+
+static int parse(lm_cli *c, study_args *a)
+{
+    while (!lm_cli_done(c)) {
+        int r;
+        if (lm_cli_is_help(c)) {
+            help();
+            return 0;
+        }
+        if ((r = lm_cli_value(c, "--config", &a->config)) ||
+            (r = lm_cli_value(c, "--output", &a->output)) ||
+            (r = lm_cli_int(c, "--threads", 1, 1024, &a->threads)) ||
+            (r = lm_cli_flag(c, "--no-charts", &a->no_charts)) ||
+            (r = lm_cli_flag(c, "--dry-run", &a->dry_run)) ||
+            (r = lm_cli_flag(c, "--quiet", &a->quiet))) {
+            if (r < 0) return 2;
+            continue;
+        }
+        return lm_cli_unknown(c);
+    }
+    if (!a->config) return lm_cli_error(c, "--config is required (see 'lumosaic study --help')");
+    return 1;
+}
+
+/* Bad config or data (including missing scene files): 2; a failed run (memory, NaN loss): 1. */
+static int status_code(lm_status st)
+{
+    return st == LM_ERR_ARG || st == LM_ERR_FORMAT || st == LM_ERR_SHAPE || st == LM_ERR_IO ||
+           st == LM_ERR_UNSUPPORTED ? 2 : 1;
+}
+
+static void print_summary(const lm_study *s, const char *dir)
+{
+    printf("%-14s %12s %10s %10s\n", "model", "params", "s/frame", "PSNR dB");
+    for (size_t i = 0; i < json_array_size(s->runs); i++) {
+        json_t *r = json_array_get(s->runs, i);
+        json_t *l0 = json_array_get(json_object_get(json_object_get(r, "eval"), "levels"), 0);
+        printf("%-14s %12lld %10.3f %10.3f\n", json_string_value(json_object_get(r, "preset")),
+               (long long)json_integer_value(json_object_get(r, "params")),
+               json_number_value(json_object_get(r, "seconds_per_frame")),
+               json_number_value(json_object_get(l0, "psnr")));
+    }
+    printf("results: %s/results.md\n", dir);
+}
+
+static int print_plan(const lm_study_cfg *cfg, const char *dir)
+{
+    const lm_train_cfg *t = &cfg->train;
+    printf("study %s -> %s\npresets:", cfg->path, dir);
+    for (int i = 0; i < cfg->npresets; i++) printf(" %s", cfg->presets[i]);
+    printf("\ntraining: %ld iterations, patch %dx%d, batch %d x %d, lr %g, synthetic share %g, "
+           "seed %llu\ndata:", t->iterations, t->patch_h, t->patch_w, t->batch, t->accum_steps,
+           (double)t->lr, (double)t->synth_fraction, (unsigned long long)t->seed);
+    for (int i = 0; i < t->ndata; i++) printf(" %s", t->data[i]);
+    printf("\nnoise %%:");
+    for (int k = 0; k < cfg->nnoise; k++) printf(" %g", 100.0 * cfg->noise[k]);
+    printf("\nheld-out fallback: %d procedural scenes %dx%d; rainbow %d; timed frame %dx%d, %d "
+           "runs\n", cfg->eval_scenes, cfg->eval_h, cfg->eval_w, cfg->rainbow, cfg->frame_h,
+           cfg->frame_w, cfg->timing_repeats);
+    return 0;
+}
+
+static int run(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const char *dir)
+{
+    lm_err e = {0};
+    lm_study s;
+    lm_study_opts o = {.threads = (int)a->threads, .progress = !a->quiet, .log = stderr};
+    lm_status st = lm_study_run(cfg, dir, &o, &s, &e);
+    if (st) {
+        lm_cli_error(c, "%s", e.msg);
+        return status_code(st);
+    }
+    int charts = !a->no_charts, rc = 0;
+    if (charts && (lm_charts_write(cfg, &s, dir, &e) || lm_charts_render(dir, &e))) {
+        lm_cli_error(c, "%s", e.msg);
+        charts = 0, rc = 1;
+    }
+    if (lm_study_write(cfg, &s, dir, charts, &e)) {
+        lm_cli_error(c, "%s", e.msg);
+        rc = 1;
+    }
+    if (!rc) print_summary(&s, dir);
+    lm_study_free(&s);
+    return rc;
+}
+
+int lm_cmd_study(int argc, char **argv)
+{
+    lm_cli c;
+    study_args a = {0};
+    lm_cli_init(&c, "lumosaic study", argc, argv);
+    int r = parse(&c, &a);
+    if (r != 1) return r;
+    static lm_study_cfg cfg; /* large (training paths): not on the stack */
+    lm_err e = {0};
+    if (lm_study_cfg_load(&cfg, a.config, &e)) return lm_cli_error(&c, "%s", e.msg);
+    const char *dir = a.output ? a.output : cfg.output[0] ? cfg.output : NULL;
+    if (!dir)
+        return lm_cli_error(&c, "no output folder: pass --output DIR or set \"output\" in %s",
+                            a.config);
+    if (a.dry_run) return print_plan(&cfg, dir);
+    if (!a.no_charts && !lm_charts_gnuplot_available()) {
+        fprintf(stderr, "lumosaic study: gnuplot not found on PATH (install gnuplot, or pass "
+                        "--no-charts)\n");
+        return 1;
+    }
+    if (a.threads > 0) omp_set_num_threads((int)a.threads);
+    /* As in `lumosaic train`: a fixed mmap threshold keeps big per-step buffers off the heap. */
+    mallopt(M_MMAP_THRESHOLD, 128 * 1024);
+    return run(&c, &a, &cfg, dir);
+}

@@ -1,0 +1,222 @@
+/* results.c — the summary files of a study (lm_study_write): results.json (the configuration
+ * summary, the held-out set and every per-preset record as written by study.c), results.csv
+ * (a row per model and noise level) and results.md (the tables and the chart links).
+ * Record fields used here: preset, params, macs_per_frame, seconds_per_frame, threads,
+ * eval.levels[k].{noise_percent, psnr, ssim, mae, sam}, rainbow.peak_error_mean_nm, train.*.
+ * What it is not: the run (study.c) or the charts (charts.c). */
+#include <errno.h>
+#include <jansson.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+#include "study/charts.h"
+#include "study/study.h"
+
+#define RPATH 1400
+
+static double num(const json_t *o, const char *key)
+{
+    json_t *v = json_object_get(o, key);
+    return json_is_number(v) ? json_number_value(v) : NAN;
+}
+
+static double level(const json_t *rec, int k, const char *key)
+{
+    return num(json_array_get(json_object_get(json_object_get(rec, "eval"), "levels"),
+                              (size_t)k), key);
+}
+
+static const char *str(const json_t *o, const char *key)
+{
+    const char *s = json_string_value(json_object_get(o, key));
+    return s ? s : "";
+}
+
+static json_t *summary_json(const lm_study_cfg *cfg, const lm_study *s)
+{
+    const lm_train_cfg *t = &cfg->train;
+    json_t *noise = json_array();
+    for (int k = 0; k < cfg->nnoise; k++)
+        json_array_append_new(noise, json_real(nearbyint(1e6 * cfg->noise[k]) / 1e4));
+    json_t *data = json_array();
+    for (int i = 0; i < t->ndata; i++) json_array_append_new(data, json_string(t->data[i]));
+    json_t *train = json_pack("{s:I, s:[i,i], s:i, s:i, s:f, s:f, s:s, s:[f,f], s:I, s:o}",
+                              "iterations", (json_int_t)t->iterations, "patch", t->patch_h,
+                              t->patch_w, "batch", t->batch, "accum_steps", t->accum_steps,
+                              "lr", (double)t->lr, "synth_fraction", (double)t->synth_fraction,
+                              "schedule", t->schedule, "noise", (double)t->noise_min,
+                              (double)t->noise_max, "seed", (json_int_t)t->seed, "data", data);
+    return json_pack("{s:i, s:s, s:o, s:o, s:O, s:[i,i], s:i, s:O}", "version", 1, "config",
+                     cfg->path, "training", train, "noise_percent", noise, "held_out",
+                     s->held_out, "frame", cfg->frame_h, cfg->frame_w, "timing_repeats",
+                     cfg->timing_repeats, "runs", s->runs);
+}
+
+static FILE *open_tmp(const char *dir, const char *name, char *tmp, char *dst, lm_err *err)
+{
+    snprintf(dst, RPATH, "%s/%s", dir, name);
+    snprintf(tmp, RPATH + 32, "%s.tmp.%d", dst, (int)getpid());
+    FILE *f = fopen(tmp, "w");
+    if (!f) lm_err_set(err, LM_ERR_IO, "%s: cannot write (%s)", tmp, strerror(errno));
+    return f;
+}
+
+static lm_status commit(FILE *f, const char *tmp, const char *dst, lm_err *err)
+{
+    if ((ferror(f) | fclose(f)) || rename(tmp, dst)) {
+        remove(tmp);
+        return lm_err_set(err, LM_ERR_IO, "%s: cannot write", dst);
+    }
+    return LM_OK;
+}
+
+static void write_csv(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
+{
+    fprintf(f, "preset,noise_percent,psnr,ssim,mae,sam,params,macs_per_frame,seconds_per_frame,"
+               "rainbow_peak_error_mean_nm,iterations\n");
+    for (size_t i = 0; i < json_array_size(runs); i++) {
+        const json_t *r = json_array_get(runs, i);
+        for (int k = 0; k < cfg->nnoise; k++)
+            fprintf(f, "%s,%g,%.6f,%.6f,%.8f,%.6f,%.0f,%.0f,%.6f,%.4f,%.0f\n", str(r, "preset"),
+                    100.0 * cfg->noise[k], level(r, k, "psnr"), level(r, k, "ssim"),
+                    level(r, k, "mae"), level(r, k, "sam"), num(r, "params"),
+                    num(r, "macs_per_frame"), num(r, "seconds_per_frame"),
+                    num(json_object_get(r, "rainbow"), "peak_error_mean_nm"),
+                    num(json_object_get(r, "train"), "iterations"));
+    }
+}
+
+/* "yes" on the Pareto front of PSNR at level k against seconds. */
+static void front(const json_t *runs, int k, int *on)
+{
+    int n = (int)json_array_size(runs);
+    double *t = calloc((size_t)n + 1, sizeof *t), *a = calloc((size_t)n + 1, sizeof *a);
+    for (int i = 0; t && a && i < n; i++) {
+        t[i] = num(json_array_get(runs, (size_t)i), "seconds_per_frame");
+        a[i] = level(json_array_get(runs, (size_t)i), k, "psnr");
+    }
+    if (t && a) lm_study_pareto(t, a, n, on);
+    else memset(on, 0, (size_t)n * sizeof *on);
+    free(t), free(a);
+}
+
+static void md_main_table(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
+{
+    int n = (int)json_array_size(runs), k0 = lm_study_noise_index(cfg, 0);
+    int k10 = lm_study_noise_index(cfg, 10);
+    int *on0 = calloc((size_t)n + 1, sizeof *on0), *on10 = calloc((size_t)n + 1, sizeof *on10);
+    if (on0 && on10) front(runs, k0, on0), front(runs, k10, on10);
+    fprintf(f, "| model | parameters | GMAC / frame | s / frame |");
+    for (int k = 0; k < cfg->nnoise; k++) fprintf(f, " PSNR %g %% |", 100.0 * cfg->noise[k]);
+    fprintf(f, " SSIM %g %% | SAM %g %% (deg) | rainbow peak error (nm) | Pareto |\n|---|---:|"
+               "---:|---:|", 100.0 * cfg->noise[k0], 100.0 * cfg->noise[k0]);
+    for (int k = 0; k < cfg->nnoise; k++) fprintf(f, "---:|");
+    fprintf(f, "---:|---:|---:|---|\n");
+    for (int i = 0; i < n; i++) {
+        const json_t *r = json_array_get(runs, (size_t)i);
+        fprintf(f, "| %s | %.0f | %.2f | %.3f |", str(r, "preset"), num(r, "params"),
+                num(r, "macs_per_frame") / 1e9, num(r, "seconds_per_frame"));
+        for (int k = 0; k < cfg->nnoise; k++) fprintf(f, " %.2f |", level(r, k, "psnr"));
+        const char *p = on0 && on10 && on0[i] ? (on10[i] ? "both" : "0 %")
+                      : on10 && on10[i] ? "10 %" : "";
+        fprintf(f, " %.4f | %.2f | %.2f | %s |\n", level(r, k0, "ssim"), level(r, k0, "sam"),
+                num(json_object_get(r, "rainbow"), "peak_error_mean_nm"), p);
+    }
+    free(on0), free(on10);
+}
+
+static void md_detail_table(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
+{
+    fprintf(f, "\n### Every noise level\n\n| model | noise %% | PSNR (dB) | SSIM | MAE | SAM (deg) |"
+               "\n|---|---:|---:|---:|---:|---:|\n");
+    for (size_t i = 0; i < json_array_size(runs); i++) {
+        const json_t *r = json_array_get(runs, i);
+        for (int k = 0; k < cfg->nnoise; k++)
+            fprintf(f, "| %s | %g | %.3f | %.4f | %.5f | %.3f |\n", str(r, "preset"),
+                    100.0 * cfg->noise[k], level(r, k, "psnr"), level(r, k, "ssim"),
+                    level(r, k, "mae"), level(r, k, "sam"));
+    }
+    fprintf(f, "\n### Training\n\n| model | iterations | seconds (last invocation) | first loss |"
+               " final loss | validation PSNR |\n|---|---:|---:|---:|---:|---:|\n");
+    for (size_t i = 0; i < json_array_size(runs); i++) {
+        const json_t *r = json_array_get(runs, i), *t = json_object_get(r, "train");
+        fprintf(f, "| %s | %.0f | %.1f | %.5f | %.5f | %.3f |\n", str(r, "preset"),
+                num(t, "iterations"), num(t, "seconds"), num(t, "first_loss"),
+                num(t, "final_loss"), num(json_object_get(t, "val"), "psnr"));
+    }
+}
+
+static void md_held_out(FILE *f, const lm_study_cfg *cfg, const json_t *h)
+{
+    const json_t *sc = json_object_get(h, "scenes");
+    if (!strcmp(str(h, "kind"), "procedural")) {
+        fprintf(f, "**Held-out set: %zu procedural scenes** (%d x %d, data/synth.h). The test "
+                   "split of the data is empty (every scene's name hashes into train or val), "
+                   "so the models are scored on procedural scenes whose seeds come from a "
+                   "stream of the study seed that training never draws from.\n\n",
+                json_array_size(sc), cfg->eval_h, cfg->eval_w);
+        return;
+    }
+    fprintf(f, "**Held-out set:** the %zu scene(s) of the test split:", json_array_size(sc));
+    for (size_t i = 0; i < json_array_size(sc); i++)
+        fprintf(f, "%s %s", i ? "," : "", json_string_value(json_array_get(sc, i)));
+    fprintf(f, ".\n\n");
+}
+
+static void write_md(FILE *f, const lm_study_cfg *cfg, const lm_study *s, const char *dir,
+                     int charts)
+{
+    const lm_train_cfg *t = &cfg->train;
+    const json_t *r0 = json_array_get(s->runs, 0);
+    fprintf(f, "# Speed against accuracy\n\nGenerated by `lumosaic study --config %s`. Every model "
+               "trained with the same budget: %ld iterations of %d x %d patches, batch %d x %d "
+               "accumulated, lr %g (%s), synthetic share %g, training noise k ~ U[%g, %g], "
+               "seed %llu.\n\n", cfg->path, t->iterations, t->patch_h, t->patch_w, t->batch,
+            t->accum_steps, (double)t->lr, t->schedule, (double)t->synth_fraction,
+            (double)t->noise_min, (double)t->noise_max, (unsigned long long)t->seed);
+    fprintf(f, "To regenerate: `lumosaic study --config %s --output %s` (it resumes: finished "
+               "presets are skipped; see `lumosaic study --help`).\n\n", cfg->path, dir);
+    md_held_out(f, cfg, s->held_out);
+    fprintf(f, "Seconds per frame: patch-wise inference (66 x 64 windows, stride 30 x 32) of a "
+               "%d x %d coded frame, the fastest of %d runs on %.0f thread(s). GMAC: multiply-adds "
+               "of the conv/linear layers of one window times the windows of a frame. Metrics: "
+               "means over the held-out scenes, 31 bands, noise in %% of the largest clean value. "
+               "Rainbow: mean error of the recovered peak wavelength (%d x %d scene, no noise).\n\n",
+            cfg->frame_w, cfg->frame_h, cfg->timing_repeats, num(r0, "threads"), cfg->rainbow,
+            cfg->rainbow);
+    md_main_table(f, cfg, s->runs);
+    md_detail_table(f, cfg, s->runs);
+    if (!charts) return;
+    fprintf(f, "\n## Charts\n\n");
+    static const char *const ch[][2] = {
+        {"accuracy_speed", "PSNR against seconds per frame, Pareto fronts"},
+        {"noise_psnr", "PSNR against noise"}, {"noise_ssim", "SSIM against noise"},
+        {"noise_sam", "SAM against noise"}, {"train_loss", "training loss"},
+        {"train_val_psnr", "validation PSNR during training"}};
+    char path[RPATH + 64];
+    for (size_t i = 0; i < sizeof ch / sizeof ch[0]; i++) {
+        snprintf(path, sizeof path, "%s/charts/%s.png", dir, ch[i][0]);
+        if (access(path, F_OK) == 0)
+            fprintf(f, "![%s](charts/%s.png) ([SVG](charts/%s.svg))\n\n", ch[i][1], ch[i][0],
+                    ch[i][0]);
+    }
+}
+
+lm_status lm_study_write(const lm_study_cfg *cfg, const lm_study *s, const char *dir,
+                         int charts, lm_err *err)
+{
+    char tmp[RPATH + 32], dst[RPATH];
+    json_t *j = summary_json(cfg, s);
+    FILE *f = j ? open_tmp(dir, "results.json", tmp, dst, err) : NULL;
+    if (!j) return lm_err_set(err, LM_ERR_NOMEM, "study: out of memory");
+    if (f && json_dumpf(j, f, JSON_INDENT(2) | JSON_REAL_PRECISION(9)) == 0) fputc('\n', f);
+    json_decref(j);
+    if (!f || commit(f, tmp, dst, err)) return err->status;
+    if (!(f = open_tmp(dir, "results.csv", tmp, dst, err))) return err->status;
+    write_csv(f, cfg, s->runs);
+    if (commit(f, tmp, dst, err)) return err->status;
+    if (!(f = open_tmp(dir, "results.md", tmp, dst, err))) return err->status;
+    write_md(f, cfg, s, dir, charts);
+    return commit(f, tmp, dst, err);
+}

@@ -1,0 +1,393 @@
+/* study.c — the study run (study.h): per preset train, evaluate on the held-out scenes, the
+ * rainbow test, time a frame and count parameters / multiply-adds; one JSON record per preset
+ * in <dir>/runs/<preset>/result.json, which also marks the preset as done (resume).
+ * What it is not: the config loader (config.c), the summary files (results.c), charts. */
+#include <errno.h>
+#include <jansson.h>
+#include <math.h>
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include "data/cube_io.h"
+#include "data/dataset.h"
+#include "data/synth.h"
+#include "models/profile.h"
+#include "study/study.h"
+
+/* The stream of the study seed that procedural held-out scene seeds come from. The dataset
+ * draws its samples from streams 0x5EED0000 + split of the same seed, so these seeds are
+ * independent of every training sample's. */
+#define STUDY_HELD_STREAM 0x57D9000000000001ull
+
+#define PATH_MAX_LEN 1200
+
+typedef struct held {
+    int procedural, n;
+    char (*name)[256];
+    char (*path)[1024];
+    uint64_t *seed;
+    lm_synth_palette pal;
+} held;
+
+static void held_free(held *h)
+{
+    free(h->name);
+    free(h->path);
+    free(h->seed);
+    memset(h, 0, sizeof *h);
+}
+
+static uint64_t fnv1a(const char *s)
+{
+    uint64_t h = 1469598103934665603ull;
+    for (; *s; s++) h = (h ^ (unsigned char)*s) * 1099511628211ull;
+    return h;
+}
+
+static lm_status load_system(const lm_study_cfg *cfg, lm_system *sys, lm_err *err)
+{
+    lm_status st = cfg->train.system[0] ? lm_system_load(cfg->train.system, sys, err)
+                                        : lm_system_default(sys, err);
+    if (st) lm_system_free(sys);
+    return st;
+}
+
+/* The data's scenes whose name hashes into the test split (every split list searched, so a
+ * borrowed scene is not counted as held out). */
+static lm_status list_test_scenes(const lm_study_cfg *cfg, held *h, lm_err *err)
+{
+    lm_system sys;
+    if (load_system(cfg, &sys, err)) return err->status;
+    const char *paths[LM_TRAIN_MAX_PATHS];
+    for (int i = 0; i < cfg->train.ndata; i++) paths[i] = cfg->train.data[i];
+    lm_dataset_cfg dc;
+    lm_dataset_default_cfg(&dc);
+    dc.paths = paths;
+    dc.npaths = cfg->train.ndata;
+    dc.sys = &sys;
+    dc.workers = 0;
+    dc.synth_fraction = 0.0f;
+    lm_dataset *d = lm_dataset_open(&dc, err);
+    lm_status st = d ? LM_OK : err->status;
+    int total = 0;
+    for (int k = 0; d && k < 3; k++) total += lm_dataset_num_scenes(d, (lm_data_split)k);
+    h->name = calloc((size_t)total + 1, sizeof *h->name);
+    h->path = calloc((size_t)total + 1, sizeof *h->path);
+    if (!st && (!h->name || !h->path)) st = lm_err_set(err, LM_ERR_NOMEM, "study: out of memory");
+    for (int k = 0; !st && k < 3; k++)
+        for (int i = 0; i < lm_dataset_num_scenes(d, (lm_data_split)k); i++) {
+            const char *nm = lm_dataset_scene_name(d, (lm_data_split)k, i);
+            const char *p = lm_dataset_scene_path(d, (lm_data_split)k, i);
+            int dup = 0;
+            for (int j = 0; j < h->n; j++) dup |= !strcmp(h->path[j], p);
+            if (dup || lm_dataset_split_of(nm) != LM_SPLIT_TEST) continue;
+            snprintf(h->name[h->n], sizeof h->name[0], "%s", nm);
+            snprintf(h->path[h->n++], sizeof h->path[0], "%s", p);
+        }
+    lm_dataset_close(d);
+    lm_system_free(&sys);
+    return st;
+}
+
+static lm_status held_open(const lm_study_cfg *cfg, held *h, json_t **desc, lm_err *err)
+{
+    memset(h, 0, sizeof *h);
+    if (list_test_scenes(cfg, h, err)) return err->status;
+    json_t *names = json_array();
+    if (h->n > 0) {
+        for (int i = 0; i < h->n; i++) json_array_append_new(names, json_string(h->name[i]));
+        *desc = json_pack("{s:s, s:o}", "kind", "test_split", "scenes", names);
+        return LM_OK;
+    }
+    h->procedural = 1;
+    h->n = cfg->eval_scenes;
+    h->seed = calloc((size_t)h->n, sizeof *h->seed);
+    if (!h->seed) return json_decref(names), lm_err_set(err, LM_ERR_NOMEM, "study: out of memory");
+    if (lm_synth_palette_load(&h->pal, err)) return json_decref(names), err->status;
+    lm_rng base, r;
+    lm_rng_seed(&base, cfg->train.seed);
+    r = lm_rng_split(&base, STUDY_HELD_STREAM);
+    char nm[64];
+    for (int i = 0; i < h->n; i++) {
+        h->seed[i] = lm_rng_u64(&r);
+        snprintf(nm, sizeof nm, "procedural_%016llx", (unsigned long long)h->seed[i]);
+        json_array_append_new(names, json_string(nm));
+    }
+    *desc = json_pack("{s:s, s:o, s:[i,i], s:s}", "kind", "procedural", "scenes", names, "size",
+                      cfg->eval_h, cfg->eval_w, "note",
+                      "the test split of the data is empty: procedural scenes (data/synth.h) "
+                      "with seeds from a stream of the study seed that training never draws");
+    return LM_OK;
+}
+
+static json_t *jnum(double v)
+{
+    return v == v && v - v == 0 ? json_real(v) : json_null();
+}
+
+static json_t *metrics_json(const lm_metrics *m, double noise_pct)
+{
+    json_t *o = json_object();
+    if (noise_pct >= 0) /* k is a float: 0.1f is 10.0000001 % */
+        json_object_set_new(o, "noise_percent", json_real(nearbyint(noise_pct * 1e4) / 1e4));
+    json_object_set_new(o, "psnr", jnum(m->psnr));
+    json_object_set_new(o, "ssim", jnum(m->ssim));
+    json_object_set_new(o, "mae", jnum(m->mae));
+    json_object_set_new(o, "sam", jnum(m->sam));
+    return o;
+}
+
+/* Mean metrics over the held-out scenes at every noise level. */
+static lm_status eval_held(lm_ctx *c, const lm_infer_model *im, const lm_study_cfg *cfg,
+                           const held *h, json_t *levels, lm_err *err)
+{
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    lm_rng base;
+    lm_rng_seed(&base, cfg->train.seed);
+    lm_metrics_acc acc[LM_EVAL_MAX_NOISE];
+    memset(acc, 0, sizeof acc);
+    lm_metrics m[LM_EVAL_MAX_NOISE];
+    for (int i = 0; i < h->n; i++) {
+        lm_cube cube;
+        lm_status st = h->procedural
+            ? lm_synth_scene(h->seed[i], cfg->eval_h, cfg->eval_w, &h->pal, &cube, err)
+            : lm_cube_read(h->path[i], &cube, err);
+        if (st) return st;
+        st = lm_eval_prepare(&cube, im->model->mosaic.ty, im->model->mosaic.tx, err);
+        lm_rng rs = lm_rng_split(&base, h->procedural ? h->seed[i] : fnv1a(h->name[i]));
+        if (!st) st = lm_eval_scene(c, im, &cube, cfg->noise, cfg->nnoise, &to, &rs, m, err);
+        lm_cube_free(&cube);
+        if (st) return st;
+        for (int k = 0; k < cfg->nnoise; k++) lm_metrics_acc_add(&acc[k], &m[k]);
+    }
+    for (int k = 0; k < cfg->nnoise; k++) {
+        lm_metrics mean = lm_metrics_acc_mean(&acc[k]);
+        json_array_append_new(levels, metrics_json(&mean, 100.0 * cfg->noise[k]));
+    }
+    return LM_OK;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Seconds of lm_tile_infer on a frame_h x frame_w coded frame (uniform random values: the cost
+ * does not depend on the content), each of timing_repeats runs; rec gets min, median, all. */
+static lm_status time_frame(lm_ctx *c, lm_model *m, const lm_study_cfg *cfg, json_t *rec,
+                            lm_err *err)
+{
+    size_t n = (size_t)cfg->frame_h * (size_t)cfg->frame_w;
+    float *frame = malloc(n * sizeof *frame);
+    double t[100];
+    if (!frame) return lm_err_set(err, LM_ERR_NOMEM, "study: out of memory (frame)");
+    lm_rng r;
+    lm_rng_seed(&r, 1);
+    lm_rng_fill_uniform(&r, frame, (long)n, 0.0f, 1.0f);
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    lm_status st = LM_OK;
+    json_t *runs = json_array();
+    for (int k = 0; !st && k < cfg->timing_repeats; k++) {
+        lm_cube cube;
+        double t0 = omp_get_wtime();
+        st = lm_tile_infer(c, m, frame, cfg->frame_h, cfg->frame_w, &to, &cube, err);
+        t[k] = omp_get_wtime() - t0;
+        if (!st) lm_cube_free(&cube);
+        json_array_append_new(runs, json_real(t[k]));
+    }
+    free(frame);
+    if (st) return json_decref(runs), st;
+    qsort(t, (size_t)cfg->timing_repeats, sizeof t[0], cmp_double);
+    int R = cfg->timing_repeats;
+    json_object_set_new(rec, "seconds_per_frame", json_real(t[0]));
+    json_object_set_new(rec, "seconds_per_frame_median",
+                        json_real(R % 2 ? t[R / 2] : 0.5 * (t[R / 2 - 1] + t[R / 2])));
+    json_object_set_new(rec, "timing_runs", runs);
+    return LM_OK;
+}
+
+/* Parameters, and multiply-adds of one inference window times the windows of a frame. */
+static lm_status count_costs(lm_model *m, const lm_study_cfg *cfg, json_t *rec, lm_err *err)
+{
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    if (lm_tile_check(&to, cfg->frame_h, cfg->frame_w, m->mosaic.ty, m->mosaic.tx, err))
+        return err->status;
+    lm_profile p;
+    lm_status st = lm_model_profile(m, 1, to.win_h, to.win_w, &p, err);
+    if (!st) {
+        long win = (long)lm_tile_positions(cfg->frame_h, to.win_h, to.stride_y, NULL, 0) *
+                   lm_tile_positions(cfg->frame_w, to.win_w, to.stride_x, NULL, 0);
+        json_object_set_new(rec, "params", json_integer(p.model_params));
+        json_object_set_new(rec, "trainable_params", json_integer(p.trainable_params));
+        json_int_t macs = (json_int_t)llround(p.total_macs); /* a count: exact in a double */
+        json_object_set_new(rec, "macs_per_window", json_integer(macs));
+        json_object_set_new(rec, "windows_per_frame", json_integer(win));
+        json_object_set_new(rec, "macs_per_frame", json_integer(macs * win));
+        json_object_set_new(rec, "frame", json_pack("[i,i]", cfg->frame_h, cfg->frame_w));
+    }
+    lm_profile_free(&p);
+    return st;
+}
+
+static json_t *rainbow_json(const lm_eval_rainbow *rb)
+{
+    json_t *o = metrics_json(&rb->m, -1);
+    json_object_set_new(o, "size", json_integer(rb->size));
+    json_object_set_new(o, "peak_error_mean_nm", jnum(rb->mean_err_nm));
+    json_object_set_new(o, "peak_error_max_nm", jnum(rb->max_err_nm));
+    json_object_set_new(o, "worst_row", json_integer(rb->worst_row));
+    return o;
+}
+
+/* Evaluation, rainbow, timing and costs of the trained run into rec. */
+static lm_status measure(const lm_study_cfg *cfg, const char *rundir, const held *h, int threads,
+                         json_t *rec, FILE *log, lm_err *err)
+{
+    lm_infer_model im;
+    if (lm_infer_model_load(rundir, NULL, &im, err)) return err->status;
+    lm_ctx c;
+    if (lm_ctx_init(&c, threads) != 0) {
+        lm_infer_model_free(&im);
+        return lm_err_set(err, LM_ERR_NOMEM, "study: out of memory (compute context)");
+    }
+    json_t *levels = json_array();
+    json_object_set_new(rec, "threads", json_integer(lm_nthreads(&c)));
+    double t0 = omp_get_wtime();
+    lm_status st = eval_held(&c, &im, cfg, h, levels, err);
+    json_object_set_new(rec, "eval", json_pack("{s:s, s:i, s:o}", "kind",
+                        h->procedural ? "procedural" : "test_split", "scenes", h->n,
+                        "levels", levels));
+    if (!st && cfg->rainbow > 0) {
+        lm_tile_opts to;
+        lm_tile_default_opts(&to);
+        lm_eval_rainbow rb;
+        st = lm_eval_rainbow_run(&c, &im, cfg->rainbow, &to, &rb, err);
+        if (!st) json_object_set_new(rec, "rainbow", rainbow_json(&rb));
+    }
+    if (!st) fprintf(log, "study: %s evaluated (%.1f s)\n", im.model->preset, omp_get_wtime() - t0);
+    if (!st) st = time_frame(&c, im.model, cfg, rec, err);
+    if (!st) st = count_costs(im.model, cfg, rec, err);
+    lm_ctx_free(&c);
+    lm_infer_model_free(&im);
+    return st;
+}
+
+static lm_status train_preset(const lm_study_cfg *cfg, const char *preset, const char *rundir,
+                              const lm_study_opts *o, json_t *rec, lm_err *err)
+{
+    lm_train_cfg tc = cfg->train;
+    snprintf(tc.model, sizeof tc.model, "%s", preset);
+    if (snprintf(tc.output, sizeof tc.output, "%s", rundir) >= (int)sizeof tc.output)
+        return lm_err_set(err, LM_ERR_ARG, "%s: path too long", rundir);
+    tc.threads = o->threads;
+    char ck[PATH_MAX_LEN + 32];
+    snprintf(ck, sizeof ck, "%s/model.safetensors", rundir);
+    int resume = access(ck, F_OK) == 0;
+    lm_train_opts to = {.resume = resume ? rundir : NULL, .progress = o->progress,
+                        .progress_out = o->log};
+    lm_train_result res;
+    fprintf(o->log, "study: %s: %s %ld iterations into %s\n", preset,
+            resume ? "continuing to" : "training for", tc.iterations, rundir);
+    if (lm_train_session(&tc, &to, &res, err)) return err->status;
+    json_t *t = json_pack("{s:I, s:f, s:b, s:o, s:o}", "iterations", (json_int_t)res.iterations_done,
+                          "seconds", res.seconds, "resumed", resume, "first_loss",
+                          jnum(res.first_loss), "final_loss", jnum(res.last_loss));
+    json_object_set_new(t, "val", res.validated ? metrics_json(&res.val, -1) : json_null());
+    json_object_set_new(rec, "train", t);
+    return LM_OK;
+}
+
+/* mkdir -p. */
+static int make_dirs(const char *path)
+{
+    char buf[PATH_MAX_LEN];
+    snprintf(buf, sizeof buf, "%s", path);
+    for (char *q = buf + 1; *q; q++)
+        if (*q == '/') {
+            *q = 0;
+            if (mkdir(buf, 0777) && errno != EEXIST) return -1;
+            *q = '/';
+        }
+    return mkdir(buf, 0777) && errno != EEXIST ? -1 : 0;
+}
+
+static lm_status write_json_atomic(json_t *j, const char *path, lm_err *err)
+{
+    char tmp[PATH_MAX_LEN + 32];
+    snprintf(tmp, sizeof tmp, "%s.tmp.%d", path, (int)getpid());
+    if (json_dump_file(j, tmp, JSON_INDENT(2) | JSON_REAL_PRECISION(9)) != 0 ||
+        rename(tmp, path) != 0) {
+        remove(tmp);
+        return lm_err_set(err, LM_ERR_IO, "%s: cannot write", path);
+    }
+    return LM_OK;
+}
+
+static lm_status run_preset(const lm_study_cfg *cfg, const char *dir, const char *preset,
+                            const held *h, const lm_study_opts *o, json_t **out, lm_err *err)
+{
+    char rundir[PATH_MAX_LEN], respath[PATH_MAX_LEN + 16];
+    snprintf(rundir, sizeof rundir, "%s/runs/%s", dir, preset);
+    snprintf(respath, sizeof respath, "%s/result.json", rundir);
+    if (access(respath, F_OK) == 0) {
+        json_error_t je;
+        *out = json_load_file(respath, 0, &je);
+        if (!json_is_object(*out) || !json_is_string(json_object_get(*out, "preset")))
+            return json_decref(*out), *out = NULL,
+                   lm_err_set(err, LM_ERR_FORMAT, "%s: not a study record (delete it to run "
+                              "%s again)", respath, preset);
+        fprintf(o->log, "study: %s: done before (%s), skipped\n", preset, respath);
+        return LM_OK;
+    }
+    char rel[128];
+    snprintf(rel, sizeof rel, "runs/%s", preset);
+    json_t *rec = json_pack("{s:s, s:s}", "preset", preset, "run", rel);
+    lm_status st = train_preset(cfg, preset, rundir, o, rec, err);
+    if (!st) st = measure(cfg, rundir, h, o->threads, rec, o->log, err);
+    if (!st) st = write_json_atomic(rec, respath, err);
+    if (st) json_decref(rec);
+    else *out = rec;
+    return st;
+}
+
+lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_opts *opts,
+                       lm_study *out, lm_err *err)
+{
+    memset(out, 0, sizeof *out);
+    lm_study_opts o = *opts;
+    if (!o.log) o.log = stderr;
+    char runs[PATH_MAX_LEN];
+    snprintf(runs, sizeof runs, "%s/runs", dir);
+    held h;
+    lm_status st = held_open(cfg, &h, &out->held_out, err); /* checks the data first */
+    if (!st && make_dirs(runs))
+        st = lm_err_set(err, LM_ERR_IO, "%s: cannot create (%s)", runs, strerror(errno));
+    if (!st && h.procedural)
+        fprintf(o.log, "study: the test split of the data is empty; evaluating on %d procedural "
+                "scenes (%d x %d) with seeds disjoint from training's\n", h.n, cfg->eval_h,
+                cfg->eval_w);
+    else if (!st)
+        fprintf(o.log, "study: evaluating on the %d scene(s) of the test split\n", h.n);
+    out->runs = json_array();
+    for (int i = 0; !st && i < cfg->npresets; i++) {
+        json_t *rec = NULL;
+        st = run_preset(cfg, dir, cfg->presets[i], &h, &o, &rec, err);
+        if (!st) json_array_append_new(out->runs, rec);
+    }
+    held_free(&h);
+    if (st) lm_study_free(out);
+    return st;
+}
+
+void lm_study_free(lm_study *s)
+{
+    json_decref(s->held_out);
+    json_decref(s->runs);
+    s->held_out = s->runs = NULL;
+}

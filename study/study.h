@@ -1,0 +1,79 @@
+/* study.h — the speed-against-accuracy study behind `lumosaic study` (issue 8).
+ * What it is: a study configuration (JSON: presets, one shared training budget, evaluation
+ * noise levels and scenes), and the run: for each preset train it (train/train.h) into
+ * <dir>/runs/<preset>/, evaluate it on the held-out scenes at every noise level
+ * (infer/eval.h), run the rainbow test, time a 640 x 480 frame (infer/tile.h, min of a few
+ * repeats) and count parameters and multiply-adds (models/profile.h). Each preset's outcome is
+ * one JSON object, written to <dir>/runs/<preset>/result.json; a preset whose result.json
+ * exists is not run again (resume), and a preset with a checkpoint but no result.json
+ * continues its training from the checkpoint.
+ * Held-out scenes: the scenes of the configured data whose name hashes into the test split
+ * (data/dataset.h); when there is none, `eval_scenes` procedural scenes (data/synth.h) whose
+ * seeds come from a stream of the study seed that the training sampler never uses.
+ * What it is not: the summary files and table (study/results.c, lm_study_write) or the charts
+ * (study/charts.h). */
+#ifndef LM_STUDY_H
+#define LM_STUDY_H
+#include <stdio.h>
+#include "infer/eval.h"
+#include "train/train.h"
+
+#define LM_STUDY_CFG_VERSION 1
+#define LM_STUDY_MAX_PRESETS 32
+
+struct json_t;
+
+typedef struct lm_study_cfg {
+    int version;
+    char presets[LM_STUDY_MAX_PRESETS][64];
+    int npresets;
+    lm_train_cfg train;              /* shared by every preset (model and output set per run) */
+    float noise[LM_EVAL_MAX_NOISE];  /* evaluation noise levels k (fractions; JSON in %) */
+    int nnoise;
+    int eval_scenes;                 /* procedural held-out scenes when the test split is empty */
+    int eval_h, eval_w;              /* their size */
+    int rainbow;                     /* rainbow scene size (0 = skip) */
+    int frame_h, frame_w;            /* timed frame (480 x 640) */
+    int timing_repeats;              /* timed runs per model (min and median reported) */
+    char output[LM_TRAIN_PATH_LEN];  /* default output folder ("" = none given) */
+    char path[LM_TRAIN_PATH_LEN];    /* the config file */
+} lm_study_cfg;
+
+/* Defaults: no presets, lm_train_cfg_default with 2000 iterations, noise 0,5,10,15,20 %,
+ * 8 procedural scenes of 132 x 128, rainbow 256, frame 480 x 640, 3 timing repeats. */
+void lm_study_cfg_default(lm_study_cfg *cfg);
+/* Load a study config. Fields (all optional but "presets" and "data"):
+ *   version 1; presets [names]; data [paths, relative to the config's folder]; system;
+ *   iterations; seed; patch "HxW"; synth_fraction; train {any other lm_train_cfg field
+ *   except model, data, output}; noise [percent levels]; eval_scenes; eval_size "HxW";
+ *   rainbow; frame "HxW"; timing_repeats; output.
+ * Errors (LM_ERR_IO / LM_ERR_FORMAT / LM_ERR_ARG) are one line naming the file and the field. */
+lm_status lm_study_cfg_load(lm_study_cfg *cfg, const char *path, lm_err *err);
+
+typedef struct lm_study_opts {
+    int threads;     /* compute threads for training, evaluation and timing (0 = all cores) */
+    int progress;    /* training progress on `log` */
+    FILE *log;       /* one line per step of the study (NULL = stderr) */
+} lm_study_opts;
+
+/* The outcome: a description of the held-out set and one record per preset (config order). */
+typedef struct lm_study {
+    struct json_t *held_out;  /* {"kind": "test_split" | "procedural", "scenes": [...], ...} */
+    struct json_t *runs;      /* array of per-preset objects (see results.c for the fields) */
+} lm_study;
+
+/* Run (or resume) the study into dir (created if missing). On error the records of the
+ * presets already finished stay on disk; *out is freed. */
+lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_opts *o,
+                       lm_study *out, lm_err *err);
+void lm_study_free(lm_study *s);
+
+/* <dir>/results.json, results.csv and results.md (atomic: temp file + rename). charts: the
+ * chart files exist in <dir>/charts/ (results.md links them). */
+lm_status lm_study_write(const lm_study_cfg *cfg, const lm_study *s, const char *dir,
+                         int charts, lm_err *err);
+
+/* Index of the noise level closest to pct percent. */
+int lm_study_noise_index(const lm_study_cfg *cfg, double pct);
+
+#endif
