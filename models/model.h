@@ -15,6 +15,8 @@ struct lm_model {
     lm_params params;
     lm_mosaic mosaic;
     int out_channels;
+    int in_channels;               /* channels of the input tensor: 1 = raw coded mosaic
+                                    * (default); 3 = RGB image (MST++ baseline) */
     lm_tensor *(*forward)(lm_ctx *c, lm_model *m, lm_tensor *raw);
     void (*init)(lm_model *m, lm_rng *r);   /* default initialisation, declaration order */
     void (*free_impl)(lm_model *m);
@@ -39,5 +41,15 @@ lm_status lm_mcan_build(lm_model *m, int feats, lm_err *err);
 lm_status lm_srnet_build(lm_model *m, int dim, lm_err *err);
 /* Linear baseline: demosaic + 1x1 conv 12 -> 33. */
 lm_status lm_linear_build(lm_model *m, lm_err *err);
+/* MST++ (models.md §5), `stages` MSTs; raw_input 0: B x 3 x H x W RGB input (in_channels 3),
+ * 1: the raw coded frame demosaiced to the mosaic's channels. Output B x 31 x H x W. */
+lm_status lm_mst_build(lm_model *m, int stages, int raw_input, lm_err *err);
+/* One whole frame without gradients (MST++'s attention is global: no windows), block by
+ * block in scopes so memory stays a few full-resolution feature maps: in = in_channels x H x W
+ * (planar, host), out = out_channels x H x W. Own ctx with nthreads (0 = all cores). */
+lm_status lm_mst_reconstruct(lm_model *m, const float *in, int H, int W, float *out,
+                             int nthreads, lm_err *err);
+/* Real-time: demosaic + raw, two 3x3 convs at `width`, 1x1 head (models/rt.c). */
+lm_status lm_rt_build(lm_model *m, int width, lm_err *err);
 
 #endif

@@ -2,6 +2,7 @@
  * model, dataset, then the loop (train.c). Also the dataset adapter of lm_train_source.
  * What it is not: option parsing (cli/cmd_train.c) or the loop itself. */
 #include "train/train.h"
+#include "data/rgbcam.h"
 #include "data/dataset.h"
 #include "data/spectra.h"
 #include "train/mosaic_system.h"
@@ -65,7 +66,14 @@ lm_status lm_train_session(const lm_train_cfg *cfg, const lm_train_opts *opts_in
     if (!st && !(m = lm_model_create(cfg->model, &mo, cfg->seed, err))) st = err->status;
     if (!st && !(d = open_data(cfg, &sys, err))) st = err->status;
     if (!st && opts.progress) lm_dataset_describe(d, opts.progress_out ? opts.progress_out : stderr);
-    if (!st) {
+    if (!st && m->in_channels == 3) {
+        /* the passive RGB baseline (MST++): same samples, seen through an RGB camera */
+        lm_train_source src;
+        st = lm_train_source_rgb_open(&src, d, NULL, LM_RGBCAM_D65, NULL, cfg->patch_h,
+                                      cfg->patch_w, cfg->seed, err);
+        if (!st) st = lm_train_run(cfg, m, &src, &opts, res, err);
+        if (src.user) lm_train_source_rgb_close(&src);
+    } else if (!st) {
         lm_train_source src = lm_train_source_dataset(d);
         st = lm_train_run(cfg, m, &src, &opts, res, err);
     }

@@ -1,6 +1,8 @@
 /* train.c — the training loop: batches from an lm_train_source, forward, L1 on all 33
- * channels scaled by 1/accum_steps, backward, gradient accumulation, Adam, NaN/inf guard,
- * validation metrics, CSV log, progress on stderr, checkpoints and exact resume (train.h).
+ * channels (models with 31 outputs, e.g. MST++: on target channels 1..31, 400..700 nm; models
+ * with in_channels != 1 take B x in_channels x H x W batches) scaled by 1/accum_steps,
+ * backward, gradient accumulation, Adam, NaN/inf guard, validation metrics, CSV log,
+ * progress on stderr, checkpoints and exact resume (train.h).
  * What it is not: the config (config.c), checkpoint files (checkpoint.c), or the data
  * pipeline (data/dataset.h). */
 #include "train/train.h"
@@ -80,8 +82,9 @@ static lm_status micro_step(loop *L, long index, double *loss_sum, lm_err *err)
     lm_ctx *c = &L->ctx;
     lm_ctx_reset(c);
     params_in(L);
-    lm_tensor *raw = lm_tensor_from(c, 4, (int[]){B, 1, H, W}, L->raw);
+    lm_tensor *raw = lm_tensor_from(c, 4, (int[]){B, L->model->in_channels, H, W}, L->raw);
     lm_tensor *tgt = lm_tensor_from(c, 4, (int[]){B, LM_MODEL_OUT_CHANNELS, H, W}, L->target);
+    if (L->model->out_channels == 31) tgt = lm_slice(c, tgt, 1, 1, 31); /* 400..700 nm */
     lm_tensor *loss = lm_l1_loss(c, lm_model_forward(c, L->model, raw), tgt);
     float lv = NAN;
     if (loss) lm_tensor_read(c, loss, &lv);
@@ -138,12 +141,26 @@ static lm_status iteration(loop *L, long it, double *loss, lm_err *err)
 }
 
 /* ---- validation ----------------------------------------------------------------------- */
+/* In place: b items of 31 planes (400..700 nm) -> the 33-channel layout (channels 1..31; the
+ * edge channels 0 and 32, which the metrics do not read, are set to 0). Back to front, so no
+ * plane is overwritten before it is moved. */
+static void widen31(float *p, int b, int plane)
+{
+    for (int j = b - 1; j >= 0; j--) {
+        for (int k = 30; k >= 0; k--)
+            memmove(p + ((size_t)j * 33 + 1 + k) * plane, p + ((size_t)j * 31 + k) * plane,
+                    (size_t)plane * sizeof(float));
+        memset(p + (size_t)j * 33 * plane, 0, (size_t)plane * sizeof(float));
+        memset(p + ((size_t)j * 33 + 32) * plane, 0, (size_t)plane * sizeof(float));
+    }
+}
+
 static lm_status validate(loop *L, lm_metrics *out, lm_err *err)
 {
     const lm_train_cfg *cfg = L->cfg;
     int n = L->src->eval_count ? L->src->eval_count(L->src->user) : 0;
     int H = cfg->patch_h, W = cfg->patch_w;
-    size_t rn = (size_t)H * W, tn = (size_t)LM_MODEL_OUT_CHANNELS * H * W;
+    size_t rn = (size_t)L->model->in_channels * H * W, tn = (size_t)LM_MODEL_OUT_CHANNELS * H * W;
     lm_metrics_acc acc = {0};
     lm_ctx *c = &L->ctx;
     int old = lm_ctx_set_grad(c, 0);
@@ -155,10 +172,11 @@ static lm_status validate(loop *L, lm_metrics *out, lm_err *err)
         if (st) break;
         lm_ctx_reset(c);
         params_in(L);
-        lm_tensor *raw = lm_tensor_from(c, 4, (int[]){b, 1, H, W}, L->raw);
+        lm_tensor *raw = lm_tensor_from(c, 4, (int[]){b, L->model->in_channels, H, W}, L->raw);
         lm_tensor *pred = lm_model_forward(c, L->model, raw);
         int bad = !pred || lm_tensor_read(c, pred, L->pred);
         params_back(L);
+        if (!bad && L->model->out_channels == 31) widen31(L->pred, b, H * W);
         if (bad) {
             st = lm_err_set(err, lm_ctx_status(c), "validation: %s", lm_ctx_message(c));
             lm_ctx_clear_error(c);
@@ -282,7 +300,7 @@ static lm_status setup(loop *L, lm_err *err)
         return lm_err_set(err, LM_ERR_NOMEM, "train: cannot create the compute context");
     if (open_device(L, err)) return err->status;
     size_t bn = (size_t)cfg->batch * cfg->patch_h * cfg->patch_w;
-    L->raw = malloc(bn * sizeof(float));
+    L->raw = malloc(bn * L->model->in_channels * sizeof(float));
     L->target = malloc(bn * LM_MODEL_OUT_CHANNELS * sizeof(float));
     L->pred = malloc(bn * LM_MODEL_OUT_CHANNELS * sizeof(float));
     if (!L->raw || !L->target || !L->pred)
@@ -377,7 +395,8 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
     if (!res) res = &dummy;
     memset(res, 0, sizeof *res);
     if (lm_train_cfg_validate(cfg, err)) return err->status;
-    if (cfg->patch_h % model->mosaic.ty || cfg->patch_w % model->mosaic.tx)
+    if (model->in_channels == 1 &&
+        (cfg->patch_h % model->mosaic.ty || cfg->patch_w % model->mosaic.tx))
         return lm_err_set(err, LM_ERR_ARG, "config: field 'patch': %dx%d is not a multiple of the "
                           "%d x %d tile", cfg->patch_h, cfg->patch_w, model->mosaic.ty,
                           model->mosaic.tx);

@@ -25,6 +25,7 @@
 #include "models/model.h"
 #include "train/adam.h"
 #include "train/metrics.h"
+#include "data/forward.h"
 
 #define LM_TRAIN_CFG_VERSION 1
 #define LM_TRAIN_MAX_PATHS 64
@@ -82,7 +83,8 @@ void lm_train_cfg_adam(const lm_train_cfg *cfg, lm_adam_cfg *out);
 
 /* ---- data for the loop ------------------------------------------------------------------ */
 /* Where batches come from: data/dataset.h through lm_train_source_dataset, or any other
- * deterministic generator (tests use fixed in-memory batches). Buffers: raw B x 1 x ph x pw,
+ * deterministic generator (tests use fixed in-memory batches). Buffers: raw B x 1 x ph x pw
+ * (B x in_channels x ph x pw for a model whose in_channels is not 1, e.g. RGB for MST++),
  * target B x 33 x ph x pw, owned by the caller. batch() must be a pure function of index. */
 typedef struct lm_train_source {
     void *user;
@@ -94,6 +96,16 @@ typedef struct lm_train_source {
 typedef struct lm_dataset lm_dataset;
 /* Training batches and the validation split's fixed samples of a dataset (data/dataset.h). */
 lm_train_source lm_train_source_dataset(lm_dataset *d);
+/* The passive RGB baseline (train/source_rgb.c): the dataset's own samples (scenes, patches,
+ * flips, synthetic share, noise level k per sample) with raw = the RGB camera image
+ * B x 3 x ph x pw of each sample's 400..700 nm bands (data/rgbcam.h: camera_csv NULL = the
+ * bundled Nikon D5100, illum an lm_rgbcam_illum); target unchanged (B x 33). noise: extra
+ * sensor options (Poisson, clip, bits; its gauss_k is replaced by the sample's k), or NULL.
+ * Close with lm_train_source_rgb_close. */
+lm_status lm_train_source_rgb_open(lm_train_source *src, lm_dataset *d, const char *camera_csv,
+                                   int illum, const lm_noise_opts *noise, int patch_h,
+                                   int patch_w, uint64_t seed, lm_err *err);
+void lm_train_source_rgb_close(lm_train_source *src);
 
 /* ---- the loop --------------------------------------------------------------------------- */
 typedef struct lm_train_opts {

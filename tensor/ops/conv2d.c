@@ -105,6 +105,7 @@ static int conv2d_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     float *y = t[2]->data;
     if (conv_path == LM_CONV_PATH_SIMPLE) return simple_run(c, g, 0, x, w, bias, NULL, y);
     if (depthwise(g)) return lm_conv2d_dw_fwd(c, g, x, w, bias, y);
+    if (lm_conv2d_direct_applies(g)) return lm_conv2d_direct_fwd(c, g, x, w, bias, y);
     return lm_conv2d_tiled_fwd(c, g, x, w, bias, y);
 }
 

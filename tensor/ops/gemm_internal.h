@@ -57,6 +57,13 @@ int lm_conv2d_dw_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const 
 int lm_conv2d_dw_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
                        float *dw);
 
+/* Direct forward path (conv2d_direct.c): stride 1, dilation 1, one group, few output
+ * channels. applies() says whether g qualifies; fwd writes y = conv(x, w) + bias. */
+#define LM_CONV_DIRECT_MAX_COUT 48
+int lm_conv2d_direct_applies(const lm_conv_geom *g);
+int lm_conv2d_direct_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
+                         const float *bias, float *y);
+
 /* Range of output columns ox in [*lo, *hi) whose input column ox*s - p + j*d lies in [0, n). */
 static inline void lm_conv_valid_range(int n_out, int n_in, int s, int p, int off, int *lo,
                                        int *hi)
