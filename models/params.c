@@ -2,6 +2,11 @@
 #include "models/params.h"
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
+
+/* Gradient blocks of at least this many bytes are anonymous mappings (zero-filled by the
+ * kernel, committed page by page when first written). */
+#define GRAD_MAP_MIN ((size_t)1 << 20)
 
 void lm_params_init(lm_params *p) { memset(p, 0, sizeof *p); }
 
@@ -10,7 +15,8 @@ void lm_params_free(lm_params *p)
     for (int i = 0; i < p->n; i++) free(p->items[i]);
     free(p->items);
     free(p->data);
-    free(p->grad);
+    if (p->grad_mapped) munmap(p->grad, p->grad_mapped);
+    else free(p->grad);
     memset(p, 0, sizeof *p);
 }
 
@@ -73,12 +79,23 @@ lm_status lm_params_finalize(lm_params *p, lm_err *err)
     if (p->finalized) return LM_OK;
     size_t bytes = (p->total ? p->total : 16) * sizeof(float);
     void *d = NULL, *g = NULL;
-    if (posix_memalign(&d, 64, bytes) || posix_memalign(&g, 64, bytes)) {
-        free(d);
+    size_t mapped = 0;
+    if (bytes >= GRAD_MAP_MIN) {
+        g = mmap(NULL, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+        if (g == MAP_FAILED) g = NULL;
+        else mapped = bytes;
+    } else if (!posix_memalign(&g, 64, bytes)) {
+        memset(g, 0, bytes);
+    } else {
+        g = NULL;
+    }
+    if (!g || posix_memalign(&d, 64, bytes)) {
+        if (mapped) munmap(g, mapped);
+        else free(g);
         return lm_err_set(err, LM_ERR_NOMEM, "out of memory for %zu parameters", p->total);
     }
     memset(d, 0, bytes);
-    memset(g, 0, bytes);
+    p->grad_mapped = mapped;
     p->data = d;
     p->grad = g;
     for (int i = 0; i < p->n; i++) {

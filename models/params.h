@@ -22,6 +22,9 @@ typedef struct lm_params {
     int n, cap;
     size_t total;                  /* floats over all parameters */
     float *data, *grad;            /* contiguous blocks (after finalize) */
+    size_t grad_mapped;            /* bytes when grad is an anonymous mapping (else 0): its
+                                    * zero pages take no memory until a gradient is written, so
+                                    * inference pays nothing for it */
     int finalized;
 } lm_params;
 
