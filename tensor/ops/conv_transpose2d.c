@@ -13,7 +13,7 @@
  * What it is not: conv2d (tensor/ops/conv2d.c), nor an output-size-inferring layer: the
  * caller passes output_padding explicitly. */
 #include "tensor/ops.h"
-#include <cblas.h>
+#include "tensor/ops/gemm_internal.h"
 #include <omp.h>
 #include <string.h>
 
@@ -112,7 +112,7 @@ static int convt_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
             const float *xg = x + ((long)b * p->Cin + (long)g * Cig) * HW;
             const float *wg = w + (long)g * Cig * M;
             if (n1 > n0)
-                cblas_sgemm(CblasRowMajor, CblasTrans, CblasNoTrans, M, (int)(n1 - n0), Cig, 1.0f,
+                lm_sgemm_st(1, 0, M, (int)(n1 - n0), Cig, 1.0f,
                             wg, M, xg + n0, (int)HW, 0.0f, col + n0, (int)HW);
 #pragma omp barrier
 #pragma omp for schedule(static)
@@ -153,7 +153,7 @@ static int convt_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p
                             col + (long)co * kk * HW);
             float *dxg = dx + ((long)b * p->Cin + (long)g * Cig) * HW;
             if (n1 > n0)
-                cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, Cig, (int)(n1 - n0), M,
+                lm_sgemm_st(0, 0, Cig, (int)(n1 - n0), M,
                             1.0f, w + (long)g * Cig * M, M, col + n0, (int)HW, 1.0f, dxg + n0,
                             (int)HW);
 #pragma omp barrier
@@ -188,7 +188,7 @@ static int convt_bwd_w_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p
                             col + (long)co * kk * HW);
             const float *xg = x + ((long)b * p->Cin + (long)g * Cig) * HW;
             if (m1 > m0)
-                cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, Cig, (int)(m1 - m0),
+                lm_sgemm_st(0, 1, Cig, (int)(m1 - m0),
                             (int)HW, 1.0f, xg, (int)HW, col + m0 * HW, (int)HW, 1.0f,
                             dw + (long)g * Cig * M + m0, M);
 #pragma omp barrier

@@ -17,6 +17,20 @@
 void lm_gemm_mt(lm_ctx *c, int ta, int tb, int M, int N, int K, float alpha, const float *A,
                 int lda, const float *B, int ldb, float beta, float *C, int ldc);
 
+/* Single-threaded row-major SGEMM with CBLAS semantics (sgemm_avx512.c): C = alpha op(A)
+ * op(B) + beta C, op(A) M x K, op(B) K x N; beta == 0 never reads C; K == 0 or alpha == 0
+ * only scales C. An AVX-512 kernel when the CPU has one, else OpenBLAS. Deterministic: the
+ * K order of each element is fixed. Every GEMM of the CPU ops goes through here. */
+void lm_sgemm_st(int ta, int tb, int M, int N, int K, float alpha, const float *A, int lda,
+                 const float *B, int ldb, float beta, float *C, int ldc);
+/* Which implementation lm_sgemm_st uses: the AVX-512 kernel by default when the CPU supports
+ * it, OpenBLAS when the environment has LM_SGEMM=blas (read once) or the CPU lacks AVX-512. */
+enum { LM_SGEMM_BLAS = 0, LM_SGEMM_AVX512 = 1 };
+int lm_sgemm_impl(void);
+/* Force an implementation (AVX512 falls back to BLAS on CPUs without it; -1 restores the
+ * default) for later calls, process-wide (tests, benchmarks). Returns the previous one. */
+int lm_sgemm_set_impl(int impl);
+
 /* `batch` products C_i = alpha op(A_i) op(B_i) + beta C_i with A_i = A + i*sa etc.
  * sa or sb may be 0 (a matrix shared by the batch). sc == 0 means every product accumulates
  * into the same C (a sum over the batch, in batch order); beta applies once, before. */

@@ -1,11 +1,10 @@
 /* gemm_parallel.c — single-precision GEMM split over the ctx's OpenMP threads.
- * What it is: OpenBLAS runs single-threaded (the ctx sets it), so a large product is cut
- * into fixed column (or row) blocks of C, one per thread, each computed by one sgemm call;
+ * What it is: a large product is cut into fixed column (or row) blocks of C, one per
+ * thread, each computed by one single-threaded lm_sgemm_st call (sgemm_avx512.c);
  * batches of independent products are spread over threads instead. Every element of C is
  * computed by exactly one call, so results depend only on the thread count.
  * What it is not: an op (see matmul.c, conv2d.c); no shape checks. */
 #include "tensor/ops/gemm_internal.h"
-#include <cblas.h>
 #include <omp.h>
 
 /* Below this many multiply-adds a product runs on one thread. */
@@ -14,17 +13,7 @@
 static void sgemm1(int ta, int tb, int M, int N, int K, float alpha, const float *A, int lda,
                    const float *B, int ldb, float beta, float *C, int ldc)
 {
-    if (M <= 0 || N <= 0) return;
-    if (K <= 0) { /* CBLAS leaves C unscaled for K == 0 in some builds: do it here */
-        for (int i = 0; i < M; i++)
-            for (int j = 0; j < N; j++) {
-                float *p = C + (long)i * ldc + j;
-                *p = beta == 0.0f ? 0.0f : beta * *p;
-            }
-        return;
-    }
-    cblas_sgemm(CblasRowMajor, ta ? CblasTrans : CblasNoTrans, tb ? CblasTrans : CblasNoTrans, M,
-                N, K, alpha, A, lda, B, ldb, beta, C, ldc);
+    lm_sgemm_st(ta, tb, M, N, K, alpha, A, lda, B, ldb, beta, C, ldc);
 }
 
 /* Block t of nparts over [0, n): multiples of `align` except the last. */
