@@ -2,14 +2,18 @@
  * rainbow scene (§7).
  * What it is: list the scenes of the given paths (data/dataset.h), keep the chosen split (by the
  * scene-name hash; `all` keeps every scene), per scene crop to the tile and normalise by its own
- * maximum, simulate the coded frame at each noise level (Gaussian, k % of the largest clean
- * value, seeded per scene name and level), reconstruct (infer/tile.h) and score PSNR / SSIM /
- * MAE / SAM on the 31 bands (infer/eval.h); with --motion, per scene and speed a 3-frame coded
- * video of the scene translating at that speed, its middle frame reconstructed with and without
- * temporal alignment (lm_eval_motion_run); then the rainbow peak-wavelength test. Prints tables
+ * maximum, simulate the model's sensor frame at each noise level (Gaussian, k % of the largest
+ * clean value, seeded per scene name and level): the coded frame, or for the passive RGB
+ * baseline (MST++, in_channels 3) the RGB camera image; reconstruct (patch-wise, infer/tile.h,
+ * or whole-frame for MST++) and score PSNR / SSIM / MAE / SAM on the 31 bands (infer/eval.h);
+ * with --motion, per scene and speed a 3-frame coded video of the scene translating at that
+ * speed, its middle frame reconstructed with and without temporal alignment (for RGB models:
+ * one motion-blurred camera frame, aligned = unaligned; lm_eval_motion_run); then the rainbow
+ * peak-wavelength test. Prints tables
  * (rows: noise levels / speeds, means over scenes) and writes eval.json + eval.csv (+
  * eval_motion.csv with --motion) into --output atomically (a staging folder renamed into place).
- * --device opencl runs the network on an OpenCL device (weights uploaded once, lm_tile_device).
+ * --device opencl runs the network on an OpenCL device (weights uploaded once, lm_tile_device;
+ * MST++ models run on the CPU only).
  * What it is not: training-time validation (train/), or a benchmark of speed. */
 #include <omp.h>
 #include <stdio.h>
@@ -30,6 +34,8 @@ static void help(void)
            "Score a trained model (system.md §10): each scene is cropped to the mosaic tile,\n"
            "divided by its own maximum, simulated at each noise level and reconstructed\n"
            "patch-wise; PSNR (peak 1), SSIM, MAE and SAM (degrees) on the 31 bands 400-700 nm.\n"
+           "RGB models (the MST++ baseline) see the scene through an RGB camera (Nikon D5100,\n"
+           "D65, white balanced) instead and reconstruct the whole frame at once.\n"
            "Then the rainbow scene: per row, the recovered peak wavelength (parabolic fit\n"
            "around the largest band of the row's mean spectrum) against the true one.\n\n"
            "  --model RUN      a training run folder or a .safetensors written by 'lumosaic train'\n"
@@ -49,9 +55,12 @@ static void help(void)
            "                   each a 3-frame noise-free coded video of the scene translating\n"
            "                   along (0.8, 0.6); the middle frame is reconstructed with and\n"
            "                   without temporal alignment and scored against the scene at its\n"
-           "                   lime instant (sub-images must be >= 24 x 24). Default: off\n"
+           "                   lime instant (sub-images must be >= 24 x 24). RGB models: one\n"
+           "                   camera frame blurred over the exposure, nothing to align\n"
+           "                   (aligned = unaligned). Default: off\n"
            "  --device D       where the network runs: cpu or opencl (default: env LM_DEVICE,\n"
-           "                   else cpu); the weights are copied to the device once\n"
+           "                   else cpu); the weights are copied to the device once;\n"
+           "                   MST++ models run on the CPU only\n"
            "  --help           this text\n", LM_EVAL_MAX_NOISE, LM_EVAL_MAX_MOTION);
 }
 
@@ -468,6 +477,9 @@ static int run(eval_run *r)
         return lm_cli_error(r->c, "out of memory (compute context)"), 1;
     r->have_ctx = 1;
     if (lm_tile_device_open(&r->dev, r->o->device, r->im.model, &r->ctx, &e)) return fail(r->c, &e);
+    if (r->dev.backend->device != LM_DEVICE_CPU && !strcmp(r->im.model->family, "mst"))
+        return lm_cli_error(r->c, "--device %s: MST++ models (%s) run on the CPU only",
+                            lm_tile_device_name(&r->dev), r->im.model->preset), 2;
     if (r->dev.backend->device != LM_DEVICE_CPU)
         fprintf(stderr, "device: %s\n", lm_tile_device_name(&r->dev));
     lm_tile_opts to;

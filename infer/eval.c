@@ -7,8 +7,90 @@
 #include "data/forward.h"
 #include "data/spectra.h"
 #include "data/synth.h"
+#include "data/rgbcam.h"
 #include "data/video.h"
 #include "infer/align.h"
+#include "infer/whole.h"
+
+static int is_rgb(const lm_infer_model *im) { return im->model->in_channels == 3; }
+static int is_mst(const lm_infer_model *im) { return !strcmp(im->model->family, "mst"); }
+
+/* lm_eval_simulate with an explicit thread count and a mutable rng (advanced). */
+static lm_status simulate(const lm_infer_model *im, const lm_cube *truth,
+                          const lm_noise_opts *noise, lm_rng *rng, int nthreads, float *frame,
+                          lm_err *err)
+{
+    if (truth->bands != 31)
+        return lm_err_set(err, LM_ERR_SHAPE, "eval: the cube needs 31 bands at 400..700 nm "
+                          "(has %d bands)", truth->bands);
+    if (is_rgb(im)) {
+        lm_rgbcam cam;
+        if (lm_rgbcam_load(&cam, NULL, LM_RGBCAM_D65, err)) return err->status;
+        lm_noise_opts none;
+        memset(&none, 0, sizeof none);
+        return lm_rgbcam_simulate(&cam, truth->data, truth->height, truth->width,
+                                  noise ? noise : &none, rng, frame, nthreads, err);
+    }
+    if (im->model->in_channels != 1)
+        return lm_err_set(err, LM_ERR_ARG, "eval: model %s takes %d input channels (need 1 or "
+                          "3)", im->model->preset, im->model->in_channels);
+    lm_forward_opts fo;
+    memset(&fo, 0, sizeof fo);
+    if (noise) fo.noise = *noise;
+    fo.nthreads = nthreads;
+    return lm_forward_simulate31(&im->sys, truth, &fo, rng, frame, NULL, err);
+}
+
+lm_status lm_eval_simulate(const lm_infer_model *im, const lm_cube *truth,
+                           const lm_noise_opts *noise, const lm_rng *rng, float **frame,
+                           size_t *n, lm_err *err)
+{
+    *frame = NULL;
+    *n = 0;
+    if (!im || !im->model)
+        return lm_err_set(err, LM_ERR_ARG, "eval: simulate: no model");
+    size_t cnt = (size_t)(is_rgb(im) ? 3 : 1) * truth->height * truth->width;
+    float *f = malloc(sizeof(float) * (cnt ? cnt : 1));
+    if (!f) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    lm_rng r;
+    if (rng) r = *rng;
+    else lm_rng_seed(&r, 0);
+    lm_status st = simulate(im, truth, noise, rng ? &r : NULL, 0, f, err);
+    if (st) {
+        free(f);
+        return st;
+    }
+    *frame = f;
+    *n = cnt;
+    return LM_OK;
+}
+
+lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *frame,
+                              int height, int width, const lm_tile_opts *to, int whole,
+                              lm_cube *out, lm_err *err)
+{
+    memset(out, 0, sizeof *out);
+    lm_model *m = im ? im->model : NULL;
+    if (!m) return lm_err_set(err, LM_ERR_ARG, "eval: reconstruct: no model");
+    if (is_mst(im)) { /* global attention: the whole frame at once */
+        if (m->out_channels != 31)
+            return lm_err_set(err, LM_ERR_ARG, "eval: model %s has %d output channels (need 31)",
+                              m->preset, m->out_channels);
+        if (height <= 0 || width <= 0)
+            return lm_err_set(err, LM_ERR_SHAPE, "eval: frame %d x %d", width, height);
+        if (lm_cube_alloc(out, 31, height, width, 400.0f, 10.0f))
+            return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+        lm_status st = lm_mst_reconstruct(m, frame, height, width, out->data, lm_nthreads(c),
+                                          err);
+        if (st) lm_cube_free(out);
+        return st;
+    }
+    if (m->in_channels != 1)
+        return lm_err_set(err, LM_ERR_ARG, "eval: model %s takes %d input channels and is not "
+                          "MST++", m->preset, m->in_channels);
+    if (whole && lm_whole_halo(m) > 0) return lm_whole_infer(c, m, frame, height, width, out, err);
+    return lm_tile_infer(c, m, frame, height, width, to, out, err);
+}
 
 lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err)
 {
@@ -37,19 +119,18 @@ lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err)
     return LM_OK;
 }
 
-/* Simulate bucket 1 of truth with noise k from rng, reconstruct, score. */
+/* Simulate the frame of truth with noise k from rng, reconstruct, score. */
 static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth, float k,
                           const lm_tile_opts *to, lm_rng *rng, float *frame, lm_metrics *out,
                           lm_err *err)
 {
-    lm_forward_opts fo;
-    memset(&fo, 0, sizeof fo);
-    fo.noise.gauss_k = k;
-    fo.nthreads = lm_nthreads(c);
-    lm_status st = lm_forward_simulate31(&im->sys, truth, &fo, rng, frame, NULL, err);
+    lm_noise_opts no;
+    memset(&no, 0, sizeof no);
+    no.gauss_k = k;
+    lm_status st = simulate(im, truth, &no, rng, lm_nthreads(c), frame, err);
     if (st) return st;
     lm_cube pred;
-    st = lm_tile_infer(c, im->model, frame, truth->height, truth->width, to, &pred, err);
+    st = lm_eval_reconstruct(c, im, frame, truth->height, truth->width, to, 0, &pred, err);
     if (st) return st;
     st = lm_metrics_compute(pred.data, truth->data, 31, truth->height, truth->width, 0, 31, out,
                             err);
@@ -67,7 +148,8 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
     for (int i = 0; i < nnoise; i++)
         if (!(k[i] >= 0.0f) || !isfinite(k[i]))
             return lm_err_set(err, LM_ERR_ARG, "eval: noise level %g is not >= 0", (double)k[i]);
-    float *frame = malloc(sizeof(float) * (size_t)truth->height * truth->width);
+    float *frame = malloc(sizeof(float) * (is_rgb(im) ? 3 : 1) * (size_t)truth->height *
+                          truth->width);
     if (!frame) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
     lm_status st = LM_OK;
     for (int i = 0; i < nnoise && !st; i++) {
@@ -148,10 +230,61 @@ static lm_status motion_score(lm_ctx *c, const lm_infer_model *im, const float *
 {
     lm_cube pred;
     int H = b->truth.height, W = b->truth.width;
-    lm_status st = lm_tile_infer(c, im->model, frame, H, W, to, &pred, err);
+    lm_status st = lm_eval_reconstruct(c, im, frame, H, W, to, 0, &pred, err);
     if (st) return st;
     st = lm_metrics_compute(pred.data, b->truth.data, 31, H, W, 0, 31, m, err);
     lm_cube_free(&pred);
+    return st;
+}
+
+/* Instants (seconds) across frame 1's exposure for the RGB camera: the exposure split into
+ * LM_VIDEO_DEFAULT_SAMPLES parts per LED (at most LM_VIDEO_MAX_SAMPLES), the midpoints. */
+static int rgb_instants(const lm_system *sys, double *t)
+{
+    int n = LM_VIDEO_DEFAULT_SAMPLES * sys->nleds;
+    if (n > LM_VIDEO_MAX_SAMPLES) n = LM_VIDEO_MAX_SAMPLES;
+    if (n < 1) n = 1;
+    double t0 = lm_video_frame_start_us(sys, 1), len = lm_system_exposure_us(sys);
+    for (int k = 0; k < n; k++) t[k] = (t0 + (k + 0.5) / n * len) * 1e-6;
+    return n;
+}
+
+/* The RGB camera's frame 1: the moving scene averaged over the exposure (motion blur), then
+ * rendered noise-free; truth = the scene at frame 1's lime instant, as for coded models. */
+static lm_status motion_rgb(lm_ctx *c, const lm_infer_model *im, const lm_cube *cube,
+                            const lm_motion *mo, const lm_tile_opts *to, lm_eval_motion *out,
+                            lm_err *err)
+{
+    int H = cube->height, W = cube->width, nt = lm_nthreads(c);
+    size_t n = (size_t)31 * H * W;
+    double t[LM_VIDEO_MAX_SAMPLES];
+    int ns = rgb_instants(&im->sys, t);
+    lm_cube acc, gt, w, pred;
+    memset(&gt, 0, sizeof gt);
+    memset(&pred, 0, sizeof pred);
+    if (lm_cube_alloc(&acc, 31, H, W, 400.0f, 10.0f))
+        return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    float *frame = malloc(sizeof(float) * 3 * (size_t)H * W);
+    double *sum = calloc(n, sizeof(double)); /* exact for a still scene: mean = the cube */
+    lm_status st = frame && sum ? LM_OK : lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    for (int k = 0; k < ns && !st; k++) {
+        st = lm_video_warp(cube, mo, t[k], &w, nt, err);
+        if (st) break;
+        for (size_t i = 0; i < n; i++) sum[i] += w.data[i];
+        lm_cube_free(&w);
+    }
+    for (size_t i = 0; i < n && !st; i++) acc.data[i] = (float)(sum[i] / ns);
+    free(sum);
+    if (!st) st = simulate(im, &acc, NULL, NULL, nt, frame, err);
+    double tg = (lm_video_frame_start_us(&im->sys, 1) + lm_video_gt_time_us(&im->sys)) * 1e-6;
+    if (!st) st = lm_video_warp(cube, mo, tg, &gt, nt, err);
+    if (!st) st = lm_eval_reconstruct(c, im, frame, H, W, to, 0, &pred, err);
+    if (!st) st = lm_metrics_compute(pred.data, gt.data, 31, H, W, 0, 31, &out->unaligned, err);
+    out->aligned = out->unaligned; /* one camera frame, nothing to align */
+    lm_cube_free(&pred);
+    lm_cube_free(&gt);
+    lm_cube_free(&acc);
+    free(frame);
     return st;
 }
 
@@ -163,6 +296,13 @@ lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube 
     out->speed = speed;
     if (!(speed >= 0.0) || !isfinite(speed))
         return lm_err_set(err, LM_ERR_ARG, "eval: motion speed %g px/s (need >= 0)", speed);
+    if (is_rgb(im)) {
+        lm_motion mo;
+        memset(&mo, 0, sizeof mo);
+        mo.vx = speed * LM_EVAL_MOTION_DIR_X;
+        mo.vy = speed * LM_EVAL_MOTION_DIR_Y;
+        return motion_rgb(c, im, truth, &mo, to, out, err);
+    }
     lm_flow_opts dfo;
     if (!fo) {
         lm_flow_default_opts(&dfo, LM_FLOW_MEDIUM);
@@ -239,17 +379,13 @@ lm_status lm_eval_rainbow_run(lm_ctx *c, const lm_infer_model *im, int size,
     lm_status st = lm_synth_rainbow(size, size, &truth, err);
     if (st) return st;
     st = lm_eval_prepare(&truth, im->model->mosaic.ty, im->model->mosaic.tx, err);
-    float *frame = st ? NULL : malloc(sizeof(float) * (size_t)truth.height * truth.width);
+    float *frame = st ? NULL : malloc(sizeof(float) * (is_rgb(im) ? 3 : 1) *
+                                      (size_t)truth.height * truth.width);
     if (!st && !frame) st = lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
     lm_cube pred;
     memset(&pred, 0, sizeof pred);
-    if (!st) {
-        lm_forward_opts fo;
-        memset(&fo, 0, sizeof fo);
-        fo.nthreads = lm_nthreads(c);
-        st = lm_forward_simulate31(&im->sys, &truth, &fo, NULL, frame, NULL, err);
-    }
-    if (!st) st = lm_tile_infer(c, im->model, frame, truth.height, truth.width, to, &pred, err);
+    if (!st) st = simulate(im, &truth, NULL, NULL, lm_nthreads(c), frame, err);
+    if (!st) st = lm_eval_reconstruct(c, im, frame, truth.height, truth.width, to, 0, &pred, err);
     if (!st) st = lm_metrics_compute(pred.data, truth.data, 31, truth.height, truth.width, 0, 31,
                                      &out->m, err);
     if (!st) {

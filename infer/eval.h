@@ -9,11 +9,19 @@
  * a short coded video (data/video.h, §5 timing, noise-free), and its middle frame is
  * reconstructed with and without temporal alignment (infer/align.h), both scored against the
  * scene at that frame's lime instant.
+ * RGB models (in_channels 3: the passive MST++ baseline) see the same cube through an RGB
+ * camera (data/rgbcam.h: Nikon D5100, D65, white balanced; noise k x the largest clean value of
+ * the three channels) and reconstruct the whole frame (lm_mst_reconstruct). In the motion test
+ * an RGB camera has no LED sub-images: its frame is the scene averaged over the middle frame's
+ * exposure (LM_VIDEO_DEFAULT_SAMPLES instants per LED, at most LM_VIDEO_MAX_SAMPLES, equally
+ * spaced over lm_system_exposure_us from the frame's start; noise-free), scored against the same
+ * lime-instant truth; there is nothing to align, so aligned = unaligned.
  * Reconstructions are scored as the network returns them (no clamping).
  * What it is not: scene listing, printing or file output (cli/cmd_eval.c). */
 #ifndef LM_EVAL_H
 #define LM_EVAL_H
 #include "data/cube.h"
+#include "data/forward.h"
 #include "infer/flow.h"
 #include "infer/model_io.h"
 #include "infer/tile.h"
@@ -28,11 +36,34 @@
  * "eval:". */
 lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err);
 
+/* The sensor frame a model takes, simulated from a prepared 31-band cube (lm_eval_prepare):
+ * coded models (in_channels 1): the coded frame of im->sys (H x W, lm_forward_simulate31);
+ * RGB models (in_channels 3): the RGB camera image (3 x H x W planar, data/rgbcam.h, bundled
+ * Nikon D5100 under D65). noise: NULL = none; rng: the noise stream (copied, not advanced; NULL
+ * only without noise). *frame is malloc'ed (NULL on error), *n its element count. OpenMP
+ * default thread count. Errors: LM_ERR_SHAPE (not 31 bands), LM_ERR_ARG (other in_channels),
+ * those of the forward / camera models, LM_ERR_NOMEM. */
+lm_status lm_eval_simulate(const lm_infer_model *im, const lm_cube *truth,
+                           const lm_noise_opts *noise, const lm_rng *rng, float **frame,
+                           size_t *n, lm_err *err);
+
+/* A 31-band cube (400..700 nm, allocated here; lm_cube_free) from a frame of lm_eval_simulate's
+ * layout: coded models through lm_tile_infer (to: window options) — or lm_whole_infer when
+ * `whole` is non-zero and the model declares a receptive field (lm_whole_halo > 0); MST++
+ * models (family "mst": the RGB "mst", "mst-tiny", and the coded "mst-coded", whose global
+ * attention has no windows) through lm_mst_reconstruct on the whole frame with lm_nthreads(c)
+ * threads (in its own ctx; `to` and `whole` unused). c must hold no tensors. Errors: those of
+ * the inference paths; LM_ERR_ARG for a model that is neither coded nor MST++. */
+lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *frame,
+                              int height, int width, const lm_tile_opts *to, int whole,
+                              lm_cube *out, lm_err *err);
+
 /* Score the model on a prepared 31-band cube at each noise level k[i] (fractions, 0.1 = 10 %):
  * level k draws from lm_rng_split(rng, round(k * 1e6)), the same noise whatever the list.
- * out[i] receives the metrics. c must hold no tensors (lm_tile_infer resets it). Errors: those
- * of the forward model, lm_tile_infer and the metrics; LM_ERR_ARG for nnoise outside
- * 1..LM_EVAL_MAX_NOISE or a negative k. */
+ * out[i] receives the metrics. c must hold no tensors (lm_tile_infer resets it). Simulation
+ * and reconstruction as lm_eval_simulate / lm_eval_reconstruct (whole 0), with lm_nthreads(c)
+ * threads. Errors: those of the forward model, lm_eval_reconstruct and the metrics;
+ * LM_ERR_ARG for nnoise outside 1..LM_EVAL_MAX_NOISE or a negative k. */
 lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
                         const float *k, int nnoise, const lm_tile_opts *to, const lm_rng *rng,
                         lm_metrics *out, lm_err *err);
@@ -56,7 +87,8 @@ typedef struct lm_eval_motion {
 /* Frames 0, 1, 2 of the prepared 31-band cube moving at `speed` px/s (mirrored to the
  * system's 41-bin grid, lm_video_frame with the default motion-blur samples, no noise); the
  * truth is frame 1's scene at its lime instant (bands 400..700 nm). fo: flow options (NULL =
- * medium preset with lm_nthreads(c) threads). c must hold no tensors. Errors: LM_ERR_ARG for a
+ * medium preset with lm_nthreads(c) threads; unused for RGB models, see above). c must hold no
+ * tensors. Errors: LM_ERR_ARG for a
  * negative or non-finite speed; those of the video model, the alignment (sub-images smaller
  * than lm_flow_min_size: LM_ERR_SHAPE), lm_tile_infer and the metrics. */
 lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,

@@ -8,14 +8,24 @@
  * frame, a level draws the same noise wherever it sits in the list, and bad level lists fail;
  * lm_eval_motion_run on the same model: a still scene scores the same aligned or not, at 400 px/s
  * the unaligned frame loses >= 3 dB and alignment wins >= 0.25 dB back (0.5 measured on
- * these 24 x 24 sub-images); a negative speed fails. */
+ * these 24 x 24 sub-images); a negative speed fails.
+ * lm_eval_simulate: the coded frame equals lm_forward_simulate31's (noise-free, and with noise
+ * for the same rng, which is not advanced); the RGB frame (mst-tiny) equals lm_rgbcam_render and
+ * a plain loop over the camera weights; a 30-band cube fails. lm_eval_reconstruct: the linear
+ * model equals lm_tile_infer (whole 0) and lm_whole_infer (whole 1); mst-tiny equals
+ * lm_mst_reconstruct of the frame. The RGB path (mst-tiny, 24 x 32 cube) through lm_eval_scene
+ * (noise 0 and 20 % against plain-loop PSNRs of independently simulated and reconstructed
+ * frames), lm_eval_motion_run (still scene = static frame, aligned = unaligned, motion changes
+ * the score) and lm_eval_rainbow_run. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include "tests/check.h"
 #include "data/forward.h"
+#include "data/rgbcam.h"
 #include "infer/eval.h"
+#include "infer/whole.h"
 #include "models/layers.h"
 #include "train/mosaic_system.h"
 
@@ -292,6 +302,241 @@ static void test_scene_linear_model(void)
     lm_model_free(im.model);
 }
 
+/* ---- lm_eval_simulate / lm_eval_reconstruct -------------------------------------------- */
+
+static lm_model *make_model(const char *preset, uint64_t seed)
+{
+    lm_err e;
+    lm_err_clear(&e);
+    lm_mosaic mo;
+    CHECK_MSG(lm_mosaic_from_system(&g_sys, &mo, &e) == LM_OK, "%s", e.msg);
+    lm_model *m = lm_model_create(preset, &mo, seed, &e);
+    CHECK_MSG(m, "%s: %s", preset, e.msg);
+    if (m) lm_params_set_requires_grad(&m->params, 0);
+    return m;
+}
+
+static size_t count_diff(const float *a, const float *b, size_t n)
+{
+    size_t d = 0;
+    for (size_t i = 0; i < n; i++) d += a[i] != b[i];
+    return d;
+}
+
+static void test_simulate_coded(void)
+{
+    if (!g_ok) return;
+    lm_infer_model im = {.model = make_model("linear", 3), .sys = g_sys};
+    if (!im.model) return;
+    lm_cube truth;
+    small_scene(&truth);
+    size_t plane = (size_t)truth.height * truth.width;
+    float *want = malloc(sizeof(float) * plane), *f = NULL;
+    size_t n = 0;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_forward_opts fo;
+    memset(&fo, 0, sizeof fo);
+    fo.nthreads = 1;
+    CHECK(lm_forward_simulate31(&g_sys, &truth, &fo, NULL, want, NULL, &e) == LM_OK);
+    CHECK_MSG(lm_eval_simulate(&im, &truth, NULL, NULL, &f, &n, &e) == LM_OK, "%s", e.msg);
+    CHECK(n == plane && f);
+    if (f) CHECK(count_diff(f, want, plane) == 0);
+    free(f);
+    /* with noise: the same draws as lm_forward_simulate31 from the same rng state */
+    lm_rng rng, r2;
+    lm_rng_seed(&rng, 9);
+    r2 = rng;
+    fo.noise.gauss_k = 0.1f;
+    CHECK(lm_forward_simulate31(&g_sys, &truth, &fo, &r2, want, NULL, &e) == LM_OK);
+    CHECK_MSG(lm_eval_simulate(&im, &truth, &fo.noise, &rng, &f, &n, &e) == LM_OK, "%s", e.msg);
+    if (f) CHECK(count_diff(f, want, plane) == 0);
+    free(f);
+    CHECK(lm_eval_simulate(&im, &truth, &fo.noise, &rng, &f, &n, &e) == LM_OK); /* not advanced */
+    if (f) CHECK(count_diff(f, want, plane) == 0);
+    free(f);
+    lm_cube bad;
+    CHECK(lm_cube_alloc(&bad, 30, 6, 8, 400, 10) == LM_OK);
+    for (int i = 0; i < 30 * 48; i++) bad.data[i] = 0.5f;
+    CHECK(lm_eval_simulate(&im, &bad, NULL, NULL, &f, &n, &e) == LM_ERR_SHAPE && !f && n == 0);
+    CHECK(strstr(e.msg, "eval:") != NULL);
+    lm_cube_free(&bad);
+    free(want);
+    lm_cube_free(&truth);
+    lm_model_free(im.model);
+}
+
+/* reconstruct of the linear model = lm_tile_infer (whole 0) / lm_whole_infer (whole 1) */
+static void test_reconstruct_linear(void)
+{
+    if (!g_ok) return;
+    lm_infer_model im = {.model = make_model("linear", 4), .sys = g_sys};
+    if (!im.model) return;
+    lm_cube truth, a, b;
+    small_scene(&truth);
+    int H = truth.height, W = truth.width;
+    size_t n = 0, cn = (size_t)31 * H * W;
+    float *f = NULL;
+    lm_err e;
+    lm_err_clear(&e);
+    CHECK(lm_eval_simulate(&im, &truth, NULL, NULL, &f, &n, &e) == LM_OK);
+    lm_ctx c;
+    CHECK(lm_ctx_init(&c, 2) == 0);
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    for (int whole = 0; whole < 2 && f; whole++) {
+        CHECK_MSG(lm_eval_reconstruct(&c, &im, f, H, W, &to, whole, &a, &e) == LM_OK, "%s", e.msg);
+        lm_status st = whole ? lm_whole_infer(&c, im.model, f, H, W, &b, &e)
+                             : lm_tile_infer(&c, im.model, f, H, W, &to, &b, &e);
+        CHECK_MSG(st == LM_OK, "%s", e.msg);
+        CHECK(a.bands == 31 && a.height == H && a.width == W);
+        if (a.data && b.data) CHECK_MSG(count_diff(a.data, b.data, cn) == 0, "whole %d", whole);
+        lm_cube_free(&a);
+        lm_cube_free(&b);
+    }
+    /* the two paths differ (window blending vs one pass), so the flag is really followed */
+    if (f && !lm_eval_reconstruct(&c, &im, f, H, W, &to, 0, &a, &e) &&
+        !lm_eval_reconstruct(&c, &im, f, H, W, &to, 1, &b, &e))
+        CHECK(count_diff(a.data, b.data, cn) > 0);
+    lm_cube_free(&a);
+    lm_cube_free(&b);
+    lm_ctx_free(&c);
+    free(f);
+    lm_cube_free(&truth);
+    lm_model_free(im.model);
+}
+
+/* A small prepared cube for MST++ (24 x 32 after the 3 x 4 tile crop). */
+static void tiny_scene(lm_cube *c)
+{
+    CHECK(lm_cube_alloc(c, 31, 25, 34, 400, 10) == LM_OK);
+    for (int b = 0; b < 31; b++)
+        for (int y = 0; y < 25; y++)
+            for (int x = 0; x < 34; x++)
+                c->data[((size_t)b * 25 + y) * 34 + x] =
+                    (float)(0.4 + 0.3 * sin(0.3 * x + 0.2 * y + 0.1 * b) * cos(0.05 * b * y));
+    lm_err e;
+    lm_err_clear(&e);
+    CHECK_MSG(lm_eval_prepare(c, 3, 4, &e) == LM_OK, "%s", e.msg);
+}
+
+/* RGB frame = lm_rgbcam_render = a plain loop over the camera weights */
+static void check_rgb_frame(const lm_infer_model *im, const lm_cube *t)
+{
+    lm_err e;
+    lm_err_clear(&e);
+    lm_rgbcam cam;
+    CHECK_MSG(lm_rgbcam_load(&cam, NULL, LM_RGBCAM_D65, &e) == LM_OK, "%s", e.msg);
+    size_t plane = (size_t)t->height * t->width, n = 0;
+    float *f = NULL, *want = malloc(sizeof(float) * 3 * plane);
+    CHECK_MSG(lm_eval_simulate(im, t, NULL, NULL, &f, &n, &e) == LM_OK, "%s", e.msg);
+    CHECK(n == 3 * plane);
+    lm_rgbcam_render(&cam, t->data, t->height, t->width, want, 1);
+    if (f) CHECK(count_diff(f, want, 3 * plane) == 0);
+    double maxd = 0;
+    for (int ch = 0; ch < 3 && f; ch++)
+        for (size_t p = 0; p < plane; p++) {
+            double s = 0;
+            for (int b = 0; b < 31; b++) s += (double)cam.w[ch][b] * t->data[b * plane + p];
+            double d = fabs(s - f[ch * plane + p]);
+            if (d > maxd) maxd = d;
+        }
+    CHECK_MSG(maxd < 1e-5, "rgb vs plain loop: %g", maxd);
+    free(f);
+    free(want);
+}
+
+/* PSNR of lm_mst_reconstruct(frame) against truth, plain loop */
+static double mst_psnr(lm_model *m, const float *frame, const lm_cube *t)
+{
+    size_t cn = (size_t)31 * t->height * t->width;
+    float *out = malloc(sizeof(float) * cn);
+    lm_err e;
+    lm_err_clear(&e);
+    CHECK_MSG(lm_mst_reconstruct(m, frame, t->height, t->width, out, 1, &e) == LM_OK, "%s",
+              e.msg);
+    double p = plain_psnr(out, t->data, cn);
+    free(out);
+    return p;
+}
+
+static void test_rgb_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *t)
+{
+    lm_err e;
+    lm_err_clear(&e);
+    lm_rng rng;
+    lm_rng_seed(&rng, 5);
+    float k[2] = {0.0f, 0.2f};
+    lm_metrics m[2];
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    CHECK_MSG(lm_eval_scene(c, im, t, k, 2, &to, &rng, m, &e) == LM_OK, "%s", e.msg);
+    printf("  mst-tiny (untrained): noise 0 %.3f dB, 20 %% %.3f dB\n", m[0].psnr, m[1].psnr);
+    lm_rgbcam cam;
+    CHECK(lm_rgbcam_load(&cam, NULL, LM_RGBCAM_D65, &e) == LM_OK);
+    size_t plane = (size_t)t->height * t->width;
+    float *rgb = malloc(sizeof(float) * 3 * plane);
+    lm_rgbcam_render(&cam, t->data, t->height, t->width, rgb, 1);
+    CHECK_CLOSE(m[0].psnr, mst_psnr(im->model, rgb, t), 1e-4, 1e-6);
+    lm_noise_opts no = {.gauss_k = 0.2f};
+    lm_rng r = lm_rng_split(&rng, 200000); /* the level's stream, as documented */
+    CHECK(lm_rgbcam_simulate(&cam, t->data, t->height, t->width, &no, &r, rgb, 1, &e) == LM_OK);
+    CHECK_CLOSE(m[1].psnr, mst_psnr(im->model, rgb, t), 1e-4, 1e-6);
+    CHECK(m[1].psnr != m[0].psnr);
+    /* motion: still = the static frame, nothing to align; moving = another score */
+    lm_eval_motion m0, m1;
+    CHECK_MSG(lm_eval_motion_run(c, im, t, 0.0, &to, NULL, &m0, &e) == LM_OK, "%s", e.msg);
+    CHECK_MSG(lm_eval_motion_run(c, im, t, 400.0, &to, NULL, &m1, &e) == LM_OK, "%s", e.msg);
+    printf("  mst-tiny motion: 0 px/s %.3f dB, 400 px/s %.3f dB\n", m0.unaligned.psnr,
+           m1.unaligned.psnr);
+    CHECK(m0.unaligned.psnr == m[0].psnr && m0.unaligned.sam == m[0].sam);
+    CHECK(m0.aligned.psnr == m0.unaligned.psnr && m1.aligned.psnr == m1.unaligned.psnr);
+    CHECK(m1.unaligned.psnr != m0.unaligned.psnr && isfinite(m1.unaligned.psnr));
+    CHECK(lm_eval_motion_run(c, im, t, -1.0, &to, NULL, &m1, &e) == LM_ERR_ARG);
+    lm_eval_rainbow rb;
+    CHECK_MSG(lm_eval_rainbow_run(c, im, 24, &to, &rb, &e) == LM_OK, "%s", e.msg);
+    CHECK(rb.height == 24 && rb.width == 24 && isfinite(rb.m.psnr));
+    CHECK(rb.mean_err_nm >= 0 && rb.mean_err_nm <= rb.max_err_nm && rb.max_err_nm <= 300);
+    free(rgb);
+}
+
+static void test_rgb_model(void)
+{
+    if (!g_ok) return;
+    lm_infer_model im = {.model = make_model("mst-tiny", 7), .sys = g_sys};
+    if (!im.model) return;
+    CHECK(im.model->in_channels == 3 && im.model->out_channels == 31);
+    lm_cube t;
+    tiny_scene(&t);
+    CHECK(t.height == 24 && t.width == 32);
+    check_rgb_frame(&im, &t);
+    lm_ctx c;
+    CHECK(lm_ctx_init(&c, 2) == 0);
+    /* reconstruct = lm_mst_reconstruct of the frame (whole frame; whole flag unused) */
+    float *f = NULL;
+    size_t n = 0, cn = (size_t)31 * t.height * t.width;
+    lm_err e;
+    lm_err_clear(&e);
+    CHECK(lm_eval_simulate(&im, &t, NULL, NULL, &f, &n, &e) == LM_OK);
+    float *want = malloc(sizeof(float) * cn);
+    lm_cube a;
+    if (f) {
+        CHECK(lm_mst_reconstruct(im.model, f, t.height, t.width, want, 2, &e) == LM_OK);
+        CHECK_MSG(lm_eval_reconstruct(&c, &im, f, t.height, t.width, NULL, 1, &a, &e) == LM_OK,
+                  "%s", e.msg);
+        CHECK(a.bands == 31 && a.height == t.height && a.width == t.width);
+        CHECK(a.wavelength[0] == 400.0f && a.wavelength[30] == 700.0f);
+        if (a.data) CHECK(count_diff(a.data, want, cn) == 0);
+        lm_cube_free(&a);
+    }
+    free(want);
+    free(f);
+    test_rgb_scene(&c, &im, &t);
+    lm_ctx_free(&c);
+    lm_cube_free(&t);
+    lm_model_free(im.model);
+}
+
 int main(void)
 {
     lm_err e;
@@ -305,5 +550,8 @@ int main(void)
     RUN(test_prepare_crops_and_normalises);
     RUN(test_prepare_errors);
     RUN(test_scene_linear_model);
+    RUN(test_simulate_coded);
+    RUN(test_reconstruct_linear);
+    RUN(test_rgb_model);
     return check_summary();
 }

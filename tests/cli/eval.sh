@@ -9,6 +9,10 @@
 # (- 0.1 dB) at 240 px/s; bad input: missing model, not a model, no DATA,
 # missing scene, bad noise / motion list, too small rainbow, bad split, unknown option, used output
 # folder — one line on stderr, exit 2, no output left.
+# The passive RGB baseline: a 3-iteration mst-tiny run (its saved model takes 3-channel RGB
+# input: conv_in 31 x 3 x 3 x 3) evaluated with --noise 0,10 --motion 0,120 --rainbow 66: the
+# same eval.json / eval.csv / eval_motion.csv fields, finite values, aligned = unaligned, the
+# still motion row = the noise-0 row; --device opencl is refused for MST++ (or no OpenCL).
 # usage: eval.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 
@@ -106,6 +110,56 @@ check "motion csv header" [ "$(head -1 "$T/evm/eval_motion.csv")" = \
 check "motion csv rows: scene and mean per speed" \
   [ "$(grep -cE '^(balloons_crop100|mean),(0|240),' "$T/evm/eval_motion.csv")" -eq 4 ]
 check "no motion csv without --motion" [ ! -e "$O/eval_motion.csv" ]
+
+# ---- the passive RGB baseline (MST++): train briefly on RGB, evaluate --------------------
+RM=$T/run_mst
+"$LM" train --model mst-tiny --data "$CAVE" --iterations 3 --batch 2 --accum-steps 1 \
+  --synth-fraction 0 --noise 0,0 --val-patches 1 --output "$RM" --quiet > "$T/mlog" 2>&1
+check "train mst-tiny: $(cat "$T/mlog")" [ -s "$RM/model.safetensors" ]
+python3 - "$RM/model.safetensors" <<'PY'
+import json, struct, sys
+f = open(sys.argv[1], "rb"); n = struct.unpack("<Q", f.read(8))[0]; h = json.loads(f.read(n))
+assert h["__metadata__"]["preset"] == "mst-tiny", h["__metadata__"]
+assert h["conv_in.weight"]["shape"] == [31, 3, 3, 3], h["conv_in.weight"]  # RGB input
+PY
+check "mst-tiny run takes RGB input" [ $? -eq 0 ]
+"$LM" eval --model "$RM" "$CAVE" --split all --noise 0,10 --rainbow 66 --motion 0,120 \
+  --output "$T/evr" > "$T/rtable" 2> "$T/rerr"
+check "eval mst-tiny: $(cat "$T/rerr")" [ $? -eq 0 ]
+cat "$T/rtable"
+check "mst table has a row per noise level" \
+  [ "$(grep -cE '^ +(0|10) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/rtable")" -eq 2 ]
+check "mst table reports the rainbow" grep -q '^rainbow 64 x 66: peak error mean' "$T/rtable"
+python3 - "$T/evr/eval.json" <<'PY'
+import json, math, sys
+j = json.load(open(sys.argv[1]))
+assert j["noise_percent"] == [0, 10] and len(j["scenes"]) == 1, j
+s = j["scenes"][0]
+for rows in (s["results"], j["mean"]):
+    assert [r["noise_percent"] for r in rows] == [0, 10]
+    for r in rows:
+        assert sorted(r) == ["mae", "noise_percent", "psnr", "sam", "ssim"], r
+        assert all(math.isfinite(v) for v in r.values()) and r["mae"] > 0, r
+for rows in (s["motion"], j["motion_mean"]):
+    assert [r["speed_px_s"] for r in rows] == [0, 120], rows
+    for r in rows:  # one RGB frame: nothing to align
+        for m in ("psnr", "ssim", "mae", "sam"):
+            assert math.isfinite(r[m + "_aligned"]) and r[m + "_aligned"] == r[m + "_unaligned"], r
+    assert abs(rows[0]["psnr_unaligned"] - s["results"][0]["psnr"]) < 1e-3, rows
+rb = j["rainbow"]
+assert rb["height"] == 66 and rb["width"] == 64 and math.isfinite(rb["psnr"]), rb
+assert 0 <= rb["peak_error_mean_nm"] <= rb["peak_error_max_nm"] <= 300, rb
+PY
+check "mst eval.json fields, aligned = unaligned, still = noise-0 row" [ $? -eq 0 ]
+check "mst csv rows" [ "$(grep -cE '^(balloons_crop100|mean),(0|10),' "$T/evr/eval.csv")" -eq 4 ]
+check "mst motion csv rows" \
+  [ "$(grep -cE '^(balloons_crop100|mean),(0|120),' "$T/evr/eval_motion.csv")" -eq 4 ]
+"$LM" eval --model "$RM" "$CAVE" --split all --noise 0 --rainbow 0 --device opencl \
+  --output "$T/evo" > /dev/null 2> "$T/oerr"
+check "mst on opencl refused (exit 2)" [ $? -eq 2 ]
+check "mst on opencl: one line" [ "$(wc -l < "$T/oerr")" -eq 1 ]
+check "mst on opencl: message" grep -qE "CPU only|device" "$T/oerr"
+check "mst on opencl: no output" no_output "$T/evo"
 
 # ---- bad input ---------------------------------------------------------------------------
 expect_error "missing model" 2 "no such model" "$T/e1" -- "$LM" eval --model "$T/nope" "$CAVE" --output "$T/e1"
