@@ -21,7 +21,11 @@ static void help(void)
            "into DIR/runs/<preset>/, scored on the held-out scenes (the data's test split, or\n"
            "procedural scenes when it is empty) at each noise level, run through the rainbow\n"
            "test, timed on a 640 x 480 frame (fastest of a few runs) and counted (parameters,\n"
-           "multiply-adds per frame). Writes DIR/results.json, results.csv, results.md and\n"
+           "multiply-adds per frame). With \"conditions\" in the config each model is also\n"
+           "scored under adverse captures (photon budget, saturation, LED gain error, dead\n"
+           "pixels, motion) and the level where it loses 3 dB is reported; with\n"
+           "\"narrowband_sweep\" one preset is trained at several synthetic shares and run\n"
+           "through the rainbow test. Writes DIR/results.json, results.csv, results.md and\n"
            "DIR/charts/ (data, gnuplot scripts, PNG and SVG). Running again resumes: presets\n"
            "with a DIR/runs/<preset>/result.json are skipped, interrupted training continues.\n\n"
            "  --config FILE  study config (see study/ci.json, study/full.json)\n"
@@ -99,6 +103,20 @@ static int print_plan(const lm_study_cfg *cfg, const char *dir)
     printf("\nheld-out fallback: %d procedural scenes %dx%d; rainbow %d; timed frame %dx%d, %d "
            "runs\n", cfg->eval_scenes, cfg->eval_h, cfg->eval_w, cfg->rainbow, cfg->frame_h,
            cfg->frame_w, cfg->timing_repeats);
+    for (int i = 0; i < cfg->ncond; i++) {
+        printf("condition %s:", lm_cond_name(cfg->cond[i].family));
+        for (int k = 0; k < cfg->cond[i].nlevels; k++) printf(" %g", cfg->cond[i].levels[k]);
+        printf(" (%s)\n", lm_cond_unit(cfg->cond[i].family));
+    }
+    if (cfg->ncond && cfg->cond_scenes)
+        printf("conditions on the first %d held-out scene(s)\n", cfg->cond_scenes);
+    else if (cfg->ncond)
+        printf("conditions on every held-out scene\n");
+    if (cfg->nnb) {
+        printf("narrowband sweep: %s at synthetic shares", cfg->nb_preset);
+        for (int i = 0; i < cfg->nnb; i++) printf(" %g", (double)cfg->nb_fraction[i]);
+        printf("\n");
+    }
     return 0;
 }
 

@@ -54,7 +54,7 @@ lm_status lm_model_profile(lm_model *m, int B, int H, int W, lm_profile *out, lm
     lm_ctx_set_backend(&c, &dry_backend);
     lm_ctx_set_grad(&c, 0);
     lm_layer_observe(&c, observe, out);
-    lm_tensor *raw = lm_tensor_zeros(&c, 4, (int[]){B, 1, H, W});
+    lm_tensor *raw = lm_tensor_zeros(&c, 4, (int[]){B, m->in_channels > 0 ? m->in_channels : 1, H, W});
     lm_tensor *y = lm_model_forward(&c, m, raw);
     lm_layer_observe(NULL, NULL, NULL);
     lm_status st = LM_OK;

@@ -17,7 +17,9 @@
 #define CPATH 1400
 
 static const char *const chart_names[] = {"accuracy_speed", "noise_psnr", "noise_ssim",
-                                          "noise_sam", "train_loss", "train_val_psnr", NULL};
+    "noise_sam", "train_loss", "train_val_psnr", "rainbow_peaks", "motion", "narrowband",
+    "failure_3db", "cond_photons", "cond_saturation", "cond_led_gain", "cond_dead_pixels",
+    "cond_motion", NULL};
 
 void lm_study_pareto(const double *t, const double *a, int n, int *on)
 {
@@ -296,6 +298,278 @@ static lm_status curve_charts(const json_t *runs, long iterations, const char *s
     return st;
 }
 
+/* ---- the rainbow, motion, conditions, 3-dB failure and narrowband charts ---------------- */
+
+/* Remove a chart's script (the chart does not apply to this study). */
+static void drop_chart(const char *dir, const char *name)
+{
+    static const char *const ext[3] = {"gp", "png", "svg"};
+    char path[CPATH + 64];
+    for (int i = 0; i < 3; i++)
+        if (snprintf(path, sizeof path, "%s/%s.%s", dir, name, ext[i]) < (int)sizeof path)
+            remove(path);
+}
+
+/* The record of family `fam` in a run's conditions when it applies, else NULL. */
+static const json_t *family_rec(const json_t *rec, const char *fam)
+{
+    const json_t *fs = json_object_get(json_object_get(rec, "conditions"), "families");
+    for (size_t i = 0; i < json_array_size(fs); i++) {
+        const json_t *f = json_array_get(fs, i);
+        const char *n = json_string_value(json_object_get(f, "family"));
+        if (n && !strcmp(n, fam) && json_is_true(json_object_get(f, "applies"))) return f;
+    }
+    return NULL;
+}
+
+/* rainbow_<preset>.dat: true and recovered peak per row; rainbow_peaks.gp. */
+static lm_status rainbow_chart(const json_t *runs, const char *dir, lm_err *err)
+{
+    char path[CPATH], name[128];
+    size_t n = json_array_size(runs);
+    int any = 0;
+    for (size_t i = 0; i < n; i++) {
+        const json_t *r = json_array_get(runs, i);
+        const json_t *rows = json_object_get(json_object_get(r, "rainbow"),
+                                             "rows_true_recovered_nm");
+        if (!json_array_size(rows)) continue;
+        snprintf(name, sizeof name, "rainbow_%s.dat", preset(r));
+        FILE *f = open_in(dir, name, path, err);
+        if (!f) return err->status;
+        fprintf(f, "# true_peak_nm recovered_peak_nm (one line per row of the rainbow)\n");
+        for (size_t y = 0; y < json_array_size(rows); y++) {
+            const json_t *p = json_array_get(rows, y);
+            fprintf(f, "%.4f %.4f\n", json_number_value(json_array_get(p, 0)),
+                    json_number_value(json_array_get(p, 1)));
+        }
+        if (close_file(f, path, err)) return err->status;
+        any = 1;
+    }
+    if (!any) return drop_chart(dir, "rainbow_peaks"), LM_OK;
+    FILE *f = open_in(dir, "rainbow_peaks.gp", path, err);
+    if (!f) return err->status;
+    gp_head(f, "rainbow_peaks", "Rainbow scene: recovered against true peak wavelength per row",
+            "true peak (nm)", "recovered peak (nm)");
+    fprintf(f, "set xrange [400:700]\nset yrange [380:720]\nplot x with lines dt 2 lc rgb "
+               "\"gray40\" title \"ideal\"");
+    for (size_t i = 0; i < n; i++) {
+        const json_t *r = json_array_get(runs, i);
+        if (json_array_size(json_object_get(json_object_get(r, "rainbow"),
+                                            "rows_true_recovered_nm")))
+            fprintf(f, ", \\\n     \"rainbow_%s.dat\" using 1:2 with lines lw 1.5 title \"%s\"",
+                    preset(r), preset(r));
+    }
+    fprintf(f, "\n");
+    gp_tail(f, "rainbow_peaks");
+    return close_file(f, path, err);
+}
+
+/* cond_<family>_<preset>.dat: level psnr ssim sam [psnr_unaligned]; fail_<family>.dat: each
+ * model's 3-dB point (level, clean - 3 dB). Returns the number of models with data. */
+static int cond_data(const json_t *runs, const char *fam, const char *dir, int *ncross,
+                     lm_err *err)
+{
+    *ncross = 0;
+    char path[CPATH], name[192];
+    int any = 0;
+    FILE *ff = NULL;
+    snprintf(name, sizeof name, "fail_%s.dat", fam);
+    if (!(ff = open_in(dir, name, path, err))) return -1;
+    char fpath[CPATH];
+    memcpy(fpath, path, sizeof fpath);
+    for (size_t i = 0; i < json_array_size(runs); i++) {
+        const json_t *r = json_array_get(runs, i), *fr = family_rec(r, fam);
+        if (!fr) continue;
+        snprintf(name, sizeof name, "cond_%s_%s.dat", fam, preset(r));
+        FILE *f = open_in(dir, name, path, err);
+        if (!f) return fclose(ff), -1;
+        fprintf(f, "# level psnr ssim sam psnr_unaligned\n");
+        const json_t *lv = json_object_get(fr, "levels");
+        for (size_t k = 0; k < json_array_size(lv); k++) {
+            const json_t *l = json_array_get(lv, k);
+            double u = num(l, "psnr_unaligned");
+            fprintf(f, "%.9g %.6f %.6f %.6f %.6f\n", num(l, "level"), num(l, "psnr"),
+                    num(l, "ssim"), num(l, "sam"), isfinite(u) ? u : num(l, "psnr"));
+        }
+        if (close_file(f, path, err)) return fclose(ff), -1;
+        double at = num(fr, "drop_3db");
+        double clean = num(json_object_get(r, "conditions"), "clean_psnr");
+        if (isfinite(at)) fprintf(ff, "%.9g %.6f \"%s\"\n", at, clean - 3.0, preset(r)), ++*ncross;
+        any++;
+    }
+    return close_file(ff, fpath, err) ? -1 : any;
+}
+
+/* cond_<family>.gp: PSNR against the level, a line per model, crosses at the 3-dB points. */
+static lm_status cond_chart(const json_t *runs, lm_cond_family fam, const char *dir,
+                            lm_err *err)
+{
+    const char *fn = lm_cond_name(fam);
+    char path[CPATH], name[64], title[160];
+    snprintf(name, sizeof name, "cond_%s", fn);
+    int nc, k = cond_data(runs, fn, dir, &nc, err);
+    if (k < 0) return err->status;
+    if (k == 0) return drop_chart(dir, name), LM_OK;
+    char gp[80];
+    snprintf(gp, sizeof gp, "%s.gp", name);
+    FILE *f = open_in(dir, gp, path, err);
+    if (!f) return err->status;
+    snprintf(title, sizeof title, "PSNR under %s (crosses: 3 dB below the model's clean PSNR)",
+             fn);
+    gp_head(f, name, title, lm_cond_unit(fam), "PSNR (dB)");
+    if (fam == LM_COND_PHOTONS) fprintf(f, "set logscale x\nset xrange [*:*] reverse\n");
+    fprintf(f, "set datafile missing \"NaN\"\nplot ");
+    int first = 1;
+    for (size_t i = 0; i < json_array_size(runs); i++) {
+        const json_t *r = json_array_get(runs, i);
+        if (!family_rec(r, fn)) continue;
+        fprintf(f, "%s\"cond_%s_%s.dat\" using 1:2 with linespoints lw 1.5 lc %zu title \"%s\"",
+                first ? "" : ", \\\n     ", fn, preset(r), i + 1, preset(r));
+        first = 0;
+    }
+    if (nc)
+        fprintf(f, ", \\\n     \"fail_%s.dat\" using 1:2 with points pt 2 ps 2 lw 2 lc rgb "
+                   "\"black\" title \"3-dB point\"", fn);
+    fprintf(f, "\n");
+    gp_tail(f, name);
+    return close_file(f, path, err);
+}
+
+/* motion.gp: PSNR against speed, aligned (solid) and as recorded (dashed), from cond_motion_*. */
+static lm_status motion_chart(const json_t *runs, const char *dir, lm_err *err)
+{
+    char path[CPATH];
+    int any = 0;
+    for (size_t i = 0; i < json_array_size(runs); i++)
+        any |= family_rec(json_array_get(runs, i), "motion") != NULL;
+    if (!any) return drop_chart(dir, "motion"), LM_OK;
+    FILE *f = open_in(dir, "motion.gp", path, err);
+    if (!f) return err->status;
+    gp_head(f, "motion", "PSNR against motion speed: with (solid) and without (dashed) temporal "
+            "alignment", "speed (px/s)", "PSNR (dB)");
+    fprintf(f, "plot ");
+    int first = 1;
+    for (size_t i = 0; i < json_array_size(runs); i++) {
+        const json_t *r = json_array_get(runs, i);
+        if (!family_rec(r, "motion")) continue;
+        fprintf(f, "%s\"cond_motion_%s.dat\" using 1:2 with linespoints lw 1.5 lc %zu title "
+                   "\"%s aligned\", \\\n     \"cond_motion_%s.dat\" using 1:5 with linespoints "
+                   "dt 2 lw 1.5 lc %zu title \"%s unaligned\"", first ? "" : ", \\\n     ",
+                preset(r), i + 1, preset(r), preset(r), i + 1, preset(r));
+        first = 0;
+    }
+    fprintf(f, "\n");
+    gp_tail(f, "motion");
+    return close_file(f, path, err);
+}
+
+/* failure_<family>.dat: index, model, 3-dB level (the last level when never reached), label. */
+static lm_status failure_data(const json_t *runs, const char *fam, const char *dir, int *any,
+                              lm_err *err)
+{
+    char path[CPATH], name[96];
+    snprintf(name, sizeof name, "failure_%s.dat", fam);
+    FILE *f = open_in(dir, name, path, err);
+    if (!f) return err->status;
+    *any = 0;
+    for (size_t i = 0; i < json_array_size(runs); i++) {
+        const json_t *r = json_array_get(runs, i), *fr = family_rec(r, fam);
+        const json_t *lv = fr ? json_object_get(fr, "levels") : NULL;
+        double at = num(fr, "drop_3db");
+        double last = num(json_array_get(lv, json_array_size(lv) - 1), "level");
+        char lab[64];
+        if (!fr) snprintf(lab, sizeof lab, "n/a");
+        else if (isfinite(at)) snprintf(lab, sizeof lab, "%.3g", at);
+        else snprintf(lab, sizeof lab, "> %g", last);
+        fprintf(f, "%zu \"%s\" %.9g \"%s\"\n", i, preset(r), fr ? (isfinite(at) ? at : last) : NAN,
+                lab);
+        *any |= fr != NULL;
+    }
+    return close_file(f, path, err);
+}
+
+static void failure_plots(FILE *f, const int *use, int nuse)
+{
+    fprintf(f, "set multiplot layout %d,%d title \"Level at which each model loses 3 dB against "
+               "its own clean PSNR (label '> x': never, up to the last level x)\"\n",
+            nuse > 3 ? 2 : 1, nuse > 3 ? (nuse + 1) / 2 : nuse);
+    for (int q = 0; q < LM_COND_NFAMILIES; q++) {
+        if (!use[q]) continue;
+        const char *fn = lm_cond_name((lm_cond_family)q);
+        fprintf(f, "set title \"%s\"\nset ylabel \"%s\"\n%s", fn, lm_cond_unit((lm_cond_family)q),
+                q == LM_COND_PHOTONS ? "set logscale y\nset yrange [*:*]\n"
+                                     : "unset logscale y\nset yrange [0:*]\n");
+        fprintf(f, "plot \"failure_%s.dat\" using 1:3:xtic(2) with boxes fs solid 0.5 notitle, "
+                   "\\\n     \"\" using 1:3:4 with labels offset 0,0.8 notitle\n", fn);
+    }
+    fprintf(f, "unset multiplot\n");
+}
+
+/* failure_3db.gp: a panel per family (multiplot: PNG and SVG written separately). */
+static lm_status failure_chart(const json_t *runs, const char *dir, lm_err *err)
+{
+    int use[LM_COND_NFAMILIES], nuse = 0;
+    for (int q = 0; q < LM_COND_NFAMILIES; q++) {
+        if (failure_data(runs, lm_cond_name((lm_cond_family)q), dir, &use[q], err))
+            return err->status;
+        nuse += use[q];
+    }
+    if (!nuse) return drop_chart(dir, "failure_3db"), LM_OK;
+    char path[CPATH];
+    FILE *f = open_in(dir, "failure_3db.gp", path, err);
+    if (!f) return err->status;
+    gp_head(f, "failure_3db", "", "", "");
+    fprintf(f, "set datafile missing \"NaN\"\nset style fill solid 0.5\nset boxwidth 0.6\n"
+               "set xtics rotate by -30\nset xlabel \"\"\nset offsets 0.5, 0.5, graph 0.15, 0\n"
+               "unset key\n");
+    failure_plots(f, use, nuse);
+    fprintf(f, "set terminal svg size 960,640 dynamic noenhanced\nset output \"failure_3db.svg\"\n");
+    failure_plots(f, use, nuse);
+    fprintf(f, "set output\n");
+    return close_file(f, path, err);
+}
+
+/* narrowband.dat (synthetic share %, rainbow peak error, rainbow PSNR, held-out PSNR at the
+ * first noise level) and narrowband.gp. */
+static lm_status narrowband_chart(const json_t *nb, const char *dir, lm_err *err)
+{
+    if (!json_array_size(nb)) return drop_chart(dir, "narrowband"), LM_OK;
+    char path[CPATH];
+    FILE *f = open_in(dir, "narrowband.dat", path, err);
+    if (!f) return err->status;
+    fprintf(f, "# synth_percent rainbow_peak_error_mean_nm rainbow_psnr heldout_psnr\n");
+    for (size_t i = 0; i < json_array_size(nb); i++) {
+        const json_t *r = json_array_get(nb, i), *rb = json_object_get(r, "rainbow");
+        fprintf(f, "%g %.6f %.6f %.6f\n", 100.0 * num(r, "synth_fraction"),
+                num(rb, "peak_error_mean_nm"), num(rb, "psnr"), level(r, 0, "psnr"));
+    }
+    if (close_file(f, path, err)) return err->status;
+    if (!(f = open_in(dir, "narrowband.gp", path, err))) return err->status;
+    char title[160];
+    snprintf(title, sizeof title, "Rainbow accuracy of %s against the synthetic share of "
+             "training", preset(json_array_get(nb, 0)));
+    gp_head(f, "narrowband", title, "synthetic (narrowband / procedural) samples in training (%)",
+            "rainbow mean peak error (nm)");
+    fprintf(f, "set y2label \"PSNR (dB)\"\nset y2tics\nset ytics nomirror\nset xrange [-5:105]\n"
+               "plot \"narrowband.dat\" using 1:2 with linespoints lw 2 pt 7 title \"rainbow "
+               "peak error\", \\\n     \"\" using 1:3 axes x1y2 with linespoints dt 2 pt 5 "
+               "title \"rainbow PSNR\", \\\n     \"\" using 1:4 axes x1y2 with linespoints dt 3 "
+               "pt 9 title \"held-out PSNR\"\n");
+    gp_tail(f, "narrowband");
+    return close_file(f, path, err);
+}
+
+static lm_status more_charts(const lm_study *s, const char *cdir, lm_err *err)
+{
+    lm_status st = rainbow_chart(s->runs, cdir, err);
+    for (int q = 0; !st && q < LM_COND_NFAMILIES; q++)
+        st = cond_chart(s->runs, (lm_cond_family)q, cdir, err);
+    if (!st) st = motion_chart(s->runs, cdir, err);
+    if (!st) st = failure_chart(s->runs, cdir, err);
+    if (!st) st = narrowband_chart(s->narrowband, cdir, err);
+    return st;
+}
+
 lm_status lm_charts_write(const lm_study_cfg *cfg, const lm_study *s, const char *dir,
                           lm_err *err)
 {
@@ -306,6 +580,7 @@ lm_status lm_charts_write(const lm_study_cfg *cfg, const lm_study *s, const char
     lm_status st = speed_chart(cfg, s->runs, cdir, err);
     if (!st) st = noise_charts(cfg, s->runs, cdir, err);
     if (!st) st = curve_charts(s->runs, cfg->train.iterations, dir, cdir, err);
+    if (!st) st = more_charts(s, cdir, err);
     return st;
 }
 

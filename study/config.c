@@ -28,7 +28,8 @@ void lm_study_cfg_default(lm_study_cfg *cfg)
 
 /* Study fields, then those passed on to the training config. */
 static const char *const study_fields[] = {"version", "presets", "data", "system", "train",
-    "noise", "eval_scenes", "eval_size", "rainbow", "frame", "timing_repeats", "output", NULL};
+    "noise", "eval_scenes", "eval_size", "rainbow", "frame", "timing_repeats", "output",
+    "conditions", "condition_scenes", "narrowband_sweep", NULL};
 static const char *const train_fields[] = {"iterations", "seed", "patch", "synth_fraction",
                                            NULL};
 
@@ -123,6 +124,80 @@ static lm_status noise_field(lm_study_cfg *cfg, json_t *root, const char *where,
     return LM_OK;
 }
 
+/* levels of condition i: a list of valid levels, or the family's default sweep. */
+static lm_status cond_levels(lm_study_cond *sc, json_t *lv, const char *w, size_t i, lm_err *err)
+{
+    if (!lv) {
+        sc->nlevels = lm_cond_default_levels(sc->family, sc->levels);
+        return LM_OK;
+    }
+    size_t n = json_is_array(lv) ? json_array_size(lv) : 0;
+    if (n < 1 || n > LM_COND_MAX_LEVELS)
+        BAD("%s: field 'conditions[%zu].levels': must be a list of 1..%d levels", w, i,
+            LM_COND_MAX_LEVELS);
+    for (size_t k = 0; k < n; k++) {
+        json_t *e = json_array_get(lv, k);
+        double v = json_is_number(e) ? json_number_value(e) : NAN;
+        if (!lm_cond_level_ok(sc->family, v))
+            BAD("%s: field 'conditions[%zu].levels[%zu]': not a valid %s level (%s)", w, i, k,
+                lm_cond_name(sc->family), lm_cond_unit(sc->family));
+        sc->levels[k] = v;
+    }
+    sc->nlevels = (int)n;
+    return LM_OK;
+}
+
+/* "conditions": [{"family": name, "levels": [...]}, ...] */
+static lm_status cond_field(lm_study_cfg *cfg, json_t *root, const char *w, lm_err *err)
+{
+    json_t *v = json_object_get(root, "conditions");
+    if (!v) return LM_OK;
+    size_t n = json_is_array(v) ? json_array_size(v) : 0;
+    if (!json_is_array(v) || n > LM_COND_NFAMILIES)
+        BAD("%s: field 'conditions': must be a list of at most %d {\"family\", \"levels\"}",
+            w, LM_COND_NFAMILIES);
+    for (size_t i = 0; i < n; i++) {
+        json_t *o = json_array_get(v, i), *lv = json_object_get(o, "levels");
+        int f = lm_cond_parse(json_string_value(json_object_get(o, "family")));
+        if (!json_is_object(o) || f < 0 || json_object_size(o) != 1u + (lv != NULL))
+            BAD("%s: field 'conditions[%zu]': must be {\"family\": photons | saturation | "
+                "led_gain | dead_pixels | motion, \"levels\": [...]}", w, i);
+        for (int j = 0; j < cfg->ncond; j++)
+            if ((int)cfg->cond[j].family == f)
+                BAD("%s: field 'conditions': family '%s' twice", w, lm_cond_name(f));
+        lm_study_cond *sc = &cfg->cond[cfg->ncond++];
+        sc->family = (lm_cond_family)f;
+        if (cond_levels(sc, lv, w, i, err)) return err->status;
+    }
+    return LM_OK;
+}
+
+/* "narrowband_sweep": {"preset": name, "fractions": [0..1, ...]} */
+static lm_status nb_field(lm_study_cfg *cfg, json_t *root, const char *w, lm_err *err)
+{
+    json_t *v = json_object_get(root, "narrowband_sweep");
+    if (!v) return LM_OK;
+    json_t *p = json_object_get(v, "preset"), *fr = json_object_get(v, "fractions");
+    const char *s = json_string_value(p);
+    int known = 0;
+    for (const char *const *q = lm_model_presets(); s && *q; q++) known |= !strcmp(*q, s);
+    size_t n = json_is_array(fr) ? json_array_size(fr) : 0;
+    if (!json_is_object(v) || json_object_size(v) != 2 || !known || n < 1 ||
+        n > LM_STUDY_MAX_FRACTIONS)
+        BAD("%s: field 'narrowband_sweep': must be {\"preset\": a model preset, \"fractions\": "
+            "[1..%d synthetic shares in 0..1]}", w, LM_STUDY_MAX_FRACTIONS);
+    for (size_t i = 0; i < n; i++) {
+        json_t *e = json_array_get(fr, i);
+        double f = json_is_number(e) ? json_number_value(e) : -1;
+        if (!(f >= 0 && f <= 1))
+            BAD("%s: field 'narrowband_sweep.fractions[%zu]': must be in 0..1", w, i);
+        cfg->nb_fraction[i] = (float)f;
+    }
+    cfg->nnb = (int)n;
+    snprintf(cfg->nb_preset, sizeof cfg->nb_preset, "%s", s);
+    return LM_OK;
+}
+
 /* data (list or one path) and system, relative to the config file. */
 static lm_status path_fields(lm_study_cfg *cfg, json_t *root, const char *where, lm_err *err)
 {
@@ -193,7 +268,9 @@ static lm_status study_fields_parse(lm_study_cfg *cfg, json_t *root, const char 
         (st = size_field(root, w, "eval_size", &cfg->eval_h, &cfg->eval_w, err)) ||
         (st = int_field(root, w, "rainbow", 0, 4096, &cfg->rainbow, err)) ||
         (st = size_field(root, w, "frame", &cfg->frame_h, &cfg->frame_w, err)) ||
-        (st = int_field(root, w, "timing_repeats", 1, 100, &cfg->timing_repeats, err)))
+        (st = int_field(root, w, "timing_repeats", 1, 100, &cfg->timing_repeats, err)) ||
+        (st = int_field(root, w, "condition_scenes", 0, 1000, &cfg->cond_scenes, err)) ||
+        (st = cond_field(cfg, root, w, err)) || (st = nb_field(cfg, root, w, err)))
         return st;
     if (cfg->rainbow > 0 && cfg->rainbow < 66)
         BAD("%s: field 'rainbow': need 0 (skip) or at least 66 (the window)", w);

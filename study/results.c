@@ -47,10 +47,12 @@ static json_t *summary_json(const lm_study_cfg *cfg, const lm_study *s)
                               "lr", (double)t->lr, "synth_fraction", (double)t->synth_fraction,
                               "schedule", t->schedule, "noise", (double)t->noise_min,
                               (double)t->noise_max, "seed", (json_int_t)t->seed, "data", data);
-    return json_pack("{s:i, s:s, s:o, s:o, s:O, s:[i,i], s:i, s:O}", "version", 1, "config",
-                     cfg->path, "training", train, "noise_percent", noise, "held_out",
-                     s->held_out, "frame", cfg->frame_h, cfg->frame_w, "timing_repeats",
-                     cfg->timing_repeats, "runs", s->runs);
+    json_t *j = json_pack("{s:i, s:s, s:o, s:o, s:O, s:[i,i], s:i, s:O}", "version", 1,
+                          "config", cfg->path, "training", train, "noise_percent", noise,
+                          "held_out", s->held_out, "frame", cfg->frame_h, cfg->frame_w,
+                          "timing_repeats", cfg->timing_repeats, "runs", s->runs);
+    if (j && s->narrowband) json_object_set(j, "narrowband_sweep", s->narrowband);
+    return j;
 }
 
 static FILE *open_tmp(const char *dir, const char *name, char *tmp, char *dst, lm_err *err)
@@ -147,6 +149,82 @@ static void md_detail_table(FILE *f, const lm_study_cfg *cfg, const json_t *runs
     }
 }
 
+/* The family record of a run (NULL when not measured). */
+static const json_t *fam_rec(const json_t *r, const char *fam)
+{
+    const json_t *fs = json_object_get(json_object_get(r, "conditions"), "families");
+    for (size_t i = 0; i < json_array_size(fs); i++)
+        if (!strcmp(str(json_array_get(fs, i), "family"), fam)) return json_array_get(fs, i);
+    return NULL;
+}
+
+/* The 3-dB table: per model and configured family the level of the 3-dB loss. */
+static void md_failure(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
+{
+    if (cfg->ncond == 0) return;
+    fprintf(f, "\n## Where methods fail\n\nEach model's mean PSNR over the first %d held-out "
+               "scene(s) under each condition, against its own clean-input PSNR (noise-free "
+               "frame): the level at which it first loses 3 dB, interpolated linearly between "
+               "the levels of the sweep; \"> x\" = never up to the last level x; n/a = the "
+               "condition does not apply (RGB input).\n\n| model | clean PSNR |",
+            (int)num(json_object_get(json_array_get(runs, 0), "conditions"), "scenes"));
+    for (int i = 0; i < cfg->ncond; i++)
+        fprintf(f, " %s: %s |", lm_cond_name(cfg->cond[i].family),
+                lm_cond_unit(cfg->cond[i].family));
+    fprintf(f, "\n|---|---:|");
+    for (int i = 0; i < cfg->ncond; i++) fprintf(f, "---:|");
+    fprintf(f, "\n");
+    for (size_t r = 0; r < json_array_size(runs); r++) {
+        const json_t *rec = json_array_get(runs, r);
+        fprintf(f, "| %s | %.2f |", str(rec, "preset"),
+                num(json_object_get(rec, "conditions"), "clean_psnr"));
+        for (int i = 0; i < cfg->ncond; i++) {
+            const json_t *fr = fam_rec(rec, lm_cond_name(cfg->cond[i].family));
+            const json_t *lv = json_object_get(fr, "levels");
+            double at = num(fr, "drop_3db");
+            if (!fr || !json_is_true(json_object_get(fr, "applies"))) fprintf(f, " n/a |");
+            else if (isfinite(at)) fprintf(f, " %.3g |", at);
+            else fprintf(f, " > %g |", num(json_array_get(lv, json_array_size(lv) - 1), "level"));
+        }
+        fprintf(f, "\n");
+    }
+    fprintf(f, "\n### PSNR per condition level\n\n| model | condition | level: PSNR (dB) |\n"
+               "|---|---|---|\n");
+    for (size_t r = 0; r < json_array_size(runs); r++)
+        for (int i = 0; i < cfg->ncond; i++) {
+            const json_t *rec = json_array_get(runs, r);
+            const json_t *fr = fam_rec(rec, lm_cond_name(cfg->cond[i].family));
+            const json_t *lv = json_object_get(fr, "levels");
+            if (!json_array_size(lv)) continue;
+            fprintf(f, "| %s | %s |", str(rec, "preset"), lm_cond_name(cfg->cond[i].family));
+            for (size_t k = 0; k < json_array_size(lv); k++) {
+                const json_t *l = json_array_get(lv, k);
+                fprintf(f, " %g: %.2f", num(l, "level"), num(l, "psnr"));
+                if (isfinite(num(l, "psnr_unaligned")))
+                    fprintf(f, " (unaligned %.2f)", num(l, "psnr_unaligned"));
+                fprintf(f, "%s", k + 1 < json_array_size(lv) ? ";" : "");
+            }
+            fprintf(f, " |\n");
+        }
+}
+
+static void md_narrowband(FILE *f, const lm_study_cfg *cfg, const json_t *nb)
+{
+    if (!json_array_size(nb)) return;
+    fprintf(f, "\n## Synthetic share of training and the rainbow\n\n%s trained with the same "
+               "budget at each synthetic share (narrowband textureless patches and procedural "
+               "scenes, data/dataset.h synth_fraction), then run through the rainbow test.\n\n"
+               "| synthetic share | rainbow peak error (nm) | rainbow max error (nm) | rainbow "
+               "PSNR | held-out PSNR %g %% |\n|---:|---:|---:|---:|---:|\n", cfg->nb_preset,
+            100.0 * cfg->noise[0]);
+    for (size_t i = 0; i < json_array_size(nb); i++) {
+        const json_t *r = json_array_get(nb, i), *rb = json_object_get(r, "rainbow");
+        fprintf(f, "| %g %% | %.2f | %.2f | %.2f | %.2f |\n", 100.0 * num(r, "synth_fraction"),
+                num(rb, "peak_error_mean_nm"), num(rb, "peak_error_max_nm"), num(rb, "psnr"),
+                level(r, 0, "psnr"));
+    }
+}
+
 static void md_held_out(FILE *f, const lm_study_cfg *cfg, const json_t *h)
 {
     const json_t *sc = json_object_get(h, "scenes");
@@ -187,13 +265,24 @@ static void write_md(FILE *f, const lm_study_cfg *cfg, const lm_study *s, const 
             cfg->rainbow);
     md_main_table(f, cfg, s->runs);
     md_detail_table(f, cfg, s->runs);
+    md_failure(f, cfg, s->runs);
+    md_narrowband(f, cfg, s->narrowband);
     if (!charts) return;
     fprintf(f, "\n## Charts\n\n");
     static const char *const ch[][2] = {
         {"accuracy_speed", "PSNR against seconds per frame, Pareto fronts"},
         {"noise_psnr", "PSNR against noise"}, {"noise_ssim", "SSIM against noise"},
         {"noise_sam", "SAM against noise"}, {"train_loss", "training loss"},
-        {"train_val_psnr", "validation PSNR during training"}};
+        {"train_val_psnr", "validation PSNR during training"},
+        {"rainbow_peaks", "rainbow: recovered against true peak per row"},
+        {"motion", "PSNR against motion speed, aligned and unaligned"},
+        {"narrowband", "rainbow accuracy against the synthetic share of training"},
+        {"failure_3db", "level of the 3-dB loss per condition"},
+        {"cond_photons", "PSNR against the photon budget"},
+        {"cond_saturation", "PSNR against exposure (saturation)"},
+        {"cond_led_gain", "PSNR against LED gain mis-calibration"},
+        {"cond_dead_pixels", "PSNR against dead pixels"},
+        {"cond_motion", "PSNR against motion speed (aligned)"}};
     char path[RPATH + 64];
     for (size_t i = 0; i < sizeof ch / sizeof ch[0]; i++) {
         snprintf(path, sizeof path, "%s/charts/%s.png", dir, ch[i][0]);

@@ -141,8 +141,9 @@ static json_t *metrics_json(const lm_metrics *m, double noise_pct)
 
 /* Mean metrics over the held-out scenes at every noise level. */
 static lm_status eval_held(lm_ctx *c, const lm_infer_model *im, const lm_study_cfg *cfg,
-                           const held *h, json_t *levels, lm_err *err)
+                           const held *h, json_t *levels, lm_study_cond_acc *ca, lm_err *err)
 {
+    int ncs = cfg->cond_scenes > 0 && cfg->cond_scenes < h->n ? cfg->cond_scenes : h->n;
     lm_tile_opts to;
     lm_tile_default_opts(&to);
     lm_rng base;
@@ -159,6 +160,8 @@ static lm_status eval_held(lm_ctx *c, const lm_infer_model *im, const lm_study_c
         st = lm_eval_prepare(&cube, im->model->mosaic.ty, im->model->mosaic.tx, err);
         lm_rng rs = lm_rng_split(&base, h->procedural ? h->seed[i] : fnv1a(h->name[i]));
         if (!st) st = lm_eval_scene(c, im, &cube, cfg->noise, cfg->nnoise, &to, &rs, m, err);
+        if (!st && ca && cfg->ncond > 0 && i < ncs)
+            st = lm_study_cond_add(c, im, cfg, &cube, &rs, ca, err);
         lm_cube_free(&cube);
         if (st) return st;
         for (int k = 0; k < cfg->nnoise; k++) lm_metrics_acc_add(&acc[k], &m[k]);
@@ -176,12 +179,12 @@ static int cmp_double(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-/* Seconds of lm_tile_infer on a frame_h x frame_w coded frame (uniform random values: the cost
+/* Seconds of lm_eval_reconstruct on a frame_h x frame_w input frame (uniform random values: the cost
  * does not depend on the content), each of timing_repeats runs; rec gets min, median, all. */
-static lm_status time_frame(lm_ctx *c, lm_model *m, const lm_study_cfg *cfg, json_t *rec,
-                            lm_err *err)
+static lm_status time_frame(lm_ctx *c, const lm_infer_model *im, const lm_study_cfg *cfg,
+                           json_t *rec, lm_err *err)
 {
-    size_t n = (size_t)cfg->frame_h * (size_t)cfg->frame_w;
+    size_t n = (size_t)im->model->in_channels * cfg->frame_h * (size_t)cfg->frame_w;
     float *frame = malloc(n * sizeof *frame);
     double t[100];
     if (!frame) return lm_err_set(err, LM_ERR_NOMEM, "study: out of memory (frame)");
@@ -195,7 +198,7 @@ static lm_status time_frame(lm_ctx *c, lm_model *m, const lm_study_cfg *cfg, jso
     for (int k = 0; !st && k < cfg->timing_repeats; k++) {
         lm_cube cube;
         double t0 = omp_get_wtime();
-        st = lm_tile_infer(c, m, frame, cfg->frame_h, cfg->frame_w, &to, &cube, err);
+        st = lm_eval_reconstruct(c, im, frame, cfg->frame_h, cfg->frame_w, &to, 0, &cube, err);
         t[k] = omp_get_wtime() - t0;
         if (!st) lm_cube_free(&cube);
         json_array_append_new(runs, json_real(t[k]));
@@ -218,11 +221,21 @@ static lm_status count_costs(lm_model *m, const lm_study_cfg *cfg, json_t *rec, 
     lm_tile_default_opts(&to);
     if (lm_tile_check(&to, cfg->frame_h, cfg->frame_w, m->mosaic.ty, m->mosaic.tx, err))
         return err->status;
+    if (m->in_channels != 1) { /* lm_model_profile runs a 1-channel input: parameters only */
+        json_object_set_new(rec, "params", json_integer(lm_params_count(&m->params, 0)));
+        json_object_set_new(rec, "trainable_params", json_integer(lm_params_count(&m->params, 1)));
+        json_object_set_new(rec, "macs_per_frame", json_null());
+        json_object_set_new(rec, "frame", json_pack("[i,i]", cfg->frame_h, cfg->frame_w));
+        return LM_OK;
+    }
     lm_profile p;
-    lm_status st = lm_model_profile(m, 1, to.win_h, to.win_w, &p, err);
+    int whole = !strcmp(m->family, "mst"); /* MST++ runs on the whole frame (lm_eval_reconstruct) */
+    lm_status st = whole ? lm_model_profile(m, 1, cfg->frame_h, cfg->frame_w, &p, err)
+                         : lm_model_profile(m, 1, to.win_h, to.win_w, &p, err);
     if (!st) {
-        long win = (long)lm_tile_positions(cfg->frame_h, to.win_h, to.stride_y, NULL, 0) *
-                   lm_tile_positions(cfg->frame_w, to.win_w, to.stride_x, NULL, 0);
+        long win = whole ? 1
+                         : (long)lm_tile_positions(cfg->frame_h, to.win_h, to.stride_y, NULL, 0) *
+                               lm_tile_positions(cfg->frame_w, to.win_w, to.stride_x, NULL, 0);
         json_object_set_new(rec, "params", json_integer(p.model_params));
         json_object_set_new(rec, "trainable_params", json_integer(p.trainable_params));
         json_int_t macs = (json_int_t)llround(p.total_macs); /* a count: exact in a double */
@@ -245,9 +258,10 @@ static json_t *rainbow_json(const lm_eval_rainbow *rb)
     return o;
 }
 
-/* Evaluation, rainbow, timing and costs of the trained run into rec. */
+/* Evaluation, rainbow, and (unless light: the narrowband sweep's runs) conditions, timing and
+ * costs of the trained run into rec. */
 static lm_status measure(const lm_study_cfg *cfg, const char *rundir, const held *h, int threads,
-                         json_t *rec, FILE *log, lm_err *err)
+                         int light, json_t *rec, FILE *log, lm_err *err)
 {
     lm_infer_model im;
     if (lm_infer_model_load(rundir, NULL, &im, err)) return err->status;
@@ -259,7 +273,13 @@ static lm_status measure(const lm_study_cfg *cfg, const char *rundir, const held
     json_t *levels = json_array();
     json_object_set_new(rec, "threads", json_integer(lm_nthreads(&c)));
     double t0 = omp_get_wtime();
-    lm_status st = eval_held(&c, &im, cfg, h, levels, err);
+    lm_study_cond_acc *ca = cfg->ncond > 0 && !light ? malloc(sizeof *ca) : NULL;
+    if (ca) lm_study_cond_init(ca);
+    lm_status st = cfg->ncond > 0 && !light && !ca
+                 ? lm_err_set(err, LM_ERR_NOMEM, "study: out of memory") : LM_OK;
+    if (!st) st = eval_held(&c, &im, cfg, h, levels, ca, err);
+    if (!st && ca) json_object_set_new(rec, "conditions", lm_study_cond_json(cfg, &im, ca));
+    free(ca);
     json_object_set_new(rec, "eval", json_pack("{s:s, s:i, s:o}", "kind",
                         h->procedural ? "procedural" : "test_split", "scenes", h->n,
                         "levels", levels));
@@ -268,21 +288,33 @@ static lm_status measure(const lm_study_cfg *cfg, const char *rundir, const held
         lm_tile_default_opts(&to);
         lm_eval_rainbow rb;
         st = lm_eval_rainbow_run(&c, &im, cfg->rainbow, &to, &rb, err);
-        if (!st) json_object_set_new(rec, "rainbow", rainbow_json(&rb));
+        json_t *rj = st ? NULL : rainbow_json(&rb);
+        if (!st) st = lm_study_rainbow_rows(&c, &im, cfg->rainbow, rj, err);
+        if (!st) json_object_set_new(rec, "rainbow", rj);
+        else json_decref(rj);
     }
     if (!st) fprintf(log, "study: %s evaluated (%.1f s)\n", im.model->preset, omp_get_wtime() - t0);
-    if (!st) st = time_frame(&c, im.model, cfg, rec, err);
-    if (!st) st = count_costs(im.model, cfg, rec, err);
+    if (!st && !light) st = time_frame(&c, &im, cfg, rec, err);
+    if (!st && !light) st = count_costs(im.model, cfg, rec, err);
     lm_ctx_free(&c);
     lm_infer_model_free(&im);
     return st;
 }
 
-static lm_status train_preset(const lm_study_cfg *cfg, const char *preset, const char *rundir,
+/* One run: a preset and its name (the folder under runs/), and for the narrowband sweep the
+ * training synth_fraction (synth < 0: the config's) and a light measurement. */
+typedef struct run_spec {
+    const char *preset, *name;
+    float synth;
+} run_spec;
+
+static lm_status train_preset(const lm_study_cfg *cfg, const run_spec *rs, const char *rundir,
                               const lm_study_opts *o, json_t *rec, lm_err *err)
 {
     lm_train_cfg tc = cfg->train;
-    snprintf(tc.model, sizeof tc.model, "%s", preset);
+    const char *preset = rs->name;
+    snprintf(tc.model, sizeof tc.model, "%s", rs->preset);
+    if (rs->synth >= 0.0f) tc.synth_fraction = rs->synth;
     if (snprintf(tc.output, sizeof tc.output, "%s", rundir) >= (int)sizeof tc.output)
         return lm_err_set(err, LM_ERR_ARG, "%s: path too long", rundir);
     tc.threads = o->threads;
@@ -329,9 +361,10 @@ static lm_status write_json_atomic(json_t *j, const char *path, lm_err *err)
     return LM_OK;
 }
 
-static lm_status run_preset(const lm_study_cfg *cfg, const char *dir, const char *preset,
+static lm_status run_preset(const lm_study_cfg *cfg, const char *dir, const run_spec *rs,
                             const held *h, const lm_study_opts *o, json_t **out, lm_err *err)
 {
+    const char *preset = rs->name;
     char rundir[PATH_MAX_LEN], respath[PATH_MAX_LEN + 16];
     snprintf(rundir, sizeof rundir, "%s/runs/%s", dir, preset);
     snprintf(respath, sizeof respath, "%s/result.json", rundir);
@@ -347,9 +380,11 @@ static lm_status run_preset(const lm_study_cfg *cfg, const char *dir, const char
     }
     char rel[128];
     snprintf(rel, sizeof rel, "runs/%s", preset);
-    json_t *rec = json_pack("{s:s, s:s}", "preset", preset, "run", rel);
-    lm_status st = train_preset(cfg, preset, rundir, o, rec, err);
-    if (!st) st = measure(cfg, rundir, h, o->threads, rec, o->log, err);
+    json_t *rec = json_pack("{s:s, s:s}", "preset", rs->preset, "run", rel);
+    if (rs->synth >= 0.0f)
+        json_object_set_new(rec, "synth_fraction", json_real(nearbyint(rs->synth * 1e4) / 1e4));
+    lm_status st = train_preset(cfg, rs, rundir, o, rec, err);
+    if (!st) st = measure(cfg, rundir, h, o->threads, rs->synth >= 0.0f, rec, o->log, err);
     if (!st) st = write_json_atomic(rec, respath, err);
     if (st) json_decref(rec);
     else *out = rec;
@@ -377,8 +412,19 @@ lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_
     out->runs = json_array();
     for (int i = 0; !st && i < cfg->npresets; i++) {
         json_t *rec = NULL;
-        st = run_preset(cfg, dir, cfg->presets[i], &h, &o, &rec, err);
+        run_spec rs = {cfg->presets[i], cfg->presets[i], -1.0f};
+        st = run_preset(cfg, dir, &rs, &h, &o, &rec, err);
         if (!st) json_array_append_new(out->runs, rec);
+    }
+    if (cfg->nnb > 0) out->narrowband = json_array();
+    for (int i = 0; !st && i < cfg->nnb; i++) { /* the narrowband sweep: light records */
+        json_t *rec = NULL;
+        char name[96];
+        snprintf(name, sizeof name, "%s@synth%03d", cfg->nb_preset,
+                 (int)lrintf(100.0f * cfg->nb_fraction[i]));
+        run_spec rs = {cfg->nb_preset, name, cfg->nb_fraction[i]};
+        st = run_preset(cfg, dir, &rs, &h, &o, &rec, err);
+        if (!st) json_array_append_new(out->narrowband, rec);
     }
     held_free(&h);
     if (st) lm_study_free(out);
@@ -389,5 +435,6 @@ void lm_study_free(lm_study *s)
 {
     json_decref(s->held_out);
     json_decref(s->runs);
-    s->held_out = s->runs = NULL;
+    json_decref(s->narrowband);
+    s->held_out = s->runs = s->narrowband = NULL;
 }

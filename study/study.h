@@ -15,11 +15,20 @@
 #ifndef LM_STUDY_H
 #define LM_STUDY_H
 #include <stdio.h>
+#include "infer/conditions.h"
 #include "infer/eval.h"
 #include "train/train.h"
 
 #define LM_STUDY_CFG_VERSION 1
 #define LM_STUDY_MAX_PRESETS 32
+#define LM_STUDY_MAX_FRACTIONS 8
+
+/* One condition family of the failure study (infer/conditions.h) and its sweep. */
+typedef struct lm_study_cond {
+    lm_cond_family family;
+    double levels[LM_COND_MAX_LEVELS];  /* mild to severe */
+    int nlevels;
+} lm_study_cond;
 
 struct json_t;
 
@@ -35,18 +44,28 @@ typedef struct lm_study_cfg {
     int rainbow;                     /* rainbow scene size (0 = skip) */
     int frame_h, frame_w;            /* timed frame (480 x 640) */
     int timing_repeats;              /* timed runs per model (min and median reported) */
+    lm_study_cond cond[LM_COND_NFAMILIES]; /* failure conditions (config order) */
+    int ncond;
+    int cond_scenes;                 /* held-out scenes used for them (0 = all) */
+    char nb_preset[64];              /* narrowband sweep preset ("" = no sweep) */
+    float nb_fraction[LM_STUDY_MAX_FRACTIONS]; /* its training synth_fraction values */
+    int nnb;
     char output[LM_TRAIN_PATH_LEN];  /* default output folder ("" = none given) */
     char path[LM_TRAIN_PATH_LEN];    /* the config file */
 } lm_study_cfg;
 
 /* Defaults: no presets, lm_train_cfg_default with 2000 iterations, noise 0,5,10,15,20 %,
- * 8 procedural scenes of 132 x 128, rainbow 256, frame 480 x 640, 3 timing repeats. */
+ * 8 procedural scenes of 132 x 128, rainbow 256, frame 480 x 640, 3 timing repeats, no
+ * conditions, no narrowband sweep. */
 void lm_study_cfg_default(lm_study_cfg *cfg);
 /* Load a study config. Fields (all optional but "presets" and "data"):
  *   version 1; presets [names]; data [paths, relative to the config's folder]; system;
  *   iterations; seed; patch "HxW"; synth_fraction; train {any other lm_train_cfg field
  *   except model, data, output}; noise [percent levels]; eval_scenes; eval_size "HxW";
- *   rainbow; frame "HxW"; timing_repeats; output.
+ *   rainbow; frame "HxW"; timing_repeats; output;
+ *   conditions [{"family": photons|saturation|led_gain|dead_pixels|motion, "levels": [...]
+ *   (optional: the family's default sweep)}]; condition_scenes (first N held-out scenes);
+ *   narrowband_sweep {"preset": name, "fractions": [synth shares 0..1]}.
  * Errors (LM_ERR_IO / LM_ERR_FORMAT / LM_ERR_ARG) are one line naming the file and the field. */
 lm_status lm_study_cfg_load(lm_study_cfg *cfg, const char *path, lm_err *err);
 
@@ -60,6 +79,8 @@ typedef struct lm_study_opts {
 typedef struct lm_study {
     struct json_t *held_out;  /* {"kind": "test_split" | "procedural", "scenes": [...], ...} */
     struct json_t *runs;      /* array of per-preset objects (see results.c for the fields) */
+    struct json_t *narrowband;/* array of the narrowband sweep's records (NULL = no sweep):
+                               * {"preset", "run", "synth_fraction", "train", "eval", "rainbow"} */
 } lm_study;
 
 /* Run (or resume) the study into dir (created if missing). On error the records of the
@@ -72,6 +93,30 @@ void lm_study_free(lm_study *s);
  * chart files exist in <dir>/charts/ (results.md links them). */
 lm_status lm_study_write(const lm_study_cfg *cfg, const lm_study *s, const char *dir,
                          int charts, lm_err *err);
+
+/* ---- inside the study (study/conds.c) --------------------------------------------------- */
+/* Means over scenes of the clean score and of each configured (family, level). */
+typedef struct lm_study_cond_acc {
+    lm_metrics_acc clean;
+    lm_metrics_acc m[LM_COND_NFAMILIES][LM_COND_MAX_LEVELS]; /* aligned for motion */
+    lm_metrics_acc u[LM_COND_NFAMILIES][LM_COND_MAX_LEVELS]; /* motion unaligned */
+    int nscenes;
+} lm_study_cond_acc;
+void lm_study_cond_init(lm_study_cond_acc *a);
+/* One prepared held-out scene through every configured condition (families that do not apply
+ * to the model are skipped); rs: the scene's generator. */
+lm_status lm_study_cond_add(lm_ctx *c, const lm_infer_model *im, const lm_study_cfg *cfg,
+                            const lm_cube *truth, const lm_rng *rs, lm_study_cond_acc *a,
+                            lm_err *err);
+/* {"scenes", "clean_psnr", "drop_db": 3, "families": [{"family", "unit", "applies",
+ * "levels": [{"level", "psnr", "ssim", "sam", "psnr_unaligned" (motion)}], "drop_3db": level
+ * or null, "beyond_last_level"}]} */
+struct json_t *lm_study_cond_json(const lm_study_cfg *cfg, const lm_infer_model *im,
+                                  const lm_study_cond_acc *a);
+/* The rainbow (size x size, no noise) reconstructed; rb["rows_true_recovered_nm"] = per row
+ * [true peak, recovered peak] (lm_eval_peak_nm of the row-averaged spectrum). */
+lm_status lm_study_rainbow_rows(lm_ctx *c, const lm_infer_model *im, int size,
+                                struct json_t *rb, lm_err *err);
 
 /* Index of the noise level closest to pct percent. */
 int lm_study_noise_index(const lm_study_cfg *cfg, double pct);

@@ -1,6 +1,10 @@
 #!/usr/bin/env bash
 # study.sh — end-to-end tests of `lumosaic study` on study/ci.json (linear + mcan-tiny, 100
-# iterations each on balloons_crop100, noise 0 and 10 %): results.json/csv/md exist, the table
+# iterations each on balloons_crop100, noise 0 and 10 %; the five failure conditions on one
+# scene; a narrowband sweep of linear at synthetic shares 0/33/66/100 %): the conditions'
+# records (clean first levels equal the clean PSNR, the 3-dB points recomputed here from the
+# levels, at least one crossing), the rainbow's per-row peaks (true peaks by formula, mean
+# error consistent), the sweep's light records; results.json/csv/md exist, the table
 # has a row per preset, the records have sane fields (parameters and multiply-adds larger for
 # mcan-tiny, PSNR(0) >= PSNR(10) - 0.5 dB, rainbow), the held-out set is procedural (the scene
 # hashes into train) and the output says so; the chart scripts, PNGs and SVGs exist and the
@@ -54,8 +58,62 @@ assert runs["mcan-tiny"]["macs_per_frame"] > runs["linear"]["macs_per_frame"]
 PY
 check "results.json fields" [ $? -eq 0 ]
 
+# conditions, the 3-dB points (recomputed here from the levels), rainbow rows, narrowband sweep
+python3 - "$S/results.json" <<'PY'
+import json, math, sys
+j = json.load(open(sys.argv[1]))
+want = [("photons", [1000, 100, 30]), ("saturation", [1, 2, 4, 16]), ("led_gain", [0, 5, 20]),
+        ("dead_pixels", [0, 1, 5, 30]), ("motion", [0, 120, 480])]
+def crossing(lv, p, clean):
+    thr = clean - 3.0
+    for i in range(len(p)):
+        if not (p[i] > thr):
+            if i == 0: return lv[0]
+            return lv[i - 1] + (p[i - 1] - thr) / (p[i - 1] - p[i]) * (lv[i] - lv[i - 1])
+    return None
+crossed = 0
+for r in j["runs"]:
+    c = r["conditions"]
+    assert c["scenes"] == 1 and c["drop_db"] == 3 and 5 < c["clean_psnr"] < 100, c
+    assert [f["family"] for f in c["families"]] == [w[0] for w in want]
+    for f, (name, lv) in zip(c["families"], want):
+        assert f["applies"] and [l["level"] for l in f["levels"]] == lv, f
+        ps = [l["psnr"] for l in f["levels"]]
+        if name in ("saturation", "led_gain", "dead_pixels"):  # first level = the clean frame
+            assert abs(ps[0] - c["clean_psnr"]) < 1e-9, (name, ps[0], c["clean_psnr"])
+        if name == "motion":
+            assert all(5 < l["psnr_unaligned"] < 100 for l in f["levels"])
+        x = crossing(lv, ps, c["clean_psnr"])
+        if x is None:
+            assert f["drop_3db"] is None and f["beyond_last_level"], f
+        else:
+            assert abs(f["drop_3db"] - x) < 1e-6 * max(1, abs(x)) and not f["beyond_last_level"], (f, x)
+            crossed += 1
+    sat = [l["psnr"] for l in c["families"][1]["levels"]]
+    assert sat[-1] < sat[0] - 1, sat  # x16 exposure clips most of the frame
+    rows = r["rainbow"]["rows_true_recovered_nm"]
+    assert len(rows) == 96
+    for y, (t, g) in enumerate(rows):
+        assert abs(t - (400 + 300 * (95 - y) / 95)) < 1e-6 and 380 <= g <= 720, (y, t, g)
+    err = sum(abs(g - t) for t, g in rows) / len(rows)
+    assert abs(err - r["rainbow"]["peak_error_mean_nm"]) < 1e-3, (err, r["rainbow"])
+assert crossed >= 1, "no 3-dB crossing exercised"
+nb = j["narrowband_sweep"]
+assert [n["synth_fraction"] for n in nb] == [0, 0.33, 0.66, 1], nb
+for n, tag in zip(nb, ["000", "033", "066", "100"]):
+    assert n["preset"] == "linear" and n["run"] == "runs/linear@synth" + tag, n
+    assert n["train"]["iterations"] == 100 and 0 <= n["rainbow"]["peak_error_mean_nm"] <= 300
+    assert "conditions" not in n and "seconds_per_frame" not in n  # light records
+PY
+check "conditions, 3-dB points, rainbow rows, narrowband sweep" [ $? -eq 0 ]
+check "results.md: failure table" grep -qE '^\| linear \| [0-9.]+ \|( [>0-9.e+ ]+ \|){5}$' "$S/results.md"
+check "results.md: narrowband table" grep -qE '^\| 66 % \| [0-9.]+ \|' "$S/results.md"
+check "narrowband run trained" [ -s "$S/runs/linear@synth066/model.safetensors" ]
+
 C=$S/charts
-for c in accuracy_speed noise_psnr noise_ssim noise_sam train_loss train_val_psnr; do
+for c in accuracy_speed noise_psnr noise_ssim noise_sam train_loss train_val_psnr rainbow_peaks \
+         motion narrowband failure_3db cond_photons cond_saturation cond_led_gain \
+         cond_dead_pixels cond_motion; do
   check "chart $c.gp" [ -s "$C/$c.gp" ]
   check "chart $c.png is a PNG" bash -c "head -c 8 '$C/$c.png' | od -An -c | grep -q 'P   N   G'"
   check "chart $c.svg is an SVG" grep -q '<svg' "$C/$c.svg"
@@ -82,6 +140,7 @@ cp "$S/runs/linear/result.json" "$T/linear.json"
 check "resume run: $(cat "$T/err2")" [ $? -eq 0 ]
 check "resume skips linear" grep -q "linear: done before" "$T/err2"
 check "resume skips mcan-tiny" grep -q "mcan-tiny: done before" "$T/err2"
+check "resume skips the narrowband runs" [ "$(grep -c 'linear@synth[0-9]*: done before' "$T/err2")" -eq 4 ]
 check_not "resume trains nothing" grep -q "training for" "$T/err2"
 check "weights untouched" cmp -s "$T/mcan.st" "$S/runs/mcan-tiny/model.safetensors"
 rm "$S/runs/linear/result.json"
@@ -93,6 +152,7 @@ python3 - "$T/linear.json" "$S/runs/linear/result.json" <<'PY'
 import json, sys
 a, b = (json.load(open(p)) for p in sys.argv[1:])
 assert a["eval"] == b["eval"] and a["params"] == b["params"] and a["rainbow"] == b["rainbow"]
+assert a["conditions"] == b["conditions"]
 assert b["train"]["resumed"] and b["train"]["iterations"] == 100
 PY
 check "re-measured record: same metrics (deterministic)" [ $? -eq 0 ]
@@ -120,6 +180,11 @@ bad nodata "field 'data'" '{"version": 1, "presets": ["linear"]}'
 bad noise "field 'noise[1]'" '{"version": 1, "presets": ["linear"], '"$D"', "noise": [0, 200]}'
 bad trainmodel "field 'train.model'" '{"version": 1, "presets": ["linear"], '"$D"', "train": {"model": "han-tiny"}}'
 bad trainfield "batch" '{"version": 1, "presets": ["linear"], '"$D"', "train": {"batch": 0}}'
+bad condfam "conditions[0]" '{"version": 1, "presets": ["linear"], '"$D"', "conditions": [{"family": "fog"}]}'
+bad condlevel "conditions[0].levels[1]" '{"version": 1, "presets": ["linear"], '"$D"', "conditions": [{"family": "saturation", "levels": [1, 0.5]}]}'
+bad condtwice "family 'motion' twice" '{"version": 1, "presets": ["linear"], '"$D"', "conditions": [{"family": "motion"}, {"family": "motion"}]}'
+bad nbfrac "narrowband_sweep.fractions[1]" '{"version": 1, "presets": ["linear"], '"$D"', "narrowband_sweep": {"preset": "linear", "fractions": [0, 2]}}'
+bad nbpreset "narrowband_sweep" '{"version": 1, "presets": ["linear"], '"$D"', "narrowband_sweep": {"preset": "nonet", "fractions": [0]}}'
 bad missingdata "nothing_here" '{"version": 1, "presets": ["linear"], "data": ["nothing_here"]}'
 expect_error "missing config file" 2 "cannot open" "$T/o1" -- "$LM" study --config "$T/none.json" --output "$T/o1"
 expect_error "missing --config" 2 "--config is required" "$T/o2" -- "$LM" study --output "$T/o2"
