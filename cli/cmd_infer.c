@@ -9,6 +9,9 @@
  * with frames i-1, i, i+1 (edge frames as align.h says) and re-mosaicked before reconstruction;
  * only three frames' sub-images are held at a time (read one frame ahead). --device opencl runs
  * the network on an OpenCL device, the weights uploaded once for the run (lm_tile_device).
+ * Models with a finite receptive field (linear, rt-*: lm_whole_halo > 0) run on the whole frame
+ * in strips (infer/whole.h) unless --tiles. --model auto picks a model per window from a
+ * calibration file (infer/auto.h, `lumosaic calibrate`) and prints the share of each model.
  * What it is not: the flow or the alignment scheme themselves (infer/flow.c, infer/align.c). */
 #include <omp.h>
 #include <stdio.h>
@@ -21,20 +24,31 @@
 #include "data/image.h"
 #include "data/srgb.h"
 #include "infer/align.h"
+#include "infer/auto.h"
 #include "infer/model_io.h"
 #include "infer/tile.h"
+#include "infer/whole.h"
 
 static void help(void)
 {
     printf("usage: lumosaic infer --model RUN --input FRAMES --output DIR [--batch N]\n"
-           "                      [--threads T] [--system FILE] [--no-align]\n"
-           "                      [--device cpu|opencl]\n\n"
+           "                      [--threads T] [--system FILE] [--no-align] [--tiles]\n"
+           "                      [--device cpu|opencl] [--auto FILE --auto-tol DB]\n\n"
            "Reconstruct 31-band cubes (400-700 nm) from coded frames with a trained model,\n"
            "patch-wise: 66 x 64 windows, stride 30 x 32, on the tile grid, blended by a raised-\n"
-           "cosine weight. Writes DIR/cube_NNNN.exr (spectral OpenEXR, channels T.<nm>nm;\n"
+           "cosine weight; models with a finite receptive field (linear, rt-8, rt-16) instead\n"
+           "run on the whole frame in strips (same result away from window borders, ~4x less\n"
+           "work) unless --tiles. Writes DIR/cube_NNNN.exr (spectral OpenEXR, channels T.<nm>nm;\n"
            "negative outputs clamped to 0) and DIR/srgb_NNNN.png (D65 preview) per frame.\n\n"
            "  --model RUN      a training run folder (its model.safetensors) or a .safetensors\n"
-           "                   file written by 'lumosaic train'\n"
+           "                   file written by 'lumosaic train'; or 'auto' (with --auto):\n"
+           "                   per window, the cheapest calibrated model whose expected PSNR\n"
+           "                   is within --auto-tol dB of the best model's (patch-wise only;\n"
+           "                   prints the share of windows per model)\n"
+           "  --auto FILE      calibration written by 'lumosaic calibrate' (for --model auto)\n"
+           "  --auto-tol DB    accuracy the auto choice may give up per window, in dB of\n"
+           "                   expected PSNR (>= 0; default 0.5; 0 = always the best model)\n"
+           "  --tiles          patch-wise even for models that can run on the whole frame\n"
            "  --input FRAMES   one coded frame (.png/.tif/.exr), a numbered pattern\n"
            "                   (frame_%%04d.png) or a folder of frames; the size must be a\n"
            "                   multiple of the mosaic tile and at least 66 x 64\n"
@@ -54,15 +68,16 @@ static void help(void)
 }
 
 typedef struct infer_opts {
-    const char *model, *input, *output, *system, *device;
+    const char *model, *input, *output, *system, *device, *auto_file;
     long long batch, threads;
-    int no_align;
+    double auto_tol;
+    int no_align, tiles, is_auto;
 } infer_opts;
 
 /* 1: run, 0: help printed, 2: bad usage (printed). */
 static int parse(lm_cli *c, infer_opts *o)
 {
-    *o = (infer_opts){.batch = 8};
+    *o = (infer_opts){.batch = 8, .auto_tol = 0.5};
     while (!lm_cli_done(c)) {
         int r;
         if (lm_cli_is_help(c)) {
@@ -74,6 +89,9 @@ static int parse(lm_cli *c, infer_opts *o)
             (r = lm_cli_value(c, "--output", &o->output)) ||
             (r = lm_cli_value(c, "--system", &o->system)) ||
             (r = lm_cli_value(c, "--device", &o->device)) ||
+            (r = lm_cli_value(c, "--auto", &o->auto_file)) ||
+            (r = lm_cli_real(c, "--auto-tol", 0.0, 1e6, &o->auto_tol)) ||
+            (r = lm_cli_flag(c, "--tiles", &o->tiles)) ||
             (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
             (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
             (r = lm_cli_flag(c, "--no-align", &o->no_align))) {
@@ -85,6 +103,11 @@ static int parse(lm_cli *c, infer_opts *o)
     if (!o->model) return lm_cli_error(c, "--model is required (see 'lumosaic infer --help')");
     if (!o->input) return lm_cli_error(c, "--input is required (see 'lumosaic infer --help')");
     if (!o->output) return lm_cli_error(c, "--output is required (see 'lumosaic infer --help')");
+    o->is_auto = !strcmp(o->model, "auto");
+    if (o->is_auto && !o->auto_file)
+        return lm_cli_error(c, "--model auto needs --auto FILE (see 'lumosaic calibrate')");
+    if (!o->is_auto && o->auto_file)
+        return lm_cli_error(c, "--auto is only for --model auto");
     return 1;
 }
 
@@ -111,6 +134,11 @@ typedef struct infer_run {
     const lm_cli *c;
     const infer_opts *o;
     lm_infer_model im;
+    lm_infer_model more[LM_AUTO_MAX_MODELS]; /* auto: models 1.. (model 0 is im) */
+    lm_model *models[LM_AUTO_MAX_MODELS];
+    lm_auto_calib cal;
+    int choice[LM_AUTO_MAX_BINS], whole;
+    long windows[LM_AUTO_MAX_MODELS];
     lm_frame_seq seq;
     lm_srgb srgb;
     lm_ctx ctx;
@@ -227,13 +255,70 @@ static lm_status frame_input(infer_run *r, int i, lm_frame *f, const float **dat
     return LM_OK;
 }
 
+/* --model auto on one frame: difficulty per window, its bin's model, the mixed fold. */
+static lm_status auto_frame(infer_run *r, const float *in, int H, int W, lm_tile_opts *to,
+                            lm_cube *cube, lm_err *e)
+{
+    const lm_auto_calib *a = &r->cal;
+    to->win_h = a->win_h, to->win_w = a->win_w, to->stride_y = a->stride_y,
+    to->stride_x = a->stride_x;
+    const lm_mosaic *mo = &r->im.model->mosaic;
+    if (lm_tile_check(to, H, W, mo->ty, mo->tx, e)) return e->status;
+    int n = lm_auto_window_count(H, W, to);
+    double *d = malloc(sizeof(double) * n);
+    int *wm = malloc(sizeof(int) * n);
+    lm_status st = d && wm ? LM_OK : lm_err_set(e, LM_ERR_NOMEM, "out of memory");
+    if (!st) st = lm_auto_frame_difficulty(a->measure, in, H, W, mo->ty, mo->tx, to,
+                                           lm_nthreads(&r->ctx), d, e);
+    for (int i = 0; i < n && !st; i++) wm[i] = r->choice[lm_auto_bin(a, d[i])];
+    long win[LM_AUTO_MAX_MODELS] = {0};
+    if (!st) st = lm_auto_infer(&r->ctx, r->models, a->nmodels, wm, in, H, W, to, cube, win, e);
+    if (!st) {
+        fprintf(stderr, "auto:");
+        for (int m = 0; m < a->nmodels; m++) {
+            fprintf(stderr, " %s %.0f%%", a->models[m].preset, 100.0 * win[m] / n);
+            r->windows[m] += win[m];
+        }
+        fprintf(stderr, " of %d windows\n", n);
+    }
+    free(d);
+    free(wm);
+    return st;
+}
+
+/* One frame to a 31-band cube by the run's path: auto, whole frame or windows. */
+static lm_status reconstruct(infer_run *r, const float *in, int H, int W, lm_cube *cube,
+                             lm_err *e)
+{
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    to.batch = (int)r->o->batch;
+    if (r->o->is_auto) return auto_frame(r, in, H, W, &to, cube, e);
+    if (r->whole) return lm_whole_infer(&r->ctx, r->im.model, in, H, W, cube, e);
+    return lm_tile_infer(&r->ctx, r->im.model, in, H, W, &to, cube, e);
+}
+
+/* The share of windows per model over the run and the calibration's expected PSNR. */
+static void auto_summary(const infer_run *r)
+{
+    const lm_auto_calib *a = &r->cal;
+    long tot = 0;
+    for (int m = 0; m < a->nmodels; m++) tot += r->windows[m];
+    int best = 0;
+    for (int m = 1; m < a->nmodels; m++)
+        if (lm_auto_expected_psnr(a, NULL, m) > lm_auto_expected_psnr(a, NULL, best)) best = m;
+    printf("auto (tol %g dB): %ld windows:", r->o->auto_tol, tot);
+    for (int m = 0; m < a->nmodels; m++)
+        printf(" %s %.1f%%", a->models[m].preset, tot ? 100.0 * r->windows[m] / tot : 0.0);
+    printf("\ncalibration: expected PSNR %.2f dB with this choice, %.2f dB always %s\n",
+           lm_auto_expected_psnr(a, r->choice, 0), lm_auto_expected_psnr(a, NULL, best),
+           a->models[best].preset);
+}
+
 static int run_frames(infer_run *r)
 {
     lm_err e;
     lm_err_clear(&e);
-    lm_tile_opts to;
-    lm_tile_default_opts(&to);
-    to.batch = (int)r->o->batch;
     for (int i = 0; i < r->seq.count; i++) {
         double t0 = omp_get_wtime();
         lm_frame f;
@@ -245,8 +330,8 @@ static int run_frames(infer_run *r)
             return fail(r->c, &e, 0);
         }
         double ta = omp_get_wtime();
-        st = lm_tile_infer(&r->ctx, r->im.model, in, f.height ? f.height : r->seq.height,
-                           f.width ? f.width : r->seq.width, &to, &cube, &e);
+        st = reconstruct(r, in, f.height ? f.height : r->seq.height,
+                         f.width ? f.width : r->seq.width, &cube, &e);
         lm_frame_free(&f);
         double t1 = omp_get_wtime();
         if (st) {
@@ -266,13 +351,42 @@ static int run_frames(infer_run *r)
         fprintf(stderr, "frame %d/%d %s: %.2f s (%s, reconstruction %.2f s, writing %.2f s)\n",
                 i + 1, r->seq.count, r->seq.paths[i], t2 - t0, al, t1 - ta, t2 - t1);
     }
+    if (r->o->is_auto) auto_summary(r);
     return 0;
 }
 
 /* Everything that can be checked before any output is created: model, frames, frame size. */
+/* --model auto: the calibration, its models (model 0 into r->im), the choice per bin. */
+static int open_auto(infer_run *r, lm_err *e)
+{
+    lm_auto_calib *a = &r->cal;
+    if (lm_auto_load(r->o->auto_file, a, e)) return fail(r->c, e, 0);
+    if (r->o->device && strcmp(r->o->device, "cpu"))
+        return lm_cli_error(r->c, "--model auto runs on the cpu only");
+    for (int m = 0; m < a->nmodels; m++) {
+        lm_infer_model *im = m ? &r->more[m] : &r->im;
+        if (lm_infer_model_load(a->models[m].path, r->o->system, im, e))
+            return lm_cli_error(r->c, "%s: model %d: %s", r->o->auto_file, m, e->msg);
+        r->models[m] = im->model;
+        if (im->model->mosaic.ty != r->im.model->mosaic.ty ||
+            im->model->mosaic.tx != r->im.model->mosaic.tx ||
+            im->model->out_channels != LM_MODEL_OUT_CHANNELS)
+            return lm_cli_error(r->c, "%s: models '%s' and '%s' do not fit the same system",
+                                r->o->auto_file, a->models[0].path, a->models[m].path);
+    }
+    lm_auto_choose(a, r->o->auto_tol, r->choice);
+    return 0;
+}
+
 static int open_inputs(infer_run *r, lm_err *e)
 {
-    if (lm_infer_model_load(r->o->model, r->o->system, &r->im, e)) return fail(r->c, e, 0);
+    if (r->o->is_auto) {
+        int rc = open_auto(r, e);
+        if (rc) return rc;
+    } else if (lm_infer_model_load(r->o->model, r->o->system, &r->im, e)) {
+        return fail(r->c, e, 0);
+    }
+    r->whole = !r->o->is_auto && !r->o->tiles && lm_whole_halo(r->im.model) > 0;
     if (lm_frame_seq_open(r->o->input, &r->seq, e)) return fail(r->c, e, 0);
     lm_tile_opts to;
     lm_tile_default_opts(&to);
@@ -313,8 +427,10 @@ int lm_cmd_infer(int argc, char **argv)
         have_ctx = 1;
         if (lm_tile_device_open(&r.dev, o.device, r.im.model, &r.ctx, &e))
             rc = fail(&c, &e, 0);
-        else if (r.dev.backend->device != LM_DEVICE_CPU)
+        else if (r.dev.backend->device != LM_DEVICE_CPU) {
             fprintf(stderr, "device: %s\n", lm_tile_device_name(&r.dev));
+            r.whole = 0; /* the strip path (infer/whole.c) is host-only: windows on the device */
+        }
     }
     if (!rc && lm_cli_stage_dir(&c, o.output, r.tmp, sizeof r.tmp) != 0) rc = 2;
     else if (!rc) {
@@ -328,5 +444,6 @@ int lm_cmd_infer(int argc, char **argv)
     align_free(&r.al);
     lm_frame_seq_free(&r.seq);
     lm_infer_model_free(&r.im);
+    for (int m = 1; m < LM_AUTO_MAX_MODELS; m++) lm_infer_model_free(&r.more[m]);
     return rc;
 }

@@ -7,6 +7,7 @@
 static const lm_command commands[] = {
     {"version", lm_cmd_version, "print the version and build configuration"},
     /* one line per command (keep alphabetical after version) */
+    {"calibrate", lm_cmd_calibrate, "calibrate infer --model auto: error vs difficulty, cost"},
     {"eval", lm_cmd_eval, "score a trained model: PSNR/SSIM/MAE/SAM vs noise, rainbow test"},
     {"infer", lm_cmd_infer, "reconstruct 31-band cubes from coded frames with a trained model"},
     {"info", lm_cmd_info, "layer table of a model (shapes, parameters, MACs), presets, system"},

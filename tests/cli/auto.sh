@@ -1,0 +1,114 @@
+#!/usr/bin/env bash
+# auto.sh — end-to-end tests of `lumosaic calibrate` and `lumosaic infer --model auto`: train a
+# linear and an mcan-tiny model briefly, calibrate them on procedural held-out scenes (auto.json
+# has the fields, one PSNR per bin and model, positive costs, the table is printed); infer
+# --model auto with tolerance 0 and a huge tolerance (every window on one model: the summary
+# says so and the cube equals that model's patch-wise cube, cli_cube_diff); the linear model runs
+# on the whole frame by default and agrees with --tiles (PSNR between them > 40 dB); bad input:
+# missing / broken calibration, --auto without auto, auto without --auto, one model, no scenes,
+# bad --split / --measure — one line on stderr, exit 2, no output left.
+# usage: auto.sh LUMOSAIC MAKE_CUBE CUBE_PSNR CUBE_DIFF
+source "$(dirname "$0")/lib.sh"
+PSNR=$3
+DIFF=$4
+
+"$LM" train --model linear --data "$CAVE" --iterations 40 --batch 4 --accum-steps 1 --lr 5e-3 \
+  --synth-fraction 0.5 --noise 0,0 --val-patches 1 --output "$T/lin" --quiet > "$T/log" 2>&1
+check "train linear: $(cat "$T/log")" [ -s "$T/lin/model.safetensors" ]
+"$LM" train --model mcan-tiny --data "$CAVE" --iterations 20 --batch 2 --accum-steps 1 \
+  --lr 2e-3 --synth-fraction 0.5 --noise 0,0 --val-patches 1 --output "$T/mc" --quiet \
+  > "$T/log" 2>&1
+check "train mcan-tiny: $(cat "$T/log")" [ -s "$T/mc/model.safetensors" ]
+"$LM" simulate --input "$CAVE" --output "$T/sim" --crop > "$T/log" 2>&1
+check "simulate: $(cat "$T/log")" [ -s "$T/sim/frames/frame_0000.png" ]
+F=$T/sim/frames/frame_0000.png
+# same A B: the cubes are equal (largest difference 0)
+same() { local d; d=$("$DIFF" "$1" "$2") && awk -v d="$d" 'BEGIN { exit !(d == 0) }'; }
+
+# ---- calibrate ---------------------------------------------------------------------------
+"$LM" calibrate --models "$T/lin,$T/mc" --synth 2 --synth-size 132x128 --bins 3 \
+  --output "$T/auto.json" > "$T/table" 2> "$T/err"
+check "calibrate: $(cat "$T/err")" [ $? -eq 0 ]
+cat "$T/table"
+check "table has a row per bin" [ "$(grep -cE '^\[' "$T/table")" -eq 3 ]
+python3 - "$T/auto.json" <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))
+assert j["version"] == 1 and j["measure"] == "grad" and j["window"] == [66, 64], j
+assert len(j["edges"]) == 2 and j["edges"][0] < j["edges"][1], j
+assert sum(j["windows"]) == 2 * 12, j  # 132 x 128: rows 0, 30, 60, 66; columns 0, 32, 64
+assert [m["preset"] for m in j["models"]] == ["linear", "mcan-tiny"], j
+for m in j["models"]:
+    assert m["cost_s_per_window"] > 0 and len(m["psnr"]) == 3, m
+    assert all(5 < p < 100 for p in m["psnr"]), m
+assert j["models"][0]["macs_per_window"] < j["models"][1]["macs_per_window"]
+PY
+check "auto.json fields" [ $? -eq 0 ]
+
+# ---- infer --model auto ------------------------------------------------------------------
+# the cost order comes from the measurement: find the cheaper and the better model per file
+read cheap best < <(python3 - "$T/auto.json" <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))["models"]
+c = min(range(2), key=lambda m: j[m]["cost_s_per_window"])
+# tol 0 picks the best in every bin; make the best model the same in every bin for the test
+print(j[c]["preset"], j[1 - c]["preset"])
+PY
+)
+"$LM" infer --model auto --auto "$T/auto.json" --auto-tol 1000 --input "$F" --output "$T/a1" \
+  > "$T/sum1" 2> "$T/err"
+check "infer auto huge tol: $(cat "$T/err")" [ $? -eq 0 ]
+check "huge tol: every window on the cheapest ($cheap)" grep -q " $cheap 100.0%" "$T/sum1"
+dir_of() { [ "$1" = linear ] && echo "$T/lin" || echo "$T/mc"; }
+"$LM" infer --model "$(dir_of "$cheap")" --tiles --input "$F" --output "$T/c1" 2> /dev/null
+check "huge tol = the cheapest model's patch-wise cube" \
+  same "$T/a1/cube_0000.exr" "$T/c1/cube_0000.exr"
+# tol 0: per bin the best model; force one best everywhere by making it win every bin
+python3 - "$T/auto.json" "$T/auto_best.json" "$best" <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))
+for m in j["models"]:
+    m["psnr"] = [40.0 if m["preset"] == sys.argv[3] else 20.0 for _ in m["psnr"]]
+json.dump(j, open(sys.argv[2], "w"))
+PY
+"$LM" infer --model auto --auto "$T/auto_best.json" --auto-tol 0 --input "$F" \
+  --output "$T/a0" > "$T/sum0" 2> "$T/err"
+check "infer auto tol 0: $(cat "$T/err")" [ $? -eq 0 ]
+check "tol 0: every window on the best ($best)" grep -q " $best 100.0%" "$T/sum0"
+"$LM" infer --model "$(dir_of "$best")" --tiles --input "$F" --output "$T/b0" 2> /dev/null
+check "tol 0 = the best model's patch-wise cube" \
+  same "$T/a0/cube_0000.exr" "$T/b0/cube_0000.exr"
+check "progress line has the share per model" grep -q '^auto: .* of [0-9]* windows' "$T/err"
+
+# ---- whole frame vs windows for the linear model -----------------------------------------
+"$LM" infer --model "$T/lin" --input "$F" --output "$T/w" 2> /dev/null
+"$LM" infer --model "$T/lin" --tiles --input "$F" --output "$T/t" 2> /dev/null
+p=$("$PSNR" "$T/w/cube_0000.exr" "$T/t/cube_0000.exr")
+echo "whole frame vs windows (linear): $p dB"
+check "whole frame agrees with windows ($p dB > 40)" awk -v p="$p" 'BEGIN { exit !(p > 40) }'
+check_not "whole frame is not the window path bit for bit" \
+  cmp -s "$T/w/cube_0000.exr" "$T/t/cube_0000.exr"
+
+# ---- bad input ---------------------------------------------------------------------------
+echo '{"version": 1}' > "$T/broken.json"
+expect_error "missing calibration" 2 "cannot open calibration" "$T/e1" -- \
+  "$LM" infer --model auto --auto "$T/none.json" --input "$F" --output "$T/e1"
+expect_error "broken calibration" 2 "missing or bad field" "$T/e2" -- \
+  "$LM" infer --model auto --auto "$T/broken.json" --input "$F" --output "$T/e2"
+expect_error "auto without --auto" 2 "needs --auto" "$T/e3" -- \
+  "$LM" infer --model auto --input "$F" --output "$T/e3"
+expect_error "--auto without auto" 2 "only for --model auto" "$T/e4" -- \
+  "$LM" infer --model "$T/lin" --auto "$T/auto.json" --input "$F" --output "$T/e4"
+expect_error "negative tol" 2 "--auto-tol" "$T/e5" -- \
+  "$LM" infer --model auto --auto "$T/auto.json" --auto-tol -1 --input "$F" --output "$T/e5"
+expect_error "calibrate one model" 2 "at least 2 models" "$T/e6.json" -- \
+  "$LM" calibrate --models "$T/lin" --synth 1 --output "$T/e6.json"
+expect_error "calibrate no scenes" 2 "no scenes" "$T/e7.json" -- \
+  "$LM" calibrate --models "$T/lin,$T/mc" --output "$T/e7.json"
+expect_error "calibrate bad split" 2 "--split" "$T/e8.json" -- \
+  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --split x --output "$T/e8.json"
+expect_error "calibrate bad measure" 2 "--measure" "$T/e9.json" -- \
+  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --measure fft --output "$T/e9.json"
+expect_error "calibrate missing model" 2 "nope" "$T/e10.json" -- \
+  "$LM" calibrate --models "$T/lin,$T/nope" --synth 1 --output "$T/e10.json"
+finish
