@@ -214,3 +214,12 @@ int lm_cli_commit_dir(const lm_cli *c, const char *tmp, const char *dir)
     }
     return 0;
 }
+
+int lm_cli_positional(lm_cli *c, const char **out, int *n)
+{
+    const char *a = c->argv[c->i];
+    if (a[0] == '-' && a[1] == '-') return lm_cli_unknown(c);
+    out[(*n)++] = a;
+    c->i++;
+    return 0;
+}

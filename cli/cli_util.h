@@ -45,6 +45,9 @@ int lm_cli_parse_real(const char *s, double *out);
 int lm_cli_error(const lm_cli *c, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* "<prog>: unknown option '<arg>' (see '<prog> --help')", returns 2. */
 int lm_cli_unknown(const lm_cli *c);
+/* The current argument as a positional one: appended to out[*n] (out sized for argc) and
+ * consumed; an unknown "--option" is reported instead (lm_cli_unknown's status). Returns 0. */
+int lm_cli_positional(lm_cli *c, const char **out, int *n);
 
 /* Case-insensitive: does path end with ext (".png")? */
 int lm_cli_has_ext(const char *path, const char *ext);

@@ -151,10 +151,7 @@ static int parse(lm_cli *c, eval_opts *o)
         int r = parse_opt(c, o);
         if (r == 2) return 2;
         if (r == 1) continue;
-        const char *a = c->argv[c->i];
-        if (a[0] == '-' && a[1] == '-') return lm_cli_unknown(c);
-        o->data[o->ndata++] = a;
-        c->i++;
+        if (lm_cli_positional(c, o->data, &o->ndata)) return 2;
     }
     if (!o->model) return lm_cli_error(c, "--model is required (see 'lumosaic eval --help')");
     if (!o->ndata)

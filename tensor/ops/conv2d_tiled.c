@@ -13,7 +13,6 @@
  * What it is not: the reference (conv2d.c, compared against this in tests) nor the depthwise
  * path (conv2d_depthwise.c). Results depend only on the thread count. */
 #include "tensor/ops/gemm_internal.h"
-#include <cblas.h>
 #include <omp.h>
 #include <string.h>
 
