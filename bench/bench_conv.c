@@ -11,9 +11,14 @@
  * interleaved (this VM can lose CPU to its host for a while) and both are reported as min and
  * median. FLOPs = 2 * MACs; forward+backward = 3x the forward MACs (input, weight gradients).
  * Times are through the public API: forward in no-grad mode; forward+backward = forward in
- * grad mode + lm_backward (includes zero-filling the gradients). Not a test: prints figures. */
+ * grad mode + lm_backward (includes zero-filling the gradients). Each shape is timed twice,
+ * interleaved: the default path (Winograd F(4x4, 3x3) where it applies: "auto") and the
+ * im2col + GEMM path it replaces ("tiled"); GFLOP/s count the direct convolution's MACs for
+ * both, so for Winograd they are an effective rate and may exceed the sgemm rate.
+ * Not a test: prints figures. */
 #include "autograd/autograd.h"
 #include "tensor/ops.h"
+#include "tensor/ops/gemm_internal.h"
 #include <cblas.h>
 #include <omp.h>
 #include <stdio.h>
@@ -87,23 +92,40 @@ static void run_config(int nt, int reps, int B, int C, const float *A, const flo
     lm_tensor_set_requires_grad(&io.x, 1);
     lm_tensor_set_requires_grad(&io.w, 1);
     lm_tensor_set_requires_grad(&io.b, 1);
-    double tf[MAXREP], tb[MAXREP], tg[MAXREP];
-    time_conv(&c, &io, 1); /* warm-up: arena blocks, page faults */
+    double tf[2][MAXREP], tb[2][MAXREP], tg[MAXREP];
+    static const int paths[2] = {LM_CONV_PATH_AUTO, LM_CONV_PATH_NO_WINOGRAD};
+    static const char *names[2] = {"auto", "tiled"};
+    for (int p = 0; p < 2; p++) { /* warm-up: arena blocks, page faults */
+        int old = lm_conv2d_set_path(paths[p]);
+        time_conv(&c, &io, 1);
+        lm_conv2d_set_path(old);
+    }
     time_sgemm(nt, A, Bm, Cm);
     for (int i = 0; i < reps; i++) {
-        tf[i] = time_conv(&c, &io, 0);
+        for (int p = 0; p < 2; p++) {
+            int old = lm_conv2d_set_path(paths[p]);
+            tf[p][i] = time_conv(&c, &io, 0);
+            lm_conv2d_set_path(old);
+        }
         tg[i] = time_sgemm(nt, A, Bm, Cm);
-        tb[i] = time_conv(&c, &io, 1);
+        for (int p = 0; p < 2; p++) {
+            int old = lm_conv2d_set_path(paths[p]);
+            tb[p][i] = time_conv(&c, &io, 1);
+            lm_conv2d_set_path(old);
+        }
     }
     double gf = 2.0 * B * C * H * W * C * 9 * 1e-9, gg = 2.0 * GM * GN * GK * 1e-9;
-    double fmin = bench_min(tf, reps), fmed = bench_median(tf, reps), bmin = bench_min(tb, reps);
-    double bmed = bench_median(tb, reps), gmin = bench_min(tg, reps), gmed = bench_median(tg, reps);
-    printf("%3d %4d | %8.2f %8.2f %7.1f %7.1f | %8.2f %8.2f %7.1f %7.1f | %7.1f %7.1f | %5.2f %5.2f"
-           " | %5.2f %5.2f\n",
-           B, C, fmin * 1e3, fmed * 1e3, gf / fmin, gf / fmed, bmin * 1e3, bmed * 1e3,
-           3 * gf / bmin, 3 * gf / bmed, gg / gmin, gg / gmed, (gf / fmin) / (gg / gmin),
-           (gf / fmed) / (gg / gmed), (3 * gf / bmin) / (gg / gmin),
-           (3 * gf / bmed) / (gg / gmed));
+    double gmin = bench_min(tg, reps), gmed = bench_median(tg, reps);
+    for (int p = 0; p < 2; p++) {
+        double fmin = bench_min(tf[p], reps), fmed = bench_median(tf[p], reps);
+        double bmin = bench_min(tb[p], reps), bmed = bench_median(tb[p], reps);
+        printf("%3d %4d %-5s | %8.2f %8.2f %7.1f %7.1f | %8.2f %8.2f %7.1f %7.1f | %7.1f %7.1f"
+               " | %5.2f %5.2f | %5.2f %5.2f\n",
+               B, C, names[p], fmin * 1e3, fmed * 1e3, gf / fmin, gf / fmed, bmin * 1e3,
+               bmed * 1e3, 3 * gf / bmin, 3 * gf / bmed, gg / gmin, gg / gmed,
+               (gf / fmin) / (gg / gmin), (gf / fmed) / (gg / gmed), (3 * gf / bmin) / (gg / gmin),
+               (3 * gf / bmed) / (gg / gmed));
+    }
     fflush(stdout);
     free(xd), free(wd), free(bd), free(sd);
     lm_ctx_free(&c);
@@ -129,7 +151,7 @@ int main(int argc, char **argv)
            nt, reps, openblas_get_corename());
     printf("reference: sgemm %dx%dx%d split by columns over %d threads (single-threaded "
            "OpenBLAS per thread)\n", GM, GN, GK, nt);
-    printf("  B    C |   fwd ms (min/med)  GFLOP/s (min/med) | fwd+bwd ms (min/med) GFLOP/s "
+    printf("  B    C path  |   fwd ms (min/med)  GFLOP/s (min/med) | fwd+bwd ms (min/med) GFLOP/s "
            "(min/med) | sgemm GFLOP/s | fwd/sgemm | f+b/sgemm\n");
     int batches[2] = {4, 14}, chans[4] = {16, 32, 64, 128};
     for (int i = 0; i < 2; i++)

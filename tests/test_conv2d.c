@@ -1,6 +1,6 @@
 /* test_conv2d.c — conv2d forward against a direct-convolution loop written here, backward
  * (x, w, bias) against direct loops and finite differences, the fast CPU paths (tiled
- * im2col + GEMM, depthwise) against the simple reference path, determinism for a thread
+ * im2col + GEMM, Winograd, depthwise) against the simple reference path, determinism for a thread
  * count, gradient accumulation, and shape/option errors. */
 #include "tests/check.h"
 #include "tensor/ops/gemm_internal.h"
@@ -153,12 +153,10 @@ static void free_reference(reference *R)
     for (int i = 0; i < 4; i++) free(R->val[i]), free(R->mag[i]);
 }
 
-/* Forward and all gradients against the direct loops, for the AUTO path on 2 and 3 threads
- * and the SIMPLE path. */
-static void check_config(const cfg *k)
+/* Forward and all gradients against the direct loops, for each (path, threads) variant,
+ * within tol * (1 + magnitude of the sum). */
+static void check_config_paths(const cfg *k, const int (*variants)[2], int nvar, double tol)
 {
-    static const int variants[3][2] = {{LM_CONV_PATH_AUTO, 2}, {LM_CONV_PATH_AUTO, 3},
-                                       {LM_CONV_PATH_SIMPLE, 2}};
     lm_ctx c;
     lm_ctx_init(&c, 1);
     lm_rng r;
@@ -176,7 +174,7 @@ static void check_config(const cfg *k)
     reference R = make_reference(k, &m, seed);
     long n[4] = {lm_tensor_numel(y), lm_tensor_numel(m.x), lm_tensor_numel(m.w), k->Cout};
     static const char *names[4] = {"y", "dx", "dw", "db"};
-    for (int v = 0; v < 3; v++) {
+    for (int v = 0; v < nvar; v++) {
         int old = lm_conv2d_set_path(variants[v][0]);
         c.nthreads = variants[v][1];
         lm_tape_clear(&c); /* earlier variants' nodes stay on the tape but are skipped */
@@ -187,16 +185,77 @@ static void check_config(const cfg *k)
                                m.w->grad ? m.w->grad->data : NULL,
                                m.b && m.b->grad ? m.b->grad->data : NULL};
         for (int i = 0; i < (m.b ? 4 : 3); i++)
-            if (got[i]) check_doubles(got[i], R.val[i], R.mag[i], n[i], 1e-6, k->what, names[i]);
+            if (got[i]) check_doubles(got[i], R.val[i], R.mag[i], n[i], tol, k->what, names[i]);
         lm_conv2d_set_path(old);
     }
     free_reference(&R);
     lm_ctx_free(&c);
 }
 
+/* The AUTO path on 2 and 3 threads and the SIMPLE path, to 1e-6. */
+static void check_config(const cfg *k)
+{
+    static const int variants[3][2] = {{LM_CONV_PATH_AUTO, 2}, {LM_CONV_PATH_AUTO, 3},
+                                       {LM_CONV_PATH_SIMPLE, 2}};
+    check_config_paths(k, variants, 3, 1e-6);
+}
+
 static void test_forward_backward_vs_direct(void)
 {
     for (int i = 0; i < NCFG; i++) check_config(&CFGS[i]);
+}
+
+/* 3x3 stride-1 convs that take the Winograd F(4x4, 3x3) path: edges that are not multiples
+ * of the 4 x 4 tile, padding 0/1/2, several chunks of tiles, uneven channel counts. */
+static const cfg WINO[] = {
+    {2, 16, 13, 18, 16, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 1, "winograd 16->16 13x18"},
+    {1, 24, 9, 7, 20, 3, 3, {1, 1, 0, 0, 1, 1, 1}, 0, "winograd pad 0"},
+    {3, 17, 8, 8, 33, 3, 3, {1, 1, 2, 2, 1, 1, 1}, 1, "winograd pad 2, 17->33"},
+    {1, 20, 11, 9, 18, 3, 3, {1, 1, 1, 0, 1, 1, 1}, 1, "winograd pad (1,0)"},
+    {2, 64, 22, 16, 64, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 1, "winograd 64->64"},
+    {4, 16, 40, 44, 16, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 0, "winograd several chunks"},
+};
+#define NWINO ((int)(sizeof WINO / sizeof WINO[0]))
+
+static lm_conv_geom geom_of(const cfg *k)
+{
+    lm_conv_geom g;
+    memset(&g, 0, sizeof g);
+    g.B = k->B, g.Cin = k->Cin, g.H = k->H, g.W = k->W, g.Cout = k->Cout, g.kh = k->kh;
+    g.kw = k->kw;
+    opts_of(k, &g.sh, &g.sw, &g.ph, &g.pw, &g.dh, &g.dw, &g.groups);
+    g.Ho = outdim(k->H, k->kh, g.sh, g.ph, g.dh), g.Wo = outdim(k->W, k->kw, g.sw, g.pw, g.dw);
+    return g;
+}
+
+/* Winograd (AUTO) on 1, 2 and 3 threads against the direct loops in double. F(4x4, 3x3)
+ * rounds more than a plain sum (its transforms scale terms by up to 8 and 1/24): 4e-6 of the
+ * magnitude; the tiled path it replaces is held to 1e-6 on the same shapes. A wrong
+ * transform coefficient gives errors of the order of the values themselves. */
+static void test_winograd_vs_direct(void)
+{
+    static const int wino[3][2] = {{LM_CONV_PATH_AUTO, 1}, {LM_CONV_PATH_AUTO, 2},
+                                   {LM_CONV_PATH_AUTO, 3}};
+    static const int tiled[2][2] = {{LM_CONV_PATH_NO_WINOGRAD, 2}, {LM_CONV_PATH_SIMPLE, 1}};
+    for (int i = 0; i < NWINO; i++) {
+        lm_conv_geom g = geom_of(&WINO[i]);
+        CHECK_MSG(lm_conv2d_winograd_applies(&g), "%s: not on the Winograd path", WINO[i].what);
+        check_config_paths(&WINO[i], wino, 3, 4e-6);
+        check_config_paths(&WINO[i], tiled, 2, 1e-6);
+    }
+    /* shapes the Winograd path must leave alone */
+    static const cfg other[] = {
+        {1, 16, 9, 9, 16, 3, 3, {2, 2, 1, 1, 1, 1, 1}, 0, "stride 2"},
+        {1, 16, 9, 9, 16, 3, 3, {1, 1, 2, 2, 2, 2, 1}, 0, "dilation 2"},
+        {1, 16, 9, 9, 16, 3, 3, {1, 1, 1, 1, 1, 1, 2}, 0, "groups 2"},
+        {1, 8, 9, 9, 16, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 0, "8 input channels"},
+        {1, 16, 9, 9, 16, 3, 3, {1, 1, 3, 3, 1, 1, 1}, 0, "pad 3"},
+        {1, 16, 9, 9, 16, 5, 5, {1, 1, 2, 2, 1, 1, 1}, 0, "5x5"},
+    };
+    for (int i = 0; i < (int)(sizeof other / sizeof other[0]); i++) {
+        lm_conv_geom g = geom_of(&other[i]);
+        CHECK_MSG(!lm_conv2d_winograd_applies(&g), "%s: on the Winograd path", other[i].what);
+    }
 }
 
 /* Hand-computed: 1 x 1 x 3 x 3 image, 2x2 kernel, pad 1, stride 2, bias 0.5. */
@@ -305,8 +364,8 @@ static void test_fast_matches_simple(void)
         {1, 24, 21, 19, 24, 4, 4, {2, 2, 1, 1, 1, 1, 3}, 1, "groups 3 4x4 s2"},
         {2, 200, 15, 17, 24, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 1, "3x3 200->24, chunks"},
     };
-    for (int i = 0; i < (int)(sizeof big / sizeof big[0]); i++) {
-        run_out f = run_once(&big[i], LM_CONV_PATH_AUTO, 2, 0);
+    for (int i = 0; i < (int)(sizeof big / sizeof big[0]); i++) { /* (Winograd: above) */
+        run_out f = run_once(&big[i], LM_CONV_PATH_NO_WINOGRAD, 2, 0);
         run_out s = run_once(&big[i], LM_CONV_PATH_SIMPLE, 2, 0);
         if (f.y && s.y) {
             CHECK_ARRAY_CLOSE(f.y, s.y, f.ny, 2e-5, 1e-5);
@@ -321,7 +380,10 @@ static void test_fast_matches_simple(void)
 
 static void test_deterministic_and_accumulating(void)
 {
-    const cfg *k = &CFGS[NCFG - 3]; /* several tiles per image */
+    /* several tiles per image (tiled path), several chunks (Winograd path) */
+    const cfg *ks[2] = {&CFGS[NCFG - 3], &WINO[NWINO - 1]};
+    for (int kk = 0; kk < 2; kk++) {
+    const cfg *k = ks[kk];
     for (int nt = 1; nt <= 3; nt++) {
         run_out a = run_once(k, LM_CONV_PATH_AUTO, nt, 0);
         run_out b = run_once(k, LM_CONV_PATH_AUTO, nt, 0);
@@ -338,8 +400,9 @@ static void test_deterministic_and_accumulating(void)
         for (int i = 0; i < k->Cout; i++) a.db[i] += 1.0f;
         CHECK_ARRAY_CLOSE(p.dx, a.dx, a.nx, 1e-5, 1e-6);
         CHECK_ARRAY_CLOSE(p.dw, a.dw, a.nw, 1e-4, 1e-6);
-        CHECK_ARRAY_CLOSE(p.db, a.db, k->Cout, 1e-4, 1e-6);
+        if (k->bias) CHECK_ARRAY_CLOSE(p.db, a.db, k->Cout, 1e-4, 1e-6);
         free_run(&a), free_run(&b), free_run(&p);
+    }
     }
 }
 
@@ -427,6 +490,7 @@ int main(void)
 {
     RUN(test_hand_computed);
     RUN(test_forward_backward_vs_direct);
+    RUN(test_winograd_vs_direct);
     RUN(test_gradcheck);
     RUN(test_fast_matches_simple);
     RUN(test_deterministic_and_accumulating);

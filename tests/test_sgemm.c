@@ -101,11 +101,14 @@ static void test_avx512(void)
     lm_sgemm_set_impl(-1);
 }
 
-/* lm_gemm_mt at 2 threads equals 1 thread bit for bit (each element computed by one call
- * with the same K order), for a split over columns and one over rows. */
+/* lm_gemm_mt: the same thread count gives the same bits; with our kernel 2 threads also equal
+ * 1 thread bit for bit (each element computed by one call with the same K order), for a split
+ * over columns and one over rows. OpenBLAS (CPUs without AVX-512) may pick another edge
+ * kernel for a narrower block, so there 1 and 2 threads need only agree to rounding. */
 static void test_mt_deterministic(void)
 {
     lm_sgemm_set_impl(LM_SGEMM_AVX512);
+    int own = lm_sgemm_impl() == LM_SGEMM_AVX512;
     lm_ctx c1, c2;
     lm_ctx_init(&c1, 1);
     lm_ctx_init(&c2, 2);
@@ -116,12 +119,18 @@ static void test_mt_deterministic(void)
         int M = sh[s].M, N = sh[s].N, K = sh[s].K;
         float *A = malloc(sizeof(float) * M * K), *B = malloc(sizeof(float) * K * N);
         float *C1 = malloc(sizeof(float) * M * N), *C2 = malloc(sizeof(float) * M * N);
+        float *C3 = malloc(sizeof(float) * M * N);
         for (long i = 0; i < (long)M * K; i++) A[i] = frand(&r);
         for (long i = 0; i < (long)K * N; i++) B[i] = frand(&r);
         lm_gemm_mt(&c1, 0, 0, M, N, K, 1.0f, A, K, B, N, 0.0f, C1, N);
         lm_gemm_mt(&c2, 0, 0, M, N, K, 1.0f, A, K, B, N, 0.0f, C2, N);
-        CHECK(memcmp(C1, C2, sizeof(float) * M * N) == 0);
-        free(A), free(B), free(C1), free(C2);
+        lm_gemm_mt(&c2, 0, 0, M, N, K, 1.0f, A, K, B, N, 0.0f, C3, N);
+        CHECK(memcmp(C2, C3, sizeof(float) * M * N) == 0);
+        if (own)
+            CHECK(memcmp(C1, C2, sizeof(float) * M * N) == 0);
+        else
+            CHECK_ARRAY_CLOSE(C1, C2, (long)M * N, 1e-4, 1e-5);
+        free(A), free(B), free(C1), free(C2), free(C3);
     }
     lm_ctx_free(&c1);
     lm_ctx_free(&c2);

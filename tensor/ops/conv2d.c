@@ -3,7 +3,8 @@
  * What it is: the op (checks, kernels, tape) and the SIMPLE reference path: whole-image
  * im2col + GEMM for the forward and the weight gradient, GEMM + col2im for the input
  * gradient, one (image, group) at a time. The fast CPU paths live in conv2d_tiled.c (tiled
- * im2col + GEMM, cache-sized column blocks) and conv2d_depthwise.c (direct loops); the kernel
+ * im2col + GEMM, cache-sized column blocks), conv2d_winograd.c (3x3 stride 1, F(4x4, 3x3)),
+ * conv2d_direct.c (few output channels) and conv2d_depthwise.c (direct loops); the kernel
  * picks one (lm_conv2d_set_path() forces the reference, for tests).
  * What it is not: transposed or 3-D convolution (conv_transpose2d.c, conv3d.c). */
 #include "tensor/ops.h"
@@ -94,7 +95,12 @@ static int simple_run(lm_ctx *c, const lm_conv_geom *g, int which, const float *
 /* One input channel per group, and the fast paths allowed. */
 static int depthwise(const lm_conv_geom *g)
 {
-    return g->groups == g->Cin && conv_path == LM_CONV_PATH_AUTO;
+    return g->groups == g->Cin && conv_path != LM_CONV_PATH_SIMPLE;
+}
+
+static int winograd(const lm_conv_geom *g)
+{
+    return conv_path == LM_CONV_PATH_AUTO && lm_conv2d_winograd_applies(g);
 }
 
 /* t = {x, w, y[, bias]}: y = conv(x, w) + bias (writes =). */
@@ -105,6 +111,7 @@ static int conv2d_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     float *y = t[2]->data;
     if (conv_path == LM_CONV_PATH_SIMPLE) return simple_run(c, g, 0, x, w, bias, NULL, y);
     if (depthwise(g)) return lm_conv2d_dw_fwd(c, g, x, w, bias, y);
+    if (winograd(g)) return lm_conv2d_winograd_fwd(c, g, x, w, bias, y);
     if (lm_conv2d_direct_applies(g)) return lm_conv2d_direct_fwd(c, g, x, w, bias, y);
     return lm_conv2d_tiled_fwd(c, g, x, w, bias, y);
 }
@@ -117,6 +124,7 @@ static int conv2d_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
     if (conv_path == LM_CONV_PATH_SIMPLE)
         return simple_run(c, g, 1, t[0]->data, t[1]->data, NULL, NULL, t[2]->data);
     if (depthwise(g)) return lm_conv2d_dw_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
+    if (winograd(g)) return lm_conv2d_winograd_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
     return lm_conv2d_tiled_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
 }
 
@@ -128,6 +136,7 @@ static int conv2d_bwd_w_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
     if (conv_path == LM_CONV_PATH_SIMPLE)
         return simple_run(c, g, 2, t[1]->data, NULL, NULL, t[0]->data, t[2]->data);
     if (depthwise(g)) return lm_conv2d_dw_bwd_w(c, g, t[0]->data, t[1]->data, t[2]->data);
+    if (winograd(g)) return lm_conv2d_winograd_bwd_w(c, g, t[0]->data, t[1]->data, t[2]->data);
     return lm_conv2d_tiled_bwd_w(c, g, t[0]->data, t[1]->data, t[2]->data);
 }
 

@@ -47,9 +47,11 @@ typedef struct lm_conv_geom {
 } lm_conv_geom;
 
 /* Which CPU implementation conv2d kernels use. AUTO: depthwise direct loops when each output
- * channel reads one input channel, else the tiled im2col + GEMM path. SIMPLE: the whole-image
- * im2col + GEMM reference (tests compare the two). */
-enum { LM_CONV_PATH_AUTO = 0, LM_CONV_PATH_SIMPLE = 1 };
+ * channel reads one input channel, Winograd F(4x4, 3x3) for 3x3 stride-1 convs with enough
+ * channels, the direct forward for few output channels, else the tiled im2col + GEMM path.
+ * SIMPLE: the whole-image im2col + GEMM reference (tests compare the two). NO_WINOGRAD: AUTO
+ * without the Winograd path (benchmarks and tests compare them). */
+enum { LM_CONV_PATH_AUTO = 0, LM_CONV_PATH_SIMPLE = 1, LM_CONV_PATH_NO_WINOGRAD = 2 };
 /* Select the path for later conv2d kernels (process-wide; for tests and benchmarks).
  * Returns the previous setting. */
 int lm_conv2d_set_path(int path);
@@ -77,6 +79,18 @@ int lm_conv2d_dw_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const 
 int lm_conv2d_direct_applies(const lm_conv_geom *g);
 int lm_conv2d_direct_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
                          const float *bias, float *y);
+
+/* Winograd F(4x4, 3x3) path (conv2d_winograd.c): 3x3, stride 1, dilation 1, one group,
+ * padding <= 2, at least LM_CONV_WINOGRAD_MIN_C input and output channels. Same write
+ * semantics as the tiled path (fwd writes, bwd_x / bwd_w add). */
+#define LM_CONV_WINOGRAD_MIN_C 16
+int lm_conv2d_winograd_applies(const lm_conv_geom *g);
+int lm_conv2d_winograd_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
+                           const float *bias, float *y);
+int lm_conv2d_winograd_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *w,
+                             float *dx);
+int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
+                             float *dw);
 
 /* Range of output columns ox in [*lo, *hi) whose input column ox*s - p + j*d lies in [0, n). */
 static inline void lm_conv_valid_range(int n_out, int n_in, int s, int p, int off, int *lo,

@@ -1,0 +1,454 @@
+/* conv2d_winograd.c — Winograd F(4x4, 3x3) CPU path of conv2d: 3x3 kernels, stride 1,
+ * dilation 1, one group, padding 0..2, enough channels (the HAN/MCAN body convolutions).
+ * What it is: the output is cut into 4 x 4 tiles; each tile needs a 6 x 6 input patch d,
+ * and Y = A^T [(G g G^T) (.) (B^T d B)] A (Lavin & Gray 2016, points 0, +-1, +-2, inf), so
+ * the 36 products per (output channel, input channel) of a tile become 36 independent
+ * GEMMs over channels: M_xi (Cout x tiles) = U_xi (Cout x Cin) V_xi (Cin x tiles),
+ * 144 -> 36 multiplies per 16 outputs. Tiles are processed in chunks small enough to stay
+ * in cache (input transform -> 36 GEMMs -> output transform, per chunk, one thread per
+ * chunk), so nothing of size 36/16 x the image is ever stored.
+ *   forward      y = bias + conv(x, w)
+ *   input grad   dx += conv(dy, w') with w'[ci][co] = w[co][ci] rotated 180 degrees and
+ *                padding 2 - p (the same forward code, accumulating)
+ *   weight grad  dw += G^T [sum over tiles (A dY A^T) (.) (B^T d B)] G: per chunk the 36
+ *                products dU_xi += Mdy_xi V_xi^T go into per-thread partials, added in
+ *                thread order.
+ * The transforms run on 8 tiles at a time (one per vector lane). Every output element is
+ * computed by one thread in a fixed order, so results depend only on the thread count.
+ * Accuracy: a few 1e-6 relative to the magnitude of the sums (tested against the reference).
+ * What it is not: strided, dilated, grouped or non-3x3 convolution (conv2d_tiled.c). */
+#include "tensor/ops/gemm_internal.h"
+#include <omp.h>
+#include <string.h>
+
+#define VL 8
+typedef float vf __attribute__((vector_size(VL * sizeof(float))));
+typedef int vi __attribute__((vector_size(VL * sizeof(int))));
+
+/* Tiles per chunk: the transformed input and output of a chunk take 36 x (Cin + Cout) x TC
+ * floats. Measured (build/bench_conv, 1 thread, Zen 3 with 512 KiB L2 + 32 MiB L3): 2.5 MB
+ * chunks beat 0.3-1.3 MB ones (wider GEMMs amortise their packing) and 10 MB ones (L3). */
+#define CHUNK_BYTES (2560 * 1024)
+#define TC_MIN 32
+#define TC_MAX 1024
+
+int lm_conv2d_winograd_applies(const lm_conv_geom *g)
+{
+    return g->kh == 3 && g->kw == 3 && g->sh == 1 && g->sw == 1 && g->dh == 1 && g->dw == 1 &&
+           g->groups == 1 && g->ph <= 2 && g->pw <= 2 && g->Cin >= LM_CONV_WINOGRAD_MIN_C &&
+           g->Cout >= LM_CONV_WINOGRAD_MIN_C && g->Ho >= 4 && g->Wo >= 4;
+}
+
+/* ---- transforms -------------------------------------------------------------------------- */
+/* U (6x6) = G g G^T for a 3x3 kernel g (row-major, element (i, j) at g[i*si + j*sj]). */
+static void weight_transform(const float *g, int si, int sj, float U[36])
+{
+    static const double G[6][3] = {{1.0 / 4, 0, 0},
+                                   {-1.0 / 6, -1.0 / 6, -1.0 / 6},
+                                   {-1.0 / 6, 1.0 / 6, -1.0 / 6},
+                                   {1.0 / 24, 1.0 / 12, 1.0 / 6},
+                                   {1.0 / 24, -1.0 / 12, 1.0 / 6},
+                                   {0, 0, 1}};
+    double t[6][3];
+    for (int a = 0; a < 6; a++)
+        for (int j = 0; j < 3; j++)
+            t[a][j] = G[a][0] * g[j * sj] + G[a][1] * g[si + j * sj] + G[a][2] * g[2 * si + j * sj];
+    for (int a = 0; a < 6; a++)
+        for (int b = 0; b < 6; b++)
+            U[a * 6 + b] = (float)(t[a][0] * G[b][0] + t[a][1] * G[b][1] + t[a][2] * G[b][2]);
+}
+
+/* dg (3x3, added at dg[i*si + j*sj]) += G^T dU G. */
+static void weight_transform_adjoint(const float dU[36], float *dg, int si, int sj)
+{
+    static const double G[6][3] = {{1.0 / 4, 0, 0},
+                                   {-1.0 / 6, -1.0 / 6, -1.0 / 6},
+                                   {-1.0 / 6, 1.0 / 6, -1.0 / 6},
+                                   {1.0 / 24, 1.0 / 12, 1.0 / 6},
+                                   {1.0 / 24, -1.0 / 12, 1.0 / 6},
+                                   {0, 0, 1}};
+    double t[3][6];
+    for (int i = 0; i < 3; i++)
+        for (int b = 0; b < 6; b++) {
+            double s = 0;
+            for (int a = 0; a < 6; a++) s += G[a][i] * dU[a * 6 + b];
+            t[i][b] = s;
+        }
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            double s = 0;
+            for (int b = 0; b < 6; b++) s += t[i][b] * G[b][j];
+            dg[i * si + j * sj] += (float)s;
+        }
+}
+
+/* B^T d along one axis: 6 values in, 6 out (any lane type). */
+#define BT6(o, d)                                                                               \
+    do {                                                                                        \
+        o[0] = 4 * d[0] - 5 * d[2] + d[4];                                                      \
+        o[1] = d[3] + d[4] - 4 * (d[1] + d[2]);                                                 \
+        o[2] = d[4] - d[3] + 4 * (d[1] - d[2]);                                                 \
+        o[3] = d[4] - d[2] + 2 * (d[3] - d[1]);                                                 \
+        o[4] = d[4] - d[2] - 2 * (d[3] - d[1]);                                                 \
+        o[5] = 4 * d[1] - 5 * d[3] + d[5];                                                      \
+    } while (0)
+
+/* A^T m along one axis: 6 values in, 4 out. */
+#define AT4(o, m)                                                                               \
+    do {                                                                                        \
+        vf s12 = m[1] + m[2], d12 = m[1] - m[2], s34 = m[3] + m[4], d34 = m[3] - m[4];          \
+        o[0] = m[0] + s12 + s34;                                                                \
+        o[1] = d12 + 2 * d34;                                                                   \
+        o[2] = s12 + 4 * s34;                                                                   \
+        o[3] = d12 + 8 * d34 + m[5];                                                            \
+    } while (0)
+
+/* A m along one axis (the adjoint of AT4): 4 values in, 6 out. */
+#define A6(o, m)                                                                                \
+    do {                                                                                        \
+        o[0] = m[0];                                                                            \
+        o[1] = m[0] + m[1] + m[2] + m[3];                                                       \
+        o[2] = m[0] - m[1] + m[2] - m[3];                                                       \
+        o[3] = m[0] + 2 * m[1] + 4 * m[2] + 8 * m[3];                                           \
+        o[4] = m[0] - 2 * m[1] + 4 * m[2] - 8 * m[3];                                           \
+        o[5] = m[3];                                                                            \
+    } while (0)
+
+static inline void vstore(float *p, vf v) { memcpy(p, &v, sizeof v); }
+static inline vf vload(const float *p)
+{
+    vf v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
+/* Geometry of the tile grid of one convolution. Tiles are numbered row by row, each row
+ * padded to a multiple of 8 tiles (txp), so that a group of 8 tiles (one per vector lane)
+ * always lies in one tile row; tiles past the output's right edge are computed and dropped
+ * (they read zeros). Within a group, lane l holds tile LANE_TILE(l) = 0,2,4,6,1,3,5,7: the
+ * order an in-register 4 x 4 transpose per 128-bit half produces; every transform and the
+ * GEMM columns use the same order. */
+typedef struct wgrid {
+    int C, H, W;        /* input channels and size (the one the patches are read from) */
+    int Ho, Wo, ph, pw; /* output size and padding */
+    int ty, tx, txp;    /* tiles per column, per row, per row padded to a multiple of VL */
+    int wp;             /* width of a staged input row: 4 txp + 4 */
+    long T;             /* tiles in all (B * ty * txp) */
+} wgrid;
+
+#define LANE_TILE(l) ((l) < 4 ? 2 * (l) : 2 * ((l) - 4) + 1)
+
+static wgrid make_grid(int C, int H, int W, int Ho, int Wo, int ph, int pw, int B)
+{
+    wgrid r = {C, H, W, Ho, Wo, ph, pw, (Ho + 3) / 4, (Wo + 3) / 4, 0, 0, 0};
+    r.txp = (r.tx + VL - 1) / VL * VL;
+    r.wp = 4 * r.txp + 4;
+    r.T = (long)B * r.ty * r.txp;
+    return r;
+}
+
+/* Image, tile row and first tile column of the group of 8 tiles starting at tile t. */
+static inline void group_of(const wgrid *g, long t, int *b, int *ty, int *tx0)
+{
+    long row = t / g->txp;
+    *tx0 = (int)(t % g->txp);
+    *b = (int)(row / g->ty);
+    *ty = (int)(row % g->ty);
+}
+
+/* 4 x 4 transpose inside each 128-bit half of (a, b, c, d): r[q] half h = element q of the
+ * four 4-float groups a, b, c, d of half h. Its own inverse. */
+static inline void transpose4x2(vf a, vf b, vf c, vf d, vf r[4])
+{
+    const vi lo = {0, 8, 1, 9, 4, 12, 5, 13}, hi = {2, 10, 3, 11, 6, 14, 7, 15};
+    const vi ml = {0, 1, 8, 9, 4, 5, 12, 13}, mh = {2, 3, 10, 11, 6, 7, 14, 15};
+    vf t0 = __builtin_shuffle(a, b, lo), t1 = __builtin_shuffle(a, b, hi);
+    vf t2 = __builtin_shuffle(c, d, lo), t3 = __builtin_shuffle(c, d, hi);
+    r[0] = __builtin_shuffle(t0, t2, ml), r[1] = __builtin_shuffle(t0, t2, mh);
+    r[2] = __builtin_shuffle(t1, t3, ml), r[3] = __builtin_shuffle(t1, t3, mh);
+}
+
+/* Stage rows 4 ty - ph .. +5 of every channel of image b, zero-padded: st[c][r][u] = x[b, c,
+ * 4 ty - ph + r, u - pw] (0 outside the image), u < wp. */
+static void stage_rows(const wgrid *g, const float *x, int b, int ty, float *st)
+{
+    long cs = (long)g->H * g->W;
+    int y0 = 4 * ty - g->ph, n = g->W < g->wp - g->pw ? g->W : g->wp - g->pw;
+    for (int c = 0; c < g->C; c++)
+        for (int r = 0; r < 6; r++) {
+            float *d = st + ((long)c * 6 + r) * g->wp;
+            int yy = y0 + r;
+            if (yy < 0 || yy >= g->H) {
+                memset(d, 0, sizeof(float) * (size_t)g->wp);
+                continue;
+            }
+            const float *s = x + ((long)b * g->C + c) * cs + (long)yy * g->W;
+            memset(d, 0, sizeof(float) * (size_t)g->pw);
+            memcpy(d + g->pw, s, sizeof(float) * (size_t)n);
+            memset(d + g->pw + n, 0, sizeof(float) * (size_t)(g->wp - g->pw - n));
+        }
+}
+
+/* V[xi][c][j] (36 blocks of C rows, ld ldv) = B^T d B for the tiles t0 .. t0+n-1 (n and t0
+ * multiples of VL; column j0 + l = tile j0 + LANE_TILE(l)) of every channel of x
+ * (B x C x H x W). st: room for the staged rows (C x 6 x wp). */
+static void input_transform(const wgrid *g, const float *x, long t0, int n, float *V, int ldv,
+                            float *st)
+{
+    long xis = (long)g->C * ldv;
+    int sb = -1, sty = -1;
+    for (int j0 = 0; j0 < n; j0 += VL) {
+        int b, ty, tx0;
+        group_of(g, t0 + j0, &b, &ty, &tx0);
+        if (b != sb || ty != sty) stage_rows(g, x, b, ty, st), sb = b, sty = ty;
+        for (int c = 0; c < g->C; c++) {
+            const float *p = st + (long)c * 6 * g->wp + 4 * tx0;
+            vf d[6][6], o[6], t[6][6], col[6];
+            for (int r = 0; r < 6; r++, p += g->wp) {
+                vf q4[4];
+                transpose4x2(vload(p), vload(p + 8), vload(p + 16), vload(p + 24), d[r]);
+                transpose4x2(vload(p + 4), vload(p + 12), vload(p + 20), vload(p + 28), q4);
+                d[r][4] = q4[0], d[r][5] = q4[1];
+            }
+            for (int q = 0; q < 6; q++) { /* columns: t[.][q] = B^T d[.][q] */
+                for (int r = 0; r < 6; r++) col[r] = d[r][q];
+                BT6(o, col);
+                for (int r = 0; r < 6; r++) t[r][q] = o[r];
+            }
+            float *dst = V + (long)c * ldv + j0;
+            for (int r = 0; r < 6; r++) { /* rows: V[r][.] = t[r][.] B */
+                BT6(o, t[r]);
+                for (int q = 0; q < 6; q++) vstore(dst + (r * 6 + q) * xis, o[q]);
+            }
+        }
+    }
+}
+
+/* For output channels of y (B x C x Ho x Wo, g->C = output channels here): tiles t0.. of
+ * M[xi][c][j] -> A^T M A, written (accumulate 0: y = bias + value) or added (accumulate 1). */
+static void output_transform(const wgrid *g, const float *M, int ldm, long t0, int n,
+                             const float *bias, int accumulate, float *y)
+{
+    long cs = (long)g->Ho * g->Wo, xis = (long)g->C * ldm;
+    for (int j0 = 0; j0 < n; j0 += VL) {
+        int b, ty, tx0;
+        group_of(g, t0 + j0, &b, &ty, &tx0);
+        if (tx0 >= g->tx) continue; /* padding tiles only */
+        int oy = 4 * ty, ox = 4 * tx0, rh = g->Ho - oy < 4 ? g->Ho - oy : 4;
+        int full = ox + 4 * VL <= g->Wo;
+        for (int c = 0; c < g->C; c++) {
+            const float *src = M + (long)c * ldm + j0;
+            vf t[6][4], m[6], o[4], out[4][4];
+            for (int r = 0; r < 6; r++) { /* rows: t[r][.] = M[r][.] A */
+                for (int q = 0; q < 6; q++) m[q] = vload(src + (r * 6 + q) * xis);
+                AT4(o, m);
+                for (int q = 0; q < 4; q++) t[r][q] = o[q];
+            }
+            for (int q = 0; q < 4; q++) { /* columns: out[.][q] = A^T t[.][q] */
+                for (int r = 0; r < 6; r++) m[r] = t[r][q];
+                AT4(o, m);
+                for (int r = 0; r < 4; r++) out[r][q] = o[r];
+            }
+            float bv = bias ? bias[c] : 0.0f;
+            vf bvv = (vf){0} + bv;
+            float *yc = y + ((long)b * g->C + c) * cs + (long)oy * g->Wo + ox;
+            for (int r = 0; r < rh; r++) {
+                float *yr = yc + (long)r * g->Wo;
+                vf row[4]; /* row[k]: output columns 8k .. 8k+7 of the group, in order */
+                transpose4x2(out[r][0], out[r][1], out[r][2], out[r][3], row);
+                if (full) {
+                    for (int k = 0; k < 4; k++) {
+                        vf v = row[k] + (accumulate ? vload(yr + 8 * k) : bvv);
+                        vstore(yr + 8 * k, v);
+                    }
+                } else {
+                    float tmp[4 * VL];
+                    for (int k = 0; k < 4; k++) vstore(tmp + 8 * k, row[k]);
+                    int nw = g->Wo - ox;
+                    for (int u = 0; u < nw; u++) yr[u] = tmp[u] + (accumulate ? yr[u] : bv);
+                }
+            }
+        }
+    }
+}
+
+/* Mdy[xi][c][j] = A dY A^T for the output tiles t0.. (dy: B x C x Ho x Wo; zero outside). */
+static void grad_transform(const wgrid *g, const float *dy, long t0, int n, float *Md, int ldm,
+                           int C)
+{
+    long cs = (long)g->Ho * g->Wo, xis = (long)C * ldm;
+    for (int j0 = 0; j0 < n; j0 += VL) {
+        int b, ty, tx0;
+        group_of(g, t0 + j0, &b, &ty, &tx0);
+        int oy = 4 * ty, ox = 4 * tx0, rh = g->Ho - oy < 4 ? g->Ho - oy : 4;
+        int nw = g->Wo - ox < 4 * VL ? g->Wo - ox : 4 * VL;
+        if (nw < 0) nw = 0;
+        for (int c = 0; c < C; c++) {
+            const float *yc = dy + ((long)b * C + c) * cs + (long)oy * g->Wo + ox;
+            vf e[4][4];
+            for (int r = 0; r < 4; r++) {
+                vf row[4];
+                if (r < rh && nw == 4 * VL) {
+                    for (int k = 0; k < 4; k++) row[k] = vload(yc + (long)r * g->Wo + 8 * k);
+                } else {
+                    float tmp[4 * VL] = {0};
+                    for (int u = 0; r < rh && u < nw; u++) tmp[u] = yc[(long)r * g->Wo + u];
+                    for (int k = 0; k < 4; k++) row[k] = vload(tmp + 8 * k);
+                }
+                transpose4x2(row[0], row[1], row[2], row[3], e[r]);
+            }
+            vf t[6][4], m[4], o[6];
+            for (int q = 0; q < 4; q++) { /* columns: t[.][q] = A e[.][q] */
+                for (int r = 0; r < 4; r++) m[r] = e[r][q];
+                A6(o, m);
+                for (int r = 0; r < 6; r++) t[r][q] = o[r];
+            }
+            float *dst = Md + (long)c * ldm + j0;
+            for (int r = 0; r < 6; r++) { /* rows: Mdy[r][.] = t[r][.] A^T */
+                A6(o, t[r]);
+                for (int q = 0; q < 6; q++) vstore(dst + (r * 6 + q) * xis, o[q]);
+            }
+        }
+    }
+}
+
+/* ---- drivers ----------------------------------------------------------------------------- */
+static int chunk_tiles(int Cin, int Cout, long T)
+{
+    long tc = CHUNK_BYTES / (36L * (Cin + Cout) * (long)sizeof(float));
+    tc = tc / VL * VL;
+    if (tc < TC_MIN) tc = TC_MIN;
+    if (tc > TC_MAX) tc = TC_MAX;
+    long tv = (T + VL - 1) / VL * VL;
+    return (int)(tc < tv ? tc : tv);
+}
+
+/* y (B x Cout x Ho x Wo) = bias + conv or += conv, from x (B x Cin x H x W) and the
+ * transformed weights U[xi][Cout][Cin]. */
+static int winograd_run(lm_ctx *c, int B, const wgrid *gi, const wgrid *go, const float *x,
+                        const float *U, const float *bias, int accumulate, float *y)
+{
+    int Cin = gi->C, Cout = go->C, nt = lm_nthreads(c);
+    long T = gi->T;
+    int tc = chunk_tiles(Cin, Cout, T);
+    long nchunks = (T + tc - 1) / tc;
+    (void)B;
+    if (nchunks < nt) nt = (int)nchunks;
+    size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + (size_t)Cin * 6 * (size_t)gi->wp;
+    lm_arena_mark mk = lm_arena_get_mark(&c->arena);
+    float *buf = lm_ctx_alloc(c, sizeof(float) * per * (size_t)nt);
+    if (!buf) return c->status;
+#pragma omp parallel num_threads(nt)
+    {
+        int nthr = omp_get_num_threads();
+        for (int th = omp_get_thread_num(); th < nt; th += nthr) {
+            float *V = buf + per * (size_t)th, *M = V + 36 * (size_t)Cin * (size_t)tc;
+            float *st = M + 36 * (size_t)Cout * (size_t)tc;
+            long c0 = nchunks * th / nt, c1 = nchunks * (th + 1) / nt;
+            for (long ch = c0; ch < c1; ch++) {
+                long t0 = ch * tc;
+                int n = T - t0 < tc ? (int)(T - t0) : tc;
+                input_transform(gi, x, t0, n, V, tc, st);
+                for (int xi = 0; xi < 36; xi++)
+                    lm_sgemm_st(0, 0, Cout, n, Cin, 1.0f, U + (long)xi * Cout * Cin, Cin,
+                                V + (long)xi * Cin * tc, tc, 0.0f, M + (long)xi * Cout * tc, tc);
+                output_transform(go, M, tc, t0, n, bias, accumulate, y);
+            }
+        }
+    }
+    lm_arena_rewind(&c->arena, mk);
+    return 0;
+}
+
+int lm_conv2d_winograd_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
+                           const float *bias, float *y)
+{
+    lm_arena_mark mk = lm_arena_get_mark(&c->arena);
+    long nw = (long)g->Cout * g->Cin;
+    float *U = lm_ctx_alloc(c, sizeof(float) * 36 * (size_t)nw);
+    if (!U) return c->status;
+    for (long k = 0; k < nw; k++) { /* U[xi][co][ci] from w[co][ci][3][3] */
+        float u[36];
+        weight_transform(w + k * 9, 3, 1, u);
+        for (int xi = 0; xi < 36; xi++) U[xi * nw + k] = u[xi];
+    }
+    wgrid gi = make_grid(g->Cin, g->H, g->W, g->Ho, g->Wo, g->ph, g->pw, g->B);
+    wgrid go = gi;
+    go.C = g->Cout;
+    int st = winograd_run(c, g->B, &gi, &go, x, U, bias, 0, y);
+    lm_arena_rewind(&c->arena, mk);
+    return st;
+}
+
+int lm_conv2d_winograd_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *w,
+                             float *dx)
+{
+    lm_arena_mark mk = lm_arena_get_mark(&c->arena);
+    long nw = (long)g->Cout * g->Cin;
+    float *U = lm_ctx_alloc(c, sizeof(float) * 36 * (size_t)nw);
+    if (!U) return c->status;
+    for (int co = 0; co < g->Cout; co++) /* U[xi][ci][co] from w[co][ci] rotated 180 degrees */
+        for (int ci = 0; ci < g->Cin; ci++) {
+            float u[36];
+            weight_transform(w + ((long)co * g->Cin + ci) * 9 + 8, -3, -1, u);
+            for (int xi = 0; xi < 36; xi++) U[xi * nw + (long)ci * g->Cout + co] = u[xi];
+        }
+    /* dx = conv(dy, w') with padding 2 - p: the tiles cover dx (H x W) */
+    wgrid gi = make_grid(g->Cout, g->Ho, g->Wo, g->H, g->W, 2 - g->ph, 2 - g->pw, g->B);
+    wgrid go = gi;
+    go.C = g->Cin;
+    int st = winograd_run(c, g->B, &gi, &go, dy, U, NULL, 1, dx);
+    lm_arena_rewind(&c->arena, mk);
+    return st;
+}
+
+int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
+                             float *dw)
+{
+    int Cin = g->Cin, Cout = g->Cout, nt = lm_nthreads(c);
+    wgrid gi = make_grid(Cin, g->H, g->W, g->Ho, g->Wo, g->ph, g->pw, g->B);
+    long T = gi.T, nw = (long)Cout * Cin;
+    int tc = chunk_tiles(Cin, Cout, T);
+    long nchunks = (T + tc - 1) / tc;
+    if (nchunks < nt) nt = (int)nchunks;
+    size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + 36 * (size_t)nw +
+                 (size_t)Cin * 6 * (size_t)gi.wp;
+    lm_arena_mark mk = lm_arena_get_mark(&c->arena);
+    float *buf = lm_ctx_alloc(c, sizeof(float) * per * (size_t)nt);
+    if (!buf) return c->status;
+#pragma omp parallel num_threads(nt)
+    {
+        int nthr = omp_get_num_threads();
+        for (int th = omp_get_thread_num(); th < nt; th += nthr) {
+            float *dU = buf + per * (size_t)th, *V = dU + 36 * (size_t)nw;
+            float *Md = V + 36 * (size_t)Cin * (size_t)tc;
+            float *st = Md + 36 * (size_t)Cout * (size_t)tc;
+            memset(dU, 0, sizeof(float) * 36 * (size_t)nw);
+            long c0 = nchunks * th / nt, c1 = nchunks * (th + 1) / nt;
+            for (long ch = c0; ch < c1; ch++) {
+                long t0 = ch * tc;
+                int n = T - t0 < tc ? (int)(T - t0) : tc;
+                input_transform(&gi, x, t0, n, V, tc, st);
+                grad_transform(&gi, dy, t0, n, Md, tc, Cout);
+                for (int xi = 0; xi < 36; xi++)
+                    lm_sgemm_st(0, 1, Cout, Cin, n, 1.0f, Md + (long)xi * Cout * tc, tc,
+                                V + (long)xi * Cin * tc, tc, 1.0f, dU + (long)xi * nw, Cin);
+            }
+        }
+#pragma omp barrier
+        /* partials added in thread order, then dw += G^T dU G; weights split over threads */
+        int me = omp_get_thread_num();
+        long k0 = nw * me / nthr, k1 = nw * (me + 1) / nthr;
+        for (long k = k0; k < k1; k++) {
+            float u[36];
+            for (int xi = 0; xi < 36; xi++) {
+                float s = 0.0f;
+                for (int th = 0; th < nt; th++) s += buf[per * (size_t)th + (size_t)xi * nw + k];
+                u[xi] = s;
+            }
+            weight_transform_adjoint(u, dw + k * 9, 3, 1);
+        }
+    }
+    lm_arena_rewind(&c->arena, mk);
+    return 0;
+}
