@@ -204,20 +204,26 @@ static void input_transform(const wgrid *g, const float *x, long t0, int n, floa
         for (int c = 0; c < g->C; c++) {
             const float *p = st + (long)c * 6 * g->wp + 4 * tx0;
             vf d[6][6], o[6], t[6][6], col[6];
+            #pragma GCC unroll 6
             for (int r = 0; r < 6; r++, p += g->wp) {
                 vf q4[4];
                 transpose4x2(vload(p), vload(p + 8), vload(p + 16), vload(p + 24), d[r]);
                 transpose4x2(vload(p + 4), vload(p + 12), vload(p + 20), vload(p + 28), q4);
                 d[r][4] = q4[0], d[r][5] = q4[1];
             }
+            #pragma GCC unroll 6
             for (int q = 0; q < 6; q++) { /* columns: t[.][q] = B^T d[.][q] */
+                #pragma GCC unroll 6
                 for (int r = 0; r < 6; r++) col[r] = d[r][q];
                 BT6(o, col);
+                #pragma GCC unroll 6
                 for (int r = 0; r < 6; r++) t[r][q] = o[r];
             }
             float *dst = V + (long)c * ldv + j0;
+            #pragma GCC unroll 6
             for (int r = 0; r < 6; r++) { /* rows: V[r][.] = t[r][.] B */
                 BT6(o, t[r]);
+                #pragma GCC unroll 6
                 for (int q = 0; q < 6; q++) vstore(dst + (r * 6 + q) * xis, o[q]);
             }
         }
@@ -239,30 +245,39 @@ static void output_transform(const wgrid *g, const float *M, int ldm, long t0, i
         for (int c = 0; c < g->C; c++) {
             const float *src = M + (long)c * ldm + j0;
             vf t[6][4], m[6], o[4], out[4][4];
+            #pragma GCC unroll 6
             for (int r = 0; r < 6; r++) { /* rows: t[r][.] = M[r][.] A */
+                #pragma GCC unroll 6
                 for (int q = 0; q < 6; q++) m[q] = vload(src + (r * 6 + q) * xis);
                 AT4(o, m);
+                #pragma GCC unroll 6
                 for (int q = 0; q < 4; q++) t[r][q] = o[q];
             }
+            #pragma GCC unroll 6
             for (int q = 0; q < 4; q++) { /* columns: out[.][q] = A^T t[.][q] */
+                #pragma GCC unroll 6
                 for (int r = 0; r < 6; r++) m[r] = t[r][q];
                 AT4(o, m);
+                #pragma GCC unroll 6
                 for (int r = 0; r < 4; r++) out[r][q] = o[r];
             }
             float bv = bias ? bias[c] : 0.0f;
             vf bvv = (vf){0} + bv;
             float *yc = y + ((long)b * g->C + c) * cs + (long)oy * g->Wo + ox;
+            #pragma GCC unroll 6
             for (int r = 0; r < rh; r++) {
                 float *yr = yc + (long)r * g->Wo;
                 vf row[4]; /* row[k]: output columns 8k .. 8k+7 of the group, in order */
                 transpose4x2(out[r][0], out[r][1], out[r][2], out[r][3], row);
                 if (full) {
+                    #pragma GCC unroll 6
                     for (int k = 0; k < 4; k++) {
                         vf v = row[k] + (accumulate ? vload(yr + 8 * k) : bvv);
                         vstore(yr + 8 * k, v);
                     }
                 } else {
                     float tmp[4 * VL];
+                    #pragma GCC unroll 6
                     for (int k = 0; k < 4; k++) vstore(tmp + 8 * k, row[k]);
                     int nw = g->Wo - ox;
                     for (int u = 0; u < nw; u++) yr[u] = tmp[u] + (accumulate ? yr[u] : bv);
@@ -286,26 +301,34 @@ static void grad_transform(const wgrid *g, const float *dy, long t0, int n, floa
         for (int c = 0; c < C; c++) {
             const float *yc = dy + ((long)b * C + c) * cs + (long)oy * g->Wo + ox;
             vf e[4][4];
+            #pragma GCC unroll 6
             for (int r = 0; r < 4; r++) {
                 vf row[4];
                 if (r < rh && nw == 4 * VL) {
+                    #pragma GCC unroll 6
                     for (int k = 0; k < 4; k++) row[k] = vload(yc + (long)r * g->Wo + 8 * k);
                 } else {
                     float tmp[4 * VL] = {0};
                     for (int u = 0; r < rh && u < nw; u++) tmp[u] = yc[(long)r * g->Wo + u];
+                    #pragma GCC unroll 6
                     for (int k = 0; k < 4; k++) row[k] = vload(tmp + 8 * k);
                 }
                 transpose4x2(row[0], row[1], row[2], row[3], e[r]);
             }
             vf t[6][4], m[4], o[6];
+            #pragma GCC unroll 6
             for (int q = 0; q < 4; q++) { /* columns: t[.][q] = A e[.][q] */
+                #pragma GCC unroll 6
                 for (int r = 0; r < 4; r++) m[r] = e[r][q];
                 A6(o, m);
+                #pragma GCC unroll 6
                 for (int r = 0; r < 6; r++) t[r][q] = o[r];
             }
             float *dst = Md + (long)c * ldm + j0;
+            #pragma GCC unroll 6
             for (int r = 0; r < 6; r++) { /* rows: Mdy[r][.] = t[r][.] A^T */
                 A6(o, t[r]);
+                #pragma GCC unroll 6
                 for (int q = 0; q < 6; q++) vstore(dst + (r * 6 + q) * xis, o[q]);
             }
         }
