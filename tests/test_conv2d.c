@@ -192,11 +192,12 @@ static void check_config_paths(const cfg *k, const int (*variants)[2], int nvar,
     lm_ctx_free(&c);
 }
 
-/* The AUTO path on 2 and 3 threads and the SIMPLE path, to 1e-6. */
+/* The fast paths but Winograd (tiled, direct, depthwise; Winograd has its own tolerance,
+ * below) on 2 and 3 threads and the SIMPLE path, to 1e-6. */
 static void check_config(const cfg *k)
 {
-    static const int variants[3][2] = {{LM_CONV_PATH_AUTO, 2}, {LM_CONV_PATH_AUTO, 3},
-                                       {LM_CONV_PATH_SIMPLE, 2}};
+    static const int variants[3][2] = {{LM_CONV_PATH_NO_WINOGRAD, 2},
+                                       {LM_CONV_PATH_NO_WINOGRAD, 3}, {LM_CONV_PATH_SIMPLE, 2}};
     check_config_paths(k, variants, 3, 1e-6);
 }
 
@@ -214,6 +215,7 @@ static const cfg WINO[] = {
     {1, 20, 11, 9, 18, 3, 3, {1, 1, 1, 0, 1, 1, 1}, 1, "winograd pad (1,0)"},
     {2, 64, 22, 16, 64, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 1, "winograd 64->64"},
     {4, 16, 40, 44, 16, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 0, "winograd several chunks"},
+    {2, 13, 12, 40, 8, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 1, "winograd 13->8 (rt-8's first conv)"},
 };
 #define NWINO ((int)(sizeof WINO / sizeof WINO[0]))
 
@@ -248,7 +250,8 @@ static void test_winograd_vs_direct(void)
         {1, 16, 9, 9, 16, 3, 3, {2, 2, 1, 1, 1, 1, 1}, 0, "stride 2"},
         {1, 16, 9, 9, 16, 3, 3, {1, 1, 2, 2, 2, 2, 1}, 0, "dilation 2"},
         {1, 16, 9, 9, 16, 3, 3, {1, 1, 1, 1, 1, 1, 2}, 0, "groups 2"},
-        {1, 8, 9, 9, 16, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 0, "8 input channels"},
+        {1, 4, 9, 9, 16, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 0, "4 input channels"},
+        {1, 16, 9, 9, 7, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 0, "7 output channels"},
         {1, 16, 9, 9, 16, 3, 3, {1, 1, 3, 3, 1, 1, 1}, 0, "pad 3"},
         {1, 16, 9, 9, 16, 5, 5, {1, 1, 2, 2, 1, 1, 1}, 0, "5x5"},
     };
@@ -310,6 +313,7 @@ static void test_gradcheck(void)
         {2, 3, 6, 7, 3, 5, 3, {1, 1, 2, 1, 1, 1, 3}, 1, "depthwise 5x3"},
         {1, 2, 6, 6, 4, 4, 4, {2, 2, 1, 1, 1, 1, 2}, 0, "depthwise x2 4x4 s2"},
         {2, 3, 4, 5, 2, 1, 1, {1, 1, 0, 0, 1, 1, 1}, 1, "1x1"},
+        {1, 8, 6, 9, 8, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 1, "3x3 8->8 (Winograd under AUTO)"},
     };
     for (int i = 0; i < (int)(sizeof small / sizeof small[0]); i++) {
         gradcheck_config(&small[i], LM_CONV_PATH_AUTO);

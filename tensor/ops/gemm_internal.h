@@ -81,9 +81,10 @@ int lm_conv2d_direct_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const
                          const float *bias, float *y);
 
 /* Winograd F(4x4, 3x3) path (conv2d_winograd.c): 3x3, stride 1, dilation 1, one group,
- * padding <= 2, at least LM_CONV_WINOGRAD_MIN_C input and output channels. Same write
- * semantics as the tiled path (fwd writes, bwd_x / bwd_w add). */
-#define LM_CONV_WINOGRAD_MIN_C 16
+ * padding <= 2, at least LM_CONV_WINOGRAD_MIN_C input and output channels (measured with
+ * bench_conv / bench_rt: faster than the tiled and direct paths from 8 channels up). Same
+ * write semantics as the tiled path (fwd writes, bwd_x / bwd_w add). */
+#define LM_CONV_WINOGRAD_MIN_C 8
 int lm_conv2d_winograd_applies(const lm_conv_geom *g);
 int lm_conv2d_winograd_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
                            const float *bias, float *y);
