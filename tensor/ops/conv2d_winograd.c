@@ -390,14 +390,19 @@ static void wgemm(int Cout, int n, int K, const float *Up, const float *V, int l
 }
 
 /* ---- drivers ----------------------------------------------------------------------------- */
-static int chunk_tiles(int Cin, int Cout, long T)
+/* Tiles per chunk: at most the cache-sized count, and the chunks a multiple of the thread
+ * count (all threads get equal work) when there are enough tiles. */
+static int chunk_tiles(int Cin, int Cout, long T, int nt)
 {
     long tc = CHUNK_BYTES / (36L * (Cin + Cout) * (long)sizeof(float));
     tc = tc / VL * VL;
     if (tc < TC_MIN) tc = TC_MIN;
     if (tc > TC_MAX) tc = TC_MAX;
-    long tv = (T + VL - 1) / VL * VL;
-    return (int)(tc < tv ? tc : tv);
+    long nch = (T + tc - 1) / tc;
+    nch = (nch + nt - 1) / nt * nt;
+    long even = (T + nch - 1) / nch;
+    even = (even + VL - 1) / VL * VL;
+    return (int)(even < tc ? even : tc);
 }
 
 /* y (B x Cout x Ho x Wo) = bias + conv or += conv, from x (B x Cin x H x W) and the
@@ -407,7 +412,7 @@ static int winograd_run(lm_ctx *c, int B, const wgrid *gi, const wgrid *go, cons
 {
     int Cin = gi->C, Cout = go->C, nt = lm_nthreads(c);
     long T = gi->T;
-    int tc = chunk_tiles(Cin, Cout, T);
+    int tc = chunk_tiles(Cin, Cout, T, nt);
     long nchunks = (T + tc - 1) / tc, pu = packed_size(Cout, Cin);
     (void)B;
     if (nchunks < nt) nt = (int)nchunks;
@@ -488,7 +493,7 @@ int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
     int Cin = g->Cin, Cout = g->Cout, nt = lm_nthreads(c);
     wgrid gi = make_grid(Cin, g->H, g->W, g->Ho, g->Wo, g->ph, g->pw, g->B);
     long T = gi.T, nw = (long)Cout * Cin;
-    int tc = chunk_tiles(Cin, Cout, T);
+    int tc = chunk_tiles(Cin, Cout, T, nt);
     long nchunks = (T + tc - 1) / tc;
     if (nchunks < nt) nt = (int)nchunks;
     size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + 36 * (size_t)nw +
