@@ -1,6 +1,6 @@
 /* test_conv2d.c — conv2d forward against a direct-convolution loop written here, backward
  * (x, w, bias) against direct loops and finite differences, the fast CPU paths (tiled
- * im2col + GEMM, Winograd, depthwise) against the simple reference path, determinism for a thread
+ * im2col + GEMM, Winograd, pointwise, depthwise) against the simple reference path, determinism for a thread
  * count, gradient accumulation, and shape/option errors. */
 #include "tests/check.h"
 #include "tensor/ops/gemm_internal.h"
@@ -261,6 +261,35 @@ static void test_winograd_vs_direct(void)
     }
 }
 
+/* 1x1 convs on the pointwise path (a plain sum, held to 1e-6 like the tiled path): pixel
+ * counts with 16-column blocks, one 8-column block and a scalar tail, output channels that
+ * are not a multiple of the 6-row panel. */
+static void test_pointwise_vs_direct(void)
+{
+    static const int paths[3][2] = {{LM_CONV_PATH_AUTO, 1}, {LM_CONV_PATH_AUTO, 2},
+                                    {LM_CONV_PATH_AUTO, 3}};
+    static const cfg pw[] = {
+        {2, 20, 7, 9, 33, 1, 1, {1, 1, 0, 0, 1, 1, 1}, 1, "pointwise 20->33, 63 pixels"},
+        {1, 12, 16, 40, 6, 1, 1, {1, 1, 0, 0, 1, 1, 1}, 0, "pointwise 12->6, 640 pixels"},
+        {3, 5, 3, 8, 13, 1, 1, {1, 1, 0, 0, 1, 1, 1}, 1, "pointwise 5->13, 24 pixels"},
+        {1, 64, 33, 32, 64, 1, 1, {1, 1, 0, 0, 1, 1, 1}, 1, "pointwise 64->64, several blocks"},
+    };
+    for (int i = 0; i < (int)(sizeof pw / sizeof pw[0]); i++) {
+        lm_conv_geom g = geom_of(&pw[i]);
+        CHECK_MSG(lm_conv2d_pointwise_applies(&g), "%s: not on the pointwise path", pw[i].what);
+        check_config_paths(&pw[i], paths, 3, 1e-6);
+    }
+    static const cfg other[] = {
+        {1, 4, 9, 9, 6, 1, 1, {2, 2, 0, 0, 1, 1, 1}, 0, "1x1 stride 2"},
+        {1, 4, 9, 9, 6, 1, 1, {1, 1, 1, 1, 1, 1, 1}, 0, "1x1 pad 1"},
+        {1, 4, 9, 9, 6, 1, 1, {1, 1, 0, 0, 1, 1, 2}, 0, "1x1 groups 2"},
+    };
+    for (int i = 0; i < (int)(sizeof other / sizeof other[0]); i++) {
+        lm_conv_geom g = geom_of(&other[i]);
+        CHECK_MSG(!lm_conv2d_pointwise_applies(&g), "%s: on the pointwise path", other[i].what);
+    }
+}
+
 /* Hand-computed: 1 x 1 x 3 x 3 image, 2x2 kernel, pad 1, stride 2, bias 0.5. */
 static void test_hand_computed(void)
 {
@@ -495,6 +524,7 @@ int main(void)
     RUN(test_hand_computed);
     RUN(test_forward_backward_vs_direct);
     RUN(test_winograd_vs_direct);
+    RUN(test_pointwise_vs_direct);
     RUN(test_gradcheck);
     RUN(test_fast_matches_simple);
     RUN(test_deterministic_and_accumulating);

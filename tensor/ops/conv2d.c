@@ -4,7 +4,8 @@
  * im2col + GEMM for the forward and the weight gradient, GEMM + col2im for the input
  * gradient, one (image, group) at a time. The fast CPU paths live in conv2d_tiled.c (tiled
  * im2col + GEMM, cache-sized column blocks), conv2d_winograd.c (3x3 stride 1, F(4x4, 3x3)),
- * conv2d_direct.c (few output channels) and conv2d_depthwise.c (direct loops); the kernel
+ * conv2d_pointwise.c (1x1 forward), conv2d_direct.c (few output channels) and
+ * conv2d_depthwise.c (direct loops); the kernel
  * picks one (lm_conv2d_set_path() forces the reference, for tests).
  * What it is not: transposed or 3-D convolution (conv_transpose2d.c, conv3d.c). */
 #include "tensor/ops.h"
@@ -112,6 +113,7 @@ static int conv2d_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     if (conv_path == LM_CONV_PATH_SIMPLE) return simple_run(c, g, 0, x, w, bias, NULL, y);
     if (depthwise(g)) return lm_conv2d_dw_fwd(c, g, x, w, bias, y);
     if (winograd(g)) return lm_conv2d_winograd_fwd(c, g, x, w, bias, y);
+    if (lm_conv2d_pointwise_applies(g)) return lm_conv2d_pointwise_fwd(c, g, x, w, bias, y);
     if (lm_conv2d_direct_applies(g)) return lm_conv2d_direct_fwd(c, g, x, w, bias, y);
     return lm_conv2d_tiled_fwd(c, g, x, w, bias, y);
 }

@@ -338,57 +338,6 @@ static void grad_transform(const wgrid *g, const float *dy, long t0, int n, floa
     }
 }
 
-/* ---- the 36 products ----------------------------------------------------------------------
- * M_xi (Cout x n, ld ldm) = U_xi V_xi with V_xi (K x n, ld ldv) read in place and U_xi
- * packed once per call in panels of MR output channels, k-major ([panel][k][r], rows past
- * Cout zero): an MR x 16 register tile (12 accumulators) runs over the whole K, its 16
- * columns of V (K x 64 bytes) staying in L1 for every panel. n is a multiple of VL. No
- * packing of V, no pass zeroing M, no library call per chunk (measured: OpenBLAS spent
- * ~30 % of these products' time outside its kernel on the small shapes). */
-#define MR 6
-
-static inline long packed_size(int Cout, int K) { return (long)(Cout + MR - 1) / MR * MR * K; }
-
-/* Offset of U_xi[co][k] in one packed product. */
-static inline long packed_at(int K, int co, int k) { return ((long)(co / MR) * K + k) * MR + co % MR; }
-
-static void wgemm(int Cout, int n, int K, const float *Up, const float *V, int ldv, float *M,
-                  int ldm)
-{
-    for (int j = 0; j < n; j += 2 * VL) {
-        int two = j + 2 * VL <= n;
-        for (int p = 0; p < Cout; p += MR) {
-            const float *a = Up + (long)p * K, *b = V + j;
-            vf acc0[MR], acc1[MR];
-#pragma GCC unroll 6
-            for (int r = 0; r < MR; r++) acc0[r] = (vf){0}, acc1[r] = (vf){0};
-            if (two) {
-                for (int k = 0; k < K; k++, a += MR, b += ldv) {
-                    vf b0 = vload(b), b1 = vload(b + VL);
-#pragma GCC unroll 6
-                    for (int r = 0; r < MR; r++) {
-                        vf av = SPLAT(a[r]);
-                        acc0[r] += av * b0;
-                        acc1[r] += av * b1;
-                    }
-                }
-            } else {
-                for (int k = 0; k < K; k++, a += MR, b += ldv) {
-                    vf b0 = vload(b);
-#pragma GCC unroll 6
-                    for (int r = 0; r < MR; r++) acc0[r] += SPLAT(a[r]) * b0;
-                }
-            }
-            int rows = Cout - p < MR ? Cout - p : MR;
-            for (int r = 0; r < rows; r++) {
-                float *m = M + (long)(p + r) * ldm + j;
-                vstore(m, acc0[r]);
-                if (two) vstore(m + VL, acc1[r]);
-            }
-        }
-    }
-}
-
 /* ---- drivers ----------------------------------------------------------------------------- */
 /* Tiles per chunk: at most the cache-sized count, and the chunks a multiple of the thread
  * count (all threads get equal work) when there are enough tiles. */
@@ -406,14 +355,14 @@ static int chunk_tiles(int Cin, int Cout, long T, int nt)
 }
 
 /* y (B x Cout x Ho x Wo) = bias + conv or += conv, from x (B x Cin x H x W) and the
- * transformed weights U, 36 packed products (wgemm). */
+ * transformed weights U: 36 products with weights packed in panels (lm_sgemm_panel). */
 static int winograd_run(lm_ctx *c, int B, const wgrid *gi, const wgrid *go, const float *x,
                         const float *U, const float *bias, int accumulate, float *y)
 {
     int Cin = gi->C, Cout = go->C, nt = lm_nthreads(c);
     long T = gi->T;
     int tc = chunk_tiles(Cin, Cout, T, nt);
-    long nchunks = (T + tc - 1) / tc, pu = packed_size(Cout, Cin);
+    long nchunks = (T + tc - 1) / tc, pu = lm_panel_size(Cout, Cin);
     (void)B;
     if (nchunks < nt) nt = (int)nchunks;
     size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + (size_t)Cin * 6 * (size_t)gi->wp;
@@ -432,8 +381,8 @@ static int winograd_run(lm_ctx *c, int B, const wgrid *gi, const wgrid *go, cons
                 int n = T - t0 < tc ? (int)(T - t0) : tc;
                 input_transform(gi, x, t0, n, V, tc, st);
                 for (int xi = 0; xi < 36; xi++)
-                    wgemm(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc,
-                          M + (long)xi * Cout * tc, tc);
+                    lm_sgemm_panel(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc, NULL,
+                                   M + (long)xi * Cout * tc, tc);
                 output_transform(go, M, tc, t0, n, bias, accumulate, y);
             }
         }
@@ -446,7 +395,7 @@ int lm_conv2d_winograd_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, con
                            const float *bias, float *y)
 {
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
-    long pu = packed_size(g->Cout, g->Cin);
+    long pu = lm_panel_size(g->Cout, g->Cin);
     float *U = lm_ctx_alloc(c, sizeof(float) * 36 * (size_t)pu);
     if (!U) return c->status;
     memset(U, 0, sizeof(float) * 36 * (size_t)pu);
@@ -454,7 +403,7 @@ int lm_conv2d_winograd_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, con
         for (int ci = 0; ci < g->Cin; ci++) {
             float u[36];
             weight_transform(w + ((long)co * g->Cin + ci) * 9, 3, 1, u);
-            for (int xi = 0; xi < 36; xi++) U[xi * pu + packed_at(g->Cin, co, ci)] = u[xi];
+            for (int xi = 0; xi < 36; xi++) U[xi * pu + lm_panel_at(g->Cin, co, ci)] = u[xi];
         }
     wgrid gi = make_grid(g->Cin, g->H, g->W, g->Ho, g->Wo, g->ph, g->pw, g->B);
     wgrid go = gi;
@@ -468,7 +417,7 @@ int lm_conv2d_winograd_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
                              float *dx)
 {
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
-    long pu = packed_size(g->Cin, g->Cout);
+    long pu = lm_panel_size(g->Cin, g->Cout);
     float *U = lm_ctx_alloc(c, sizeof(float) * 36 * (size_t)pu);
     if (!U) return c->status;
     memset(U, 0, sizeof(float) * 36 * (size_t)pu);
@@ -476,7 +425,7 @@ int lm_conv2d_winograd_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
         for (int ci = 0; ci < g->Cin; ci++) {
             float u[36];
             weight_transform(w + ((long)co * g->Cin + ci) * 9 + 8, -3, -1, u);
-            for (int xi = 0; xi < 36; xi++) U[xi * pu + packed_at(g->Cout, ci, co)] = u[xi];
+            for (int xi = 0; xi < 36; xi++) U[xi * pu + lm_panel_at(g->Cout, ci, co)] = u[xi];
         }
     /* dx = conv(dy, w') with padding 2 - p: the tiles cover dx (H x W) */
     wgrid gi = make_grid(g->Cout, g->Ho, g->Wo, g->H, g->W, 2 - g->ph, 2 - g->pw, g->B);

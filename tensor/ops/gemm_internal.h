@@ -48,7 +48,8 @@ typedef struct lm_conv_geom {
 
 /* Which CPU implementation conv2d kernels use. AUTO: depthwise direct loops when each output
  * channel reads one input channel, Winograd F(4x4, 3x3) for 3x3 stride-1 convs with enough
- * channels, the direct forward for few output channels, else the tiled im2col + GEMM path.
+ * channels, the pointwise forward for 1x1 stride-1 unpadded convs, the direct forward for few
+ * output channels, else the tiled im2col + GEMM path.
  * SIMPLE: the whole-image im2col + GEMM reference (tests compare the two). NO_WINOGRAD: AUTO
  * without the Winograd path (benchmarks and tests compare them). */
 enum { LM_CONV_PATH_AUTO = 0, LM_CONV_PATH_SIMPLE = 1, LM_CONV_PATH_NO_WINOGRAD = 2 };
@@ -92,6 +93,30 @@ int lm_conv2d_winograd_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
                              float *dx);
 int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
                              float *dw);
+
+/* Pointwise forward path (conv2d_pointwise.c): 1x1, stride 1, no padding, one group;
+ * y = W x + bias per image through lm_sgemm_panel. */
+int lm_conv2d_pointwise_applies(const lm_conv_geom *g);
+int lm_conv2d_pointwise_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
+                            const float *bias, float *y);
+
+/* ---- panel GEMM (sgemm_panel.c) ----------------------------------------------------------
+ * C (M x n, ld ldc) = bias + A B, A (M x K) packed by lm_panel_pack into panels of
+ * LM_PANEL_MR rows (k-major, zero rows past M; element (m, k) at lm_panel_at(K, m, k),
+ * lm_panel_size(M, K) floats), B (K x n, ld ldb) read in place; bias (M) may be NULL.
+ * Single-threaded; each element summed in the same order however n is split. */
+#define LM_PANEL_MR 6
+static inline long lm_panel_size(int M, int K)
+{
+    return (long)(M + LM_PANEL_MR - 1) / LM_PANEL_MR * LM_PANEL_MR * K;
+}
+static inline long lm_panel_at(int K, int m, int k)
+{
+    return ((long)(m / LM_PANEL_MR) * K + k) * LM_PANEL_MR + m % LM_PANEL_MR;
+}
+void lm_panel_pack(int M, int K, const float *A, long lda, float *Ap);
+void lm_sgemm_panel(int M, int n, int K, const float *Ap, const float *B, long ldb,
+                    const float *bias, float *C, long ldc);
 
 /* Range of output columns ox in [*lo, *hi) whose input column ox*s - p + j*d lies in [0, n). */
 static inline void lm_conv_valid_range(int n_out, int n_in, int s, int p, int off, int *lo,
