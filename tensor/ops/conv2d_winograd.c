@@ -399,6 +399,7 @@ int lm_conv2d_winograd_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, con
     float *U = lm_ctx_alloc(c, sizeof(float) * 36 * (size_t)pu);
     if (!U) return c->status;
     memset(U, 0, sizeof(float) * 36 * (size_t)pu);
+#pragma omp parallel for schedule(static) num_threads(lm_nthreads(c)) if (g->Cout * g->Cin >= 256)
     for (int co = 0; co < g->Cout; co++) /* U_xi[co][ci] from w[co][ci][3][3] */
         for (int ci = 0; ci < g->Cin; ci++) {
             float u[36];
@@ -421,6 +422,7 @@ int lm_conv2d_winograd_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
     float *U = lm_ctx_alloc(c, sizeof(float) * 36 * (size_t)pu);
     if (!U) return c->status;
     memset(U, 0, sizeof(float) * 36 * (size_t)pu);
+#pragma omp parallel for schedule(static) num_threads(lm_nthreads(c)) if (g->Cout * g->Cin >= 256)
     for (int co = 0; co < g->Cout; co++) /* U_xi[ci][co] from w[co][ci] rotated 180 degrees */
         for (int ci = 0; ci < g->Cin; ci++) {
             float u[36];
