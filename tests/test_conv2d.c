@@ -413,9 +413,11 @@ static void test_fast_matches_simple(void)
 
 static void test_deterministic_and_accumulating(void)
 {
-    /* several tiles per image (tiled path), several chunks (Winograd path) */
-    const cfg *ks[2] = {&CFGS[NCFG - 3], &WINO[NWINO - 1]};
-    for (int kk = 0; kk < 2; kk++) {
+    /* several tiles per image (tiled path), several chunks (Winograd path), several column
+     * blocks (pointwise path) */
+    static const cfg pw = {2, 24, 30, 40, 20, 1, 1, {1, 1, 0, 0, 1, 1, 1}, 1, "pointwise blocks"};
+    const cfg *ks[3] = {&CFGS[NCFG - 3], &WINO[NWINO - 1], &pw};
+    for (int kk = 0; kk < 3; kk++) {
     const cfg *k = ks[kk];
     for (int nt = 1; nt <= 3; nt++) {
         run_out a = run_once(k, LM_CONV_PATH_AUTO, nt, 0);

@@ -4,7 +4,7 @@
  * im2col + GEMM for the forward and the weight gradient, GEMM + col2im for the input
  * gradient, one (image, group) at a time. The fast CPU paths live in conv2d_tiled.c (tiled
  * im2col + GEMM, cache-sized column blocks), conv2d_winograd.c (3x3 stride 1, F(4x4, 3x3)),
- * conv2d_pointwise.c (1x1 forward), conv2d_direct.c (few output channels) and
+ * conv2d_pointwise.c (1x1 forward and input gradient), conv2d_direct.c (few output channels) and
  * conv2d_depthwise.c (direct loops); the kernel
  * picks one (lm_conv2d_set_path() forces the reference, for tests).
  * What it is not: transposed or 3-D convolution (conv_transpose2d.c, conv3d.c). */
@@ -127,6 +127,8 @@ static int conv2d_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
         return simple_run(c, g, 1, t[0]->data, t[1]->data, NULL, NULL, t[2]->data);
     if (depthwise(g)) return lm_conv2d_dw_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
     if (winograd(g)) return lm_conv2d_winograd_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
+    if (lm_conv2d_pointwise_applies(g))
+        return lm_conv2d_pointwise_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
     return lm_conv2d_tiled_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
 }
 

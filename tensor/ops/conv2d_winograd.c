@@ -381,7 +381,7 @@ static int winograd_run(lm_ctx *c, int B, const wgrid *gi, const wgrid *go, cons
                 int n = T - t0 < tc ? (int)(T - t0) : tc;
                 input_transform(gi, x, t0, n, V, tc, st);
                 for (int xi = 0; xi < 36; xi++)
-                    lm_sgemm_panel(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc, NULL,
+                    lm_sgemm_panel(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc, NULL, 0,
                                    M + (long)xi * Cout * tc, tc);
                 output_transform(go, M, tc, t0, n, bias, accumulate, y);
             }

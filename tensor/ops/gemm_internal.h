@@ -94,14 +94,16 @@ int lm_conv2d_winograd_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
 int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
                              float *dw);
 
-/* Pointwise forward path (conv2d_pointwise.c): 1x1, stride 1, no padding, one group;
- * y = W x + bias per image through lm_sgemm_panel. */
+/* Pointwise path (conv2d_pointwise.c): 1x1, stride 1, no padding, one group; y = W x + bias
+ * and dx += W^T dy per image through lm_sgemm_panel (the weight gradient stays tiled). */
 int lm_conv2d_pointwise_applies(const lm_conv_geom *g);
 int lm_conv2d_pointwise_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
                             const float *bias, float *y);
+int lm_conv2d_pointwise_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *w,
+                              float *dx);
 
 /* ---- panel GEMM (sgemm_panel.c) ----------------------------------------------------------
- * C (M x n, ld ldc) = bias + A B, A (M x K) packed by lm_panel_pack into panels of
+ * C (M x n, ld ldc) = bias + A B (accumulate 0) or C += A B (1), A (M x K) packed by lm_panel_pack into panels of
  * LM_PANEL_MR rows (k-major, zero rows past M; element (m, k) at lm_panel_at(K, m, k),
  * lm_panel_size(M, K) floats), B (K x n, ld ldb) read in place; bias (M) may be NULL.
  * Single-threaded; each element summed in the same order however n is split. */
@@ -116,7 +118,7 @@ static inline long lm_panel_at(int K, int m, int k)
 }
 void lm_panel_pack(int M, int K, const float *A, long lda, float *Ap);
 void lm_sgemm_panel(int M, int n, int K, const float *Ap, const float *B, long ldb,
-                    const float *bias, float *C, long ldc);
+                    const float *bias, int accumulate, float *C, long ldc);
 
 /* Range of output columns ox in [*lo, *hi) whose input column ox*s - p + j*d lies in [0, n). */
 static inline void lm_conv_valid_range(int n_out, int n_in, int s, int p, int off, int *lo,

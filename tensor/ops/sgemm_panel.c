@@ -1,6 +1,6 @@
 /* sgemm_panel.c — the small-GEMM kernel of the convolution fast paths (Winograd products,
  * pointwise convolutions): C (M x n, ld ldc) = bias + A B with A packed once by the caller
- * in panels of LM_PANEL_MR rows, k-major ([panel][k][r], rows past M zero: lm_panel_at /
+ * in panels of LM_PANEL_MR rows (or C += A B), k-major ([panel][k][r], rows past M zero: lm_panel_at /
  * lm_panel_size), and B (K x n, ld ldb) read in place. An MR x 16 register tile (12 vector
  * accumulators) runs over the whole K while its 16 columns of B (K x 64 bytes) stay in L1 for
  * every panel of A; columns past the last multiple of 8 are done one by one. No packing of
@@ -34,7 +34,7 @@ void lm_panel_pack(int M, int K, const float *A, long lda, float *Ap)
 }
 
 void lm_sgemm_panel(int M, int n, int K, const float *Ap, const float *B, long ldb,
-                    const float *bias, float *C, long ldc)
+                    const float *bias, int accumulate, float *C, long ldc)
 {
     int nv = n / VL * VL;
     for (int j = 0; j < nv; j += 2 * VL) {
@@ -47,6 +47,10 @@ void lm_sgemm_panel(int M, int n, int K, const float *Ap, const float *B, long l
             for (int r = 0; r < MR; r++) {
                 float b0 = bias && r < rows ? bias[p + r] : 0.0f;
                 acc0[r] = SPLAT(b0), acc1[r] = SPLAT(b0);
+                if (accumulate && r < rows) {
+                    acc0[r] = vload(C + (long)(p + r) * ldc + j);
+                    if (two) acc1[r] = vload(C + (long)(p + r) * ldc + j + VL);
+                }
             }
             if (two) {
                 for (int k = 0; k < K; k++, a += MR, b += ldb) {
@@ -75,7 +79,7 @@ void lm_sgemm_panel(int M, int n, int K, const float *Ap, const float *B, long l
     for (int j = nv; j < n; j++) /* the last n % 8 columns */
         for (int m = 0; m < M; m++) {
             const float *a = Ap + (long)(m / MR) * MR * K + m % MR;
-            float s = bias ? bias[m] : 0.0f;
+            float s = accumulate ? C[(long)m * ldc + j] : bias ? bias[m] : 0.0f;
             for (int k = 0; k < K; k++) s += a[(long)k * MR] * B[(long)k * ldb + j];
             C[(long)m * ldc + j] = s;
         }
