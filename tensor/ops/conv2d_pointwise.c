@@ -19,16 +19,14 @@ int lm_conv2d_pointwise_applies(const lm_conv_geom *g)
            g->groups == 1;
 }
 
-int lm_conv2d_pointwise_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
-                            const float *bias, float *y)
+/* Per image b and column block: out_b (M x hw) = bias + Ap in_b or += Ap in_b, with in_b
+ * (K x hw) read in place; work items split statically over the threads. */
+static void run_blocks(lm_ctx *c, int B, long hw, int M, int K, const float *Ap,
+                       const float *in, const float *bias, int accumulate, float *out)
 {
-    long hw = (long)g->H * g->W, nblk = (hw + NB - 1) / NB, items = g->B * nblk;
+    long nblk = (hw + NB - 1) / NB, items = B * nblk;
     int nt = lm_nthreads(c);
     if (items < nt) nt = (int)items;
-    lm_arena_mark mk = lm_arena_get_mark(&c->arena);
-    float *wp = lm_ctx_alloc(c, sizeof(float) * (size_t)lm_panel_size(g->Cout, g->Cin));
-    if (!wp) return c->status;
-    lm_panel_pack(g->Cout, g->Cin, w, g->Cin, wp);
 #pragma omp parallel num_threads(nt)
     {
         int nthr = omp_get_num_threads();
@@ -36,10 +34,20 @@ int lm_conv2d_pointwise_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, co
             for (long it = items * t / nt; it < items * (t + 1) / nt; it++) {
                 long b = it / nblk, j0 = it % nblk * NB;
                 int n = hw - j0 < NB ? (int)(hw - j0) : NB;
-                lm_sgemm_panel(g->Cout, n, g->Cin, wp, x + b * g->Cin * hw + j0, hw, bias, 0,
-                               y + b * g->Cout * hw + j0, hw);
+                lm_sgemm_panel(M, n, K, Ap, in + b * K * hw + j0, hw, bias, accumulate,
+                               out + b * M * hw + j0, hw);
             }
     }
+}
+
+int lm_conv2d_pointwise_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
+                            const float *bias, float *y)
+{
+    lm_arena_mark mk = lm_arena_get_mark(&c->arena);
+    float *wp = lm_ctx_alloc(c, sizeof(float) * (size_t)lm_panel_size(g->Cout, g->Cin));
+    if (!wp) return c->status;
+    lm_panel_pack(g->Cout, g->Cin, w, g->Cin, wp);
+    run_blocks(c, g->B, (long)g->H * g->W, g->Cout, g->Cin, wp, x, bias, 0, y);
     lm_arena_rewind(&c->arena, mk);
     return 0;
 }
@@ -47,9 +55,6 @@ int lm_conv2d_pointwise_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, co
 int lm_conv2d_pointwise_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *w,
                               float *dx)
 {
-    long hw = (long)g->H * g->W, nblk = (hw + NB - 1) / NB, items = g->B * nblk;
-    int nt = lm_nthreads(c);
-    if (items < nt) nt = (int)items;
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
     float *wp = lm_ctx_alloc(c, sizeof(float) * (size_t)lm_panel_size(g->Cin, g->Cout));
     if (!wp) return c->status;
@@ -57,17 +62,7 @@ int lm_conv2d_pointwise_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy,
     for (int co = 0; co < g->Cout; co++) /* W^T: row ci, column co */
         for (int ci = 0; ci < g->Cin; ci++)
             wp[lm_panel_at(g->Cout, ci, co)] = w[(long)co * g->Cin + ci];
-#pragma omp parallel num_threads(nt)
-    {
-        int nthr = omp_get_num_threads();
-        for (int t = omp_get_thread_num(); t < nt; t += nthr)
-            for (long it = items * t / nt; it < items * (t + 1) / nt; it++) {
-                long b = it / nblk, j0 = it % nblk * NB;
-                int n = hw - j0 < NB ? (int)(hw - j0) : NB;
-                lm_sgemm_panel(g->Cin, n, g->Cout, wp, dy + b * g->Cout * hw + j0, hw, NULL, 1,
-                               dx + b * g->Cin * hw + j0, hw);
-            }
-    }
+    run_blocks(c, g->B, (long)g->H * g->W, g->Cin, g->Cout, wp, dy, NULL, 1, dx);
     lm_arena_rewind(&c->arena, mk);
     return 0;
 }

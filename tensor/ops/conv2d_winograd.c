@@ -356,14 +356,13 @@ static int chunk_tiles(int Cin, int Cout, long T, int nt)
 
 /* y (B x Cout x Ho x Wo) = bias + conv or += conv, from x (B x Cin x H x W) and the
  * transformed weights U: 36 products with weights packed in panels (lm_sgemm_panel). */
-static int winograd_run(lm_ctx *c, int B, const wgrid *gi, const wgrid *go, const float *x,
-                        const float *U, const float *bias, int accumulate, float *y)
+static int winograd_run(lm_ctx *c, const wgrid *gi, const wgrid *go, const float *x,
+                        const float *U, long pu, const float *bias, int accumulate, float *y)
 {
     int Cin = gi->C, Cout = go->C, nt = lm_nthreads(c);
     long T = gi->T;
     int tc = chunk_tiles(Cin, Cout, T, nt);
-    long nchunks = (T + tc - 1) / tc, pu = lm_panel_size(Cout, Cin);
-    (void)B;
+    long nchunks = (T + tc - 1) / tc;
     if (nchunks < nt) nt = (int)nchunks;
     size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + (size_t)Cin * 6 * (size_t)gi->wp;
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
@@ -391,51 +390,61 @@ static int winograd_run(lm_ctx *c, int B, const wgrid *gi, const wgrid *go, cons
     return 0;
 }
 
+/* Transformed weights, packed for lm_sgemm_panel: for the forward (flip 0) U_xi[co][ci] from
+ * w[co][ci]; for the input gradient (flip 1) U_xi[ci][co] from w[co][ci] rotated 180 degrees.
+ * Returns NULL with the ctx error set when out of memory. */
+static float *packed_weights(lm_ctx *c, const lm_conv_geom *g, const float *w, int flip,
+                             long *pu_out)
+{
+    int rows = flip ? g->Cin : g->Cout, K = flip ? g->Cout : g->Cin;
+    long pu = lm_panel_size(rows, K);
+    float *U = lm_ctx_alloc(c, sizeof(float) * 36 * (size_t)pu);
+    if (!U) return NULL;
+    memset(U, 0, sizeof(float) * 36 * (size_t)pu);
+#pragma omp parallel for schedule(static) num_threads(lm_nthreads(c)) if (g->Cout * g->Cin >= 256)
+    for (int co = 0; co < g->Cout; co++)
+        for (int ci = 0; ci < g->Cin; ci++) {
+            const float *k = w + ((long)co * g->Cin + ci) * 9;
+            float u[36];
+            if (flip)
+                weight_transform(k + 8, -3, -1, u);
+            else
+                weight_transform(k, 3, 1, u);
+            long at = flip ? lm_panel_at(K, ci, co) : lm_panel_at(K, co, ci);
+            for (int xi = 0; xi < 36; xi++) U[xi * pu + at] = u[xi];
+        }
+    *pu_out = pu;
+    return U;
+}
+
+/* flip 0: y = bias + conv(x, w); flip 1: dx += conv(dy, w') with w' the transposed, rotated
+ * weights and padding 2 - p, whose tiles cover dx (H x W). */
+static int forward_like(lm_ctx *c, const lm_conv_geom *g, const float *in, const float *w,
+                        int flip, const float *bias, float *out)
+{
+    lm_arena_mark mk = lm_arena_get_mark(&c->arena);
+    long pu;
+    float *U = packed_weights(c, g, w, flip, &pu);
+    if (!U) return c->status;
+    wgrid gi = flip ? make_grid(g->Cout, g->Ho, g->Wo, g->H, g->W, 2 - g->ph, 2 - g->pw, g->B)
+                    : make_grid(g->Cin, g->H, g->W, g->Ho, g->Wo, g->ph, g->pw, g->B);
+    wgrid go = gi;
+    go.C = flip ? g->Cin : g->Cout;
+    int st = winograd_run(c, &gi, &go, in, U, pu, bias, flip, out);
+    lm_arena_rewind(&c->arena, mk);
+    return st;
+}
+
 int lm_conv2d_winograd_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
                            const float *bias, float *y)
 {
-    lm_arena_mark mk = lm_arena_get_mark(&c->arena);
-    long pu = lm_panel_size(g->Cout, g->Cin);
-    float *U = lm_ctx_alloc(c, sizeof(float) * 36 * (size_t)pu);
-    if (!U) return c->status;
-    memset(U, 0, sizeof(float) * 36 * (size_t)pu);
-#pragma omp parallel for schedule(static) num_threads(lm_nthreads(c)) if (g->Cout * g->Cin >= 256)
-    for (int co = 0; co < g->Cout; co++) /* U_xi[co][ci] from w[co][ci][3][3] */
-        for (int ci = 0; ci < g->Cin; ci++) {
-            float u[36];
-            weight_transform(w + ((long)co * g->Cin + ci) * 9, 3, 1, u);
-            for (int xi = 0; xi < 36; xi++) U[xi * pu + lm_panel_at(g->Cin, co, ci)] = u[xi];
-        }
-    wgrid gi = make_grid(g->Cin, g->H, g->W, g->Ho, g->Wo, g->ph, g->pw, g->B);
-    wgrid go = gi;
-    go.C = g->Cout;
-    int st = winograd_run(c, g->B, &gi, &go, x, U, bias, 0, y);
-    lm_arena_rewind(&c->arena, mk);
-    return st;
+    return forward_like(c, g, x, w, 0, bias, y);
 }
 
 int lm_conv2d_winograd_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *w,
                              float *dx)
 {
-    lm_arena_mark mk = lm_arena_get_mark(&c->arena);
-    long pu = lm_panel_size(g->Cin, g->Cout);
-    float *U = lm_ctx_alloc(c, sizeof(float) * 36 * (size_t)pu);
-    if (!U) return c->status;
-    memset(U, 0, sizeof(float) * 36 * (size_t)pu);
-#pragma omp parallel for schedule(static) num_threads(lm_nthreads(c)) if (g->Cout * g->Cin >= 256)
-    for (int co = 0; co < g->Cout; co++) /* U_xi[ci][co] from w[co][ci] rotated 180 degrees */
-        for (int ci = 0; ci < g->Cin; ci++) {
-            float u[36];
-            weight_transform(w + ((long)co * g->Cin + ci) * 9 + 8, -3, -1, u);
-            for (int xi = 0; xi < 36; xi++) U[xi * pu + lm_panel_at(g->Cout, ci, co)] = u[xi];
-        }
-    /* dx = conv(dy, w') with padding 2 - p: the tiles cover dx (H x W) */
-    wgrid gi = make_grid(g->Cout, g->Ho, g->Wo, g->H, g->W, 2 - g->ph, 2 - g->pw, g->B);
-    wgrid go = gi;
-    go.C = g->Cin;
-    int st = winograd_run(c, g->B, &gi, &go, dy, U, NULL, 1, dx);
-    lm_arena_rewind(&c->arena, mk);
-    return st;
+    return forward_like(c, g, dy, w, 1, NULL, dx);
 }
 
 int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
