@@ -40,15 +40,14 @@ int lm_conv2d_winograd_applies(const lm_conv_geom *g)
 }
 
 /* ---- transforms -------------------------------------------------------------------------- */
+/* The kernel transform of F(4x4, 3x3) (points 0, +-1, +-2, inf). */
+static const double G[6][3] = {{1.0 / 4, 0, 0},           {-1.0 / 6, -1.0 / 6, -1.0 / 6},
+                               {-1.0 / 6, 1.0 / 6, -1.0 / 6}, {1.0 / 24, 1.0 / 12, 1.0 / 6},
+                               {1.0 / 24, -1.0 / 12, 1.0 / 6}, {0, 0, 1}};
+
 /* U (6x6) = G g G^T for a 3x3 kernel g (row-major, element (i, j) at g[i*si + j*sj]). */
 static void weight_transform(const float *g, int si, int sj, float U[36])
 {
-    static const double G[6][3] = {{1.0 / 4, 0, 0},
-                                   {-1.0 / 6, -1.0 / 6, -1.0 / 6},
-                                   {-1.0 / 6, 1.0 / 6, -1.0 / 6},
-                                   {1.0 / 24, 1.0 / 12, 1.0 / 6},
-                                   {1.0 / 24, -1.0 / 12, 1.0 / 6},
-                                   {0, 0, 1}};
     double t[6][3];
     for (int a = 0; a < 6; a++)
         for (int j = 0; j < 3; j++)
@@ -61,12 +60,6 @@ static void weight_transform(const float *g, int si, int sj, float U[36])
 /* dg (3x3, added at dg[i*si + j*sj]) += G^T dU G. */
 static void weight_transform_adjoint(const float dU[36], float *dg, int si, int sj)
 {
-    static const double G[6][3] = {{1.0 / 4, 0, 0},
-                                   {-1.0 / 6, -1.0 / 6, -1.0 / 6},
-                                   {-1.0 / 6, 1.0 / 6, -1.0 / 6},
-                                   {1.0 / 24, 1.0 / 12, 1.0 / 6},
-                                   {1.0 / 24, -1.0 / 12, 1.0 / 6},
-                                   {0, 0, 1}};
     double t[3][6];
     for (int i = 0; i < 3; i++)
         for (int b = 0; b < 6; b++) {
