@@ -7,9 +7,15 @@
 #include "tensor/tensor.h"
 
 /* Back-propagate from `out`. seed: gradient of the final objective w.r.t. out (same shape),
- * or NULL for ones (a scalar loss). Gradients accumulate into ->grad of every tensor that
- * requires grad. Returns LM_OK or the ctx error. */
+ * or NULL for ones (a scalar loss). Gradients accumulate into ->grad of every leaf tensor and
+ * parameter that requires grad, and of `out`; the gradients of intermediate tensors (outputs
+ * of recorded ops) are released as soon as their op's backward has run (their buffers are
+ * reused for later gradients) and are NULL afterwards. Returns LM_OK or the ctx error. */
 lm_status lm_backward(lm_ctx *c, lm_tensor *out, const lm_tensor *seed);
+/* Process-wide: 0 keeps every intermediate gradient until lm_ctx_reset (the reference
+ * behaviour, for tests); 1 (default) releases and reuses them as above. Returns the previous
+ * setting. */
+int lm_backward_set_grad_reuse(int on);
 
 /* Forget grads of every tensor on the tape (not parameters); the tape itself remains. */
 void lm_tape_clear(lm_ctx *c);

@@ -82,6 +82,65 @@ lm_tensor *lm_conv_forward(lm_ctx *c, const lm_conv *l, lm_tensor *x)
     return y;
 }
 
+lm_tensor *lm_conv_forward_shared(lm_ctx *c, const lm_conv *l, lm_tensor *a, lm_tensor *s)
+{
+    if (!lm_check_inputs(c, "conv_forward_shared", 2, a, s)) return NULL;
+    int g = l->o.groups > 0 ? l->o.groups : 1;
+    if (l->transposed || g != 1 || a->ndim != 4 || s->ndim != 4 || s->shape[0] != 1 ||
+        a->shape[1] + s->shape[1] != l->cin) {
+        char sa[64], ss[64];
+        lm_ctx_fail(c, LM_ERR_SHAPE, "conv_forward_shared: inputs %s and %s (shared, batch 1) "
+                    "do not make the %d input channels of a plain conv", lm_shape_str(a, sa,
+                    sizeof sa), lm_shape_str(s, ss, sizeof ss), l->cin);
+        return NULL;
+    }
+    int ca = a->shape[1], cs = s->shape[1];
+    lm_tensor *ya = lm_conv2d(c, a, lm_slice(c, l->w, 1, 0, ca), NULL, &l->o);
+    lm_tensor *ys = lm_conv2d(c, s, lm_slice(c, l->w, 1, ca, cs), l->b, &l->o);
+    lm_tensor *y = lm_add(c, ya, ys);
+    if (observer && observed_ctx == c && y) observer(observer_user, "conv", l->w, l->b, a, y);
+    return y;
+}
+
+lm_tensor *lm_conv_forward_concat(lm_ctx *c, const lm_conv *const *ls, int n, lm_tensor *x,
+                                  int stacked)
+{
+    if (!lm_check_inputs(c, "conv_forward_concat", 1, x)) return NULL;
+    enum { MAXN = 8 };
+    const lm_conv *l0 = ls[0];
+    int g = l0->o.groups > 0 ? l0->o.groups : 1, ok = n >= 1 && n <= MAXN && !l0->transposed;
+    for (int i = 1; ok && i < n; i++) {
+        const lm_conv *l = ls[i];
+        ok = !l->transposed && l->cin == l0->cin && l->kh == l0->kh && l->kw == l0->kw &&
+             !memcmp(&l->o, &l0->o, sizeof l->o) && !l->b == !l0->b;
+    }
+    int cin = stacked ? n * l0->cin : l0->cin;
+    if (!ok || x->ndim != 4 || x->shape[1] != cin) {
+        char sx[64];
+        lm_ctx_fail(c, LM_ERR_SHAPE, "conv_forward_concat: %d layers that differ in input "
+                    "channels, kernel, options or bias, or input %s (need %d channels)", n,
+                    lm_shape_str(x, sx, sizeof sx), cin);
+        return NULL;
+    }
+    lm_tensor *ws[MAXN], *bs[MAXN];
+    for (int i = 0; i < n; i++) ws[i] = ls[i]->w, bs[i] = ls[i]->b;
+    lm_conv2d_opts o = l0->o;
+    if (stacked) o.groups = n * g;
+    lm_tensor *w = n > 1 ? lm_concat(c, ws, n, 0) : ws[0];
+    lm_tensor *b = l0->b && n > 1 ? lm_concat(c, bs, n, 0) : bs[0];
+    lm_tensor *y = lm_conv2d(c, x, w, b, &o);
+    if (observer && observed_ctx == c && y) {
+        int c0 = 0;
+        for (int i = 0; i < n; i++) {
+            lm_tensor *xi = stacked ? lm_slice(c, x, 1, i * l0->cin, l0->cin) : x;
+            lm_tensor *yi = lm_slice(c, y, 1, c0, ls[i]->cout);
+            if (xi && yi) observer(observer_user, "conv", ls[i]->w, ls[i]->b, xi, yi);
+            c0 += ls[i]->cout;
+        }
+    }
+    return y;
+}
+
 lm_status lm_linear_declare(lm_params *p, lm_linear_layer *l, const char *name, int in, int out,
                             int bias, lm_err *err)
 {

@@ -31,6 +31,21 @@ lm_status lm_conv_transpose_declare(lm_params *p, lm_conv *l, const char *name, 
  * (cout/g)*kh*kw for transposed conv (PyTorch's quirk). */
 void lm_conv_init_default(lm_conv *l, lm_rng *r);
 lm_tensor *lm_conv_forward(lm_ctx *c, const lm_conv *l, lm_tensor *x);
+/* The plain (ungrouped, not transposed) conv l on the channel concatenation of a
+ * (B x Ca x H x W) and s (1 x Cs x H x W: the same for every batch item, broadcast), computed
+ * as conv(a, W[:, :Ca]) + (conv(s, W[:, Ca:]) + bias) so the shared half is convolved once,
+ * not B times. Equal to lm_conv_forward on the concatenation up to float rounding (the halves
+ * are summed separately); differentiable; reported to the layer observer as one layer l. */
+/* n (<= 8) convs with the same input channels, kernel, options and bias presence, as one
+ * conv (weights and biases concatenated): the result is the channel concatenation of their
+ * outputs. stacked = 0: every layer reads all of x; stacked = 1: x is the channel
+ * concatenation of the layers' inputs (layer i reads its own block; for grouped layers the
+ * groups line up, e.g. depthwise convs stay depthwise). One bigger conv instead of n small
+ * ones; the same numbers up to float rounding (the conv path may differ); differentiable;
+ * reported to the layer observer as the n layers. */
+lm_tensor *lm_conv_forward_concat(lm_ctx *c, const lm_conv *const *ls, int n, lm_tensor *x,
+                                  int stacked);
+lm_tensor *lm_conv_forward_shared(lm_ctx *c, const lm_conv *l, lm_tensor *a, lm_tensor *s);
 
 typedef struct lm_linear_layer {
     lm_tensor *w, *b;              /* w: out x in */

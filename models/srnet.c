@@ -26,9 +26,12 @@ static lm_tensor *spectral_attention(lm_ctx *c, const sam *s, lm_tensor *x)
 {
     int B = x->shape[0], d = s->dim, H = x->shape[2], W = x->shape[3], h = s->heads;
     int shp[3] = {B * h, d / h, H * W};
-    lm_tensor *q = lm_reshape(c, lm_conv_forward(c, &s->q_dw, lm_conv_forward(c, &s->to_q, x)), 3, shp);
-    lm_tensor *k = lm_reshape(c, lm_conv_forward(c, &s->k_dw, lm_conv_forward(c, &s->to_k, x)), 3, shp);
-    lm_tensor *v = lm_reshape(c, lm_conv_forward(c, &s->v_dw, lm_conv_forward(c, &s->to_v, x)), 3, shp);
+    /* q, k, v = dwconv(to_*(x)): the three 1x1 convs as one, the three depthwise as one */
+    const lm_conv *pw[3] = {&s->to_q, &s->to_k, &s->to_v}, *dw[3] = {&s->q_dw, &s->k_dw, &s->v_dw};
+    lm_tensor *qkv = lm_conv_forward_concat(c, dw, 3, lm_conv_forward_concat(c, pw, 3, x, 0), 1);
+    lm_tensor *q = lm_reshape(c, lm_slice(c, qkv, 1, 0, d), 3, shp);
+    lm_tensor *k = lm_reshape(c, lm_slice(c, qkv, 1, d, d), 3, shp);
+    lm_tensor *v = lm_reshape(c, lm_slice(c, qkv, 1, 2 * d, d), 3, shp);
     q = lm_l2_normalize(c, q, -1, 1e-12f);
     k = lm_l2_normalize(c, k, -1, 1e-12f);
     lm_tensor *a = lm_reshape(c, lm_matmul(c, q, k, 0, 1), 4, (int[]){B, h, d / h, d / h});
@@ -38,11 +41,14 @@ static lm_tensor *spectral_attention(lm_ctx *c, const sam *s, lm_tensor *x)
     return lm_conv_forward(c, &s->proj, o);
 }
 
+/* out_conv(gelu(cat(o1, o2))), o_i = net_i.2(gelu(net_i.0(x))): both branches at once (the
+ * 1x1 convs as one, the depthwise convs as one), whose output is already cat(o1, o2). */
 static lm_tensor *ffn(lm_ctx *c, const sam *s, lm_tensor *x)
 {
-    lm_tensor *o1 = lm_conv_forward(c, &s->net1_2, lm_gelu(c, lm_conv_forward(c, &s->net1_0, x)));
-    lm_tensor *o2 = lm_conv_forward(c, &s->net2_2, lm_gelu(c, lm_conv_forward(c, &s->net2_0, x)));
-    return lm_conv_forward(c, &s->out_conv, lm_gelu(c, lm_concat(c, (lm_tensor *[]){o1, o2}, 2, 1)));
+    const lm_conv *pw[2] = {&s->net1_0, &s->net2_0}, *dw[2] = {&s->net1_2, &s->net2_2};
+    lm_tensor *o = lm_conv_forward_concat(c, pw, 2, x, 0);
+    o = lm_conv_forward_concat(c, dw, 2, lm_gelu(c, o), 1);
+    return lm_conv_forward(c, &s->out_conv, lm_gelu(c, o));
 }
 
 static lm_tensor *sam_forward(lm_ctx *c, const sam *s, lm_tensor *x)
@@ -88,8 +94,8 @@ static lm_tensor *srnet_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
     }
     lm_tensor *e2 = lm_conv_forward(c, &n->emb2, mask); /* same for every batch item */
     lm_tensor *e1 = lm_conv_forward(c, &n->emb1, x);
-    e2 = lm_add(c, lm_scale(c, e1, 0.0f), e2);         /* broadcast to the batch */
-    lm_tensor *fea = lm_conv_forward(c, &n->emb, lm_concat(c, (lm_tensor *[]){e1, e2}, 2, 1));
+    /* emb(cat(e1, e2 broadcast to the batch)), with the e2 half convolved once */
+    lm_tensor *fea = lm_conv_forward_shared(c, &n->emb, e1, e2);
     lm_tensor *residual = fea, *skips[4];
     fea = lm_conv_forward(c, &n->down, fea);
     for (int i = 0; i < n->stages; i++) {
@@ -103,6 +109,11 @@ static lm_tensor *srnet_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
         fea = sam_forward(c, &n->dec[i], lm_conv_forward(c, &n->dec_fuse[i], fea));
     }
     fea = lm_add(c, lm_conv_forward(c, &n->up, fea), residual);
+    if (ph || pw) { /* the mapping conv only where the crop keeps it: H x W plus its halo */
+        int hh = H + n->mapping.kh / 2, hw = W + n->mapping.kw / 2;
+        if (hh < H + ph) fea = lm_slice(c, fea, 2, 0, hh);
+        if (hw < W + pw) fea = lm_slice(c, fea, 3, 0, hw);
+    }
     lm_tensor *out = lm_conv_forward(c, &n->mapping, fea);
     if (ph || pw) out = lm_contiguous(c, lm_slice(c, lm_slice(c, out, 2, 0, H), 3, 0, W));
     return out;

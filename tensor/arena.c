@@ -57,7 +57,13 @@ void *lm_arena_alloc(lm_arena *a, size_t bytes)
         a->cur++;
         a->blocks[a->cur].used = 0;
     }
-    size_t cap = need > a->min_block ? need : a->min_block;
+    /* New blocks at least double the capacity: a first step that grows the arena makes few
+     * blocks, so few block tails are left behind when an allocation does not fit (tails that
+     * scratch, since rewound, had touched stay resident: with one block per tensor they made
+     * the first step's peak RSS about the arena capacity, well above its high water). Untouched
+     * pages of a large block take no memory. */
+    size_t cap = need > a->min_block ? need : a->min_block, total = lm_arena_capacity(a);
+    if (cap < total) cap = total;
     if (add_block(a, cap) != 0) return NULL;
     a->cur = a->nblocks - 1;
     return lm_arena_alloc(a, bytes);

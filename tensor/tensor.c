@@ -387,10 +387,31 @@ int lm_check_inputs(lm_ctx *c, const char *op, int n, ...)
     return ok;
 }
 
+/* A host gradient for t from the buffers released so far in this backward (the smallest one
+ * that fits), or NULL. */
+static lm_tensor *grad_from_pool(lm_ctx *c, const lm_tensor *t)
+{
+    lm_grad_pool *p = c->grad_pool;
+    long n = lm_tensor_numel(t);
+    int best = -1;
+    for (int i = 0; i < p->n; i++)
+        if (p->cap[i] >= n && (best < 0 || p->cap[i] < p->cap[best])) best = i;
+    if (best < 0) return NULL;
+    lm_tensor *g = lm_ctx_alloc(c, sizeof *g);
+    if (!g) return NULL;
+    lm_tensor_wrap(g, p->data[best], t->ndim, t->shape);
+    p->n--;
+    p->data[best] = p->data[p->n];
+    p->cap[best] = p->cap[p->n];
+    return g;
+}
+
 lm_tensor *lm_grad(lm_ctx *c, lm_tensor *t)
 {
     if (t->grad) return t->grad;
-    lm_tensor *g = lm_tensor_new_on(c, t->device, t->ndim, t->shape);
+    lm_tensor *g = NULL;
+    if (c->grad_pool && t->device == LM_DEVICE_CPU) g = grad_from_pool(c, t);
+    if (!g) g = lm_tensor_new_on(c, t->device, t->ndim, t->shape);
     if (!g) return NULL;
     float zero = 0.0f;
     lm_tensor *a[1] = {g};

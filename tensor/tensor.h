@@ -92,6 +92,14 @@ struct lm_node {
 };
 
 /* ---- context ------------------------------------------------------------------------- */
+/* Host gradient buffers released during lm_backward (those of intermediate tensors whose
+ * backward has run), reused by lm_grad for later gradients (autograd/tape.c). */
+typedef struct lm_grad_pool {
+    float **data;
+    long *cap;                        /* floats in data[i] */
+    int n, max;
+} lm_grad_pool;
+
 struct lm_ctx {
     lm_arena arena;                   /* per step: tensors, tape nodes, scratch */
     lm_node *tape;                    /* newest node first */
@@ -102,6 +110,7 @@ struct lm_ctx {
     lm_status status;                 /* first error since the last clear */
     char msg[512];
     void *dev_arena;                  /* device memory of a device backend (owned by it) */
+    lm_grad_pool *grad_pool;          /* set during lm_backward only */
 };
 
 /* Initialise a context: CPU backend, grad enabled, nthreads (0 = all cores). */

@@ -1,6 +1,7 @@
 /* test_activation.c — relu, leaky_relu, sigmoid, tanh, gelu (activation.c): hand-computed
  * values, an independent double-precision reference, behaviour for large |x|, gradient checks
  * away from kinks, exact gradients at and around the kinks, errors, determinism. */
+#include "tensor/ops/op_paths.h"
 #include "tests/check.h"
 #include <stdlib.h>
 
@@ -227,6 +228,53 @@ static void test_activation_determinism(void)
     free(one);
 }
 
+/* The vectorised GELU forward (its own erf) against the erff loop it replaces (the reference
+ * path) on a dense grid of [-12, 12], tiny and special values: within 1.1 ulp of erf, i.e.
+ * |fast - ref| <= |x| * 1.2e-7 + 1 ulp of the result; same for any thread count. */
+static void test_gelu_fast_matches_reference(void)
+{
+    const long n = 240001 + 12;
+    float *xv = malloc(sizeof(float) * n);
+    for (long i = 0; i < 240001; i++) xv[i] = -12.0f + (float)i * 1e-4f;
+    const float sp[12] = {0.0f, -0.0f, 1e-30f, -1e-30f, 1e-40f, 0.927734375f, -0.927734375f,
+                          0.9277344f, 88.0f, -88.0f, 1e30f, -1e30f};
+    memcpy(xv + 240001, sp, sizeof sp);
+    float *out[3];
+    for (int v = 0; v < 3; v++) {
+        lm_ctx c;
+        lm_ctx_init(&c, v == 1 ? 2 : 1);
+        int old = lm_op_set_path(v == 2 ? LM_OP_PATH_REFERENCE : LM_OP_PATH_FAST);
+        lm_tensor *x = lm_tensor_from(&c, 1, (int[]){(int)n}, xv);
+        lm_tensor *y = lm_gelu(&c, x);
+        lm_op_set_path(old);
+        out[v] = malloc(sizeof(float) * n);
+        if (y) memcpy(out[v], y->data, sizeof(float) * n);
+        CHECK_CTX_OK(&c);
+        lm_ctx_free(&c);
+    }
+    long bad = 0, first = -1;
+    for (long i = 0; i < n; i++) {
+        double e = fabs((double)out[0][i] - out[2][i]);
+        double tol = fabs(xv[i]) * 1.2e-7 + fabs((double)out[2][i]) * 1.2e-7;
+        if (!(e <= tol) || out[0][i] != out[1][i]) {
+            if (first < 0) first = i;
+            bad++;
+        }
+    }
+    CHECK_MSG(bad == 0, "%ld of %ld off; first x = %.9g: fast %.9g, reference %.9g", bad, n,
+              first >= 0 ? xv[first] : 0.0, first >= 0 ? out[0][first] : 0.0,
+              first >= 0 ? out[2][first] : 0.0);
+    for (int v = 0; v < 3; v++) free(out[v]);
+    /* inf, -inf and NaN behave as the reference: inf, NaN (-inf * 0), NaN */
+    lm_ctx c;
+    lm_ctx_init(&c, 1);
+    lm_tensor *x = lm_tensor_from(&c, 1, (int[]){3}, (float[]){INFINITY, -INFINITY, NAN});
+    lm_tensor *y = lm_gelu(&c, x);
+    CHECK(y && isinf(y->data[0]) && y->data[0] > 0 && isnan(y->data[1]) && isnan(y->data[2]));
+    lm_ctx_free(&c);
+    free(xv);
+}
+
 int main(void)
 {
     RUN(test_activation_hand_values);
@@ -236,5 +284,6 @@ int main(void)
     RUN(test_activation_grad_exact);
     RUN(test_activation_errors);
     RUN(test_activation_determinism);
+    RUN(test_gelu_fast_matches_reference);
     return check_summary();
 }

@@ -1,6 +1,7 @@
 /* test_norm.c — layer_norm_channels and l2_normalize: independent double-precision references,
  * hand values, gradient checks for every differentiable input (l2 on both sides of the eps
  * clamp), exact w/b gradients, thread-count independence, strided inputs and error cases. */
+#include "tensor/ops/op_paths.h"
 #include "tests/check.h"
 #include <stdlib.h>
 
@@ -285,6 +286,40 @@ static void test_l2_errors(void)
     lm_ctx_free(&c);
 }
 
+/* The row path of the forward (last axis, as in the spectral attention) against the blocked
+ * reference loop: row lengths around the 4-wide unroll, rows below eps, 1 and 2 threads. */
+static void test_l2_rows_match_reference(void)
+{
+    lm_rng r;
+    lm_rng_seed(&r, 76);
+    const int lens[] = {1, 3, 4, 5, 80, 1280, 1283};
+    for (size_t i = 0; i < sizeof lens / sizeof lens[0]; i++) {
+        int shape[3] = {3, 40, lens[i]};
+        long n = 3L * 40 * lens[i];
+        float *xv = malloc(sizeof(float) * n), *y[3];
+        lm_rng_fill_uniform(&r, xv, n, -1.0f, 1.0f);
+        for (int k = 0; k < lens[i]; k++) xv[k] *= 1e-3f; /* row 0 below eps = 1e-2 if short */
+        for (int v = 0; v < 3; v++) {
+            lm_ctx c;
+            lm_ctx_init(&c, v == 1 ? 2 : 1);
+            int old = lm_op_set_path(v == 2 ? LM_OP_PATH_REFERENCE : LM_OP_PATH_FAST);
+            lm_tensor *x = lm_tensor_from(&c, 3, shape, xv);
+            lm_tensor *yt = lm_l2_normalize(&c, x, -1, lens[i] < 100 ? 1e-2f : 1e-12f);
+            lm_op_set_path(old);
+            y[v] = malloc(sizeof(float) * n);
+            if (yt) memcpy(y[v], yt->data, sizeof(float) * n);
+            CHECK_CTX_OK(&c);
+            lm_ctx_free(&c);
+        }
+        /* the norms are summed in double in another order: equal after rounding but for
+         * ties, so within one float ulp */
+        CHECK_ARRAY_CLOSE(y[0], y[2], n, 1e-30, 1.2e-7);
+        CHECK_ARRAY_CLOSE(y[1], y[0], n, 0, 0);
+        for (int v = 0; v < 3; v++) free(y[v]);
+        free(xv);
+    }
+}
+
 int main(void)
 {
     RUN(test_layer_norm_reference);
@@ -294,5 +329,6 @@ int main(void)
     RUN(test_l2_reference);
     RUN(test_l2_gradients);
     RUN(test_l2_errors);
+    RUN(test_l2_rows_match_reference);
     return check_summary();
 }

@@ -106,21 +106,21 @@ static void bc_row_offsets(const bc_layout *L, long r, ptrdiff_t *oa, ptrdiff_t 
 #define ROW_LOOP(DST, STORE, EXPR)                                                            \
     do {                                                                                      \
         if (sa && sb) {                                                                       \
-            for (long i = 0; i < n; i++) {                                                    \
+            _Pragma("omp simd") for (long i = 0; i < n; i++) {                               \
                 const float av = a[i], bv = b[i];                                             \
                 (void)av, (void)bv;                                                           \
                 DST[i] STORE(EXPR);                                                           \
             }                                                                                 \
         } else if (sa) {                                                                      \
             const float bv = b[0];                                                            \
-            for (long i = 0; i < n; i++) {                                                    \
+            _Pragma("omp simd") for (long i = 0; i < n; i++) {                               \
                 const float av = a[i];                                                        \
                 (void)av, (void)bv;                                                           \
                 DST[i] STORE(EXPR);                                                           \
             }                                                                                 \
         } else if (sb) {                                                                      \
             const float av = a[0];                                                            \
-            for (long i = 0; i < n; i++) {                                                    \
+            _Pragma("omp simd") for (long i = 0; i < n; i++) {                               \
                 const float bv = b[i];                                                        \
                 (void)av, (void)bv;                                                           \
                 DST[i] STORE(EXPR);                                                           \
@@ -128,7 +128,7 @@ static void bc_row_offsets(const bc_layout *L, long r, ptrdiff_t *oa, ptrdiff_t 
         } else {                                                                              \
             const float av = a[0], bv = b[0];                                                 \
             (void)av, (void)bv;                                                               \
-            for (long i = 0; i < n; i++) DST[i] STORE(EXPR);                                  \
+            _Pragma("omp simd") for (long i = 0; i < n; i++) DST[i] STORE(EXPR);              \
         }                                                                                     \
     } while (0)
 

@@ -29,13 +29,17 @@ static int ln_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params
         float *y = t[1]->data + b * C * HW + p0, *st = t[2]->data + b * 2 * HW + p0;
         float mean[LN_BLOCK] = {0}, var[LN_BLOCK] = {0};
         for (int ch = 0; ch < C; ch++)
+#pragma omp simd
             for (int q = 0; q < np; q++) mean[q] += x[ch * HW + q];
+#pragma omp simd
         for (int q = 0; q < np; q++) mean[q] /= (float)C;
         for (int ch = 0; ch < C; ch++)
+#pragma omp simd
             for (int q = 0; q < np; q++) {
                 const float d = x[ch * HW + q] - mean[q];
                 var[q] += d * d;
             }
+#pragma omp simd
         for (int q = 0; q < np; q++) {
             var[q] = 1.0f / sqrtf(var[q] / (float)C + p->eps); /* now rstd */
             st[q] = mean[q];
@@ -43,6 +47,7 @@ static int ln_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params
         }
         for (int ch = 0; ch < C; ch++) {
             const float wc = w ? w[ch] : 1.0f, bc = bias ? bias[ch] : 0.0f;
+#pragma omp simd
             for (int q = 0; q < np; q++)
                 y[ch * HW + q] = (x[ch * HW + q] - mean[q]) * var[q] * wc + bc;
         }
@@ -69,18 +74,21 @@ static int ln_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *para
         float sd[LN_BLOCK] = {0}, sdx[LN_BLOCK] = {0};
         for (int ch = 0; ch < C; ch++) {
             const float wc = w ? w[ch] : 1.0f;
+#pragma omp simd
             for (int q = 0; q < np; q++) {
                 const float d = gy[ch * HW + q] * wc;
                 sd[q] += d;
                 sdx[q] += d * (x[ch * HW + q] - mean[q]) * rstd[q];
             }
         }
+#pragma omp simd
         for (int q = 0; q < np; q++) {
             sd[q] /= (float)C;
             sdx[q] /= (float)C;
         }
         for (int ch = 0; ch < C; ch++) {
             const float wc = w ? w[ch] : 1.0f;
+#pragma omp simd
             for (int q = 0; q < np; q++) {
                 const float xh = (x[ch * HW + q] - mean[q]) * rstd[q];
                 gx[ch * HW + q] += rstd[q] * (gy[ch * HW + q] * wc - sd[q] - xh * sdx[q]);

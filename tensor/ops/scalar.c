@@ -16,7 +16,7 @@ static int affine_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     const float s = p->s, b = p->t, *x = t[0]->data;
     float *y = t[1]->data;
     long n = lm_tensor_numel(t[0]);
-#pragma omp parallel for num_threads(lm_nthreads(c)) schedule(static) if (n >= PAR_MIN)
+#pragma omp parallel for simd num_threads(lm_nthreads(c)) schedule(static) if (parallel: n >= PAR_MIN)
     for (long i = 0; i < n; i++) y[i] = s * x[i] + b;
     return 0;
 }
@@ -28,7 +28,7 @@ static int affine_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     const float s = ((const affine_params *)params)->s, *gy = t[0]->data;
     float *gx = t[1]->data;
     long n = lm_tensor_numel(t[0]);
-#pragma omp parallel for num_threads(lm_nthreads(c)) schedule(static) if (n >= PAR_MIN)
+#pragma omp parallel for simd num_threads(lm_nthreads(c)) schedule(static) if (parallel: n >= PAR_MIN)
     for (long i = 0; i < n; i++) gx[i] += s * gy[i];
     return 0;
 }

@@ -21,7 +21,15 @@ static void copy_strided(const lm_tensor *v, float *contig, int to_contig)
             for (int d = 0; d < shape[2]; d++)
                 for (int e = 0; e < shape[3]; e++) {
                     float *p = v->data + a * st[0] + b * st[1] + d * st[2] + e * st[3];
-                    if (to_contig)
+                    if (st[4] == 1) { /* contiguous rows: copy / vectorised add */
+                        float *q = contig + k;
+                        if (to_contig) memcpy(q, p, sizeof(float) * (size_t)shape[4]);
+                        else {
+#pragma omp simd
+                            for (int f = 0; f < shape[4]; f++) p[f] += q[f];
+                        }
+                        k += shape[4];
+                    } else if (to_contig)
                         for (int f = 0; f < shape[4]; f++) contig[k++] = p[f * st[4]];
                     else
                         for (int f = 0; f < shape[4]; f++) p[f * st[4]] += contig[k++];
@@ -49,6 +57,7 @@ static int flat_add_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p)
     long n = lm_tensor_numel(t[0]);
     float *a = t[0]->data;
     const float *b = t[1]->data;
+#pragma omp simd
     for (long i = 0; i < n; i++) a[i] += b[i];
     return 0;
 }
