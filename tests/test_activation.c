@@ -275,6 +275,56 @@ static void test_gelu_fast_matches_reference(void)
     free(xv);
 }
 
+/* The GELU backward's fast path against its erff/expf reference, on the same grid and special
+ * values, 1 and 2 threads (identical), and the non-finite inputs. */
+static void test_gelu_grad_fast_matches_reference(void)
+{
+    const long n = 240001 + 12;
+    float *xv = malloc(sizeof(float) * n);
+    for (long i = 0; i < 240001; i++) xv[i] = -12.0f + (float)i * 1e-4f;
+    const float sp[12] = {0.0f, -0.0f, 1e-30f, -1e-30f, 1e-40f, 0.927734375f, -0.927734375f,
+                          14.3f, 88.0f, -88.0f, 1e30f, -1e30f};
+    memcpy(xv + 240001, sp, sizeof sp);
+    float *out[3];
+    for (int v = 0; v < 3; v++) {
+        lm_ctx c;
+        lm_ctx_init(&c, v == 1 ? 2 : 1);
+        int old = lm_op_set_path(v == 2 ? LM_OP_PATH_REFERENCE : LM_OP_PATH_FAST);
+        lm_tensor *x = lm_tensor_from(&c, 1, (int[]){(int)n}, xv);
+        lm_tensor_set_requires_grad(x, 1);
+        lm_tensor *y = lm_gelu(&c, x);
+        out[v] = calloc((size_t)n, sizeof(float));
+        if (y && lm_backward(&c, y, NULL) == LM_OK && x->grad)
+            memcpy(out[v], x->grad->data, sizeof(float) * n);
+        lm_op_set_path(old);
+        CHECK_CTX_OK(&c);
+        lm_ctx_free(&c);
+    }
+    long bad = 0, first = -1;
+    for (long i = 0; i < n; i++) {
+        /* gelu' = Phi(x) + x phi(x): both terms' rounding, relative to their sizes */
+        double e = fabs((double)out[0][i] - out[2][i]);
+        double tol = 4e-7 * (1.0 + fabs(xv[i]) * 0.4);
+        if (!(e <= tol) || out[0][i] != out[1][i]) {
+            if (first < 0) first = i;
+            bad++;
+        }
+    }
+    CHECK_MSG(bad == 0, "%ld of %ld off; first x = %.9g: fast %.9g, reference %.9g", bad, n,
+              first >= 0 ? xv[first] : 0.0, first >= 0 ? out[0][first] : 0.0,
+              first >= 0 ? out[2][first] : 0.0);
+    for (int v = 0; v < 3; v++) free(out[v]);
+    free(xv);
+    lm_ctx c;
+    lm_ctx_init(&c, 1);
+    lm_tensor *x = lm_tensor_from(&c, 1, (int[]){3}, (float[]){INFINITY, -INFINITY, NAN});
+    lm_tensor_set_requires_grad(x, 1);
+    lm_tensor *y = lm_gelu(&c, x);
+    CHECK(y && lm_backward(&c, y, NULL) == LM_OK && x->grad);
+    if (x->grad) CHECK(isnan(x->grad->data[0]) && isnan(x->grad->data[1]) && isnan(x->grad->data[2]));
+    lm_ctx_free(&c);
+}
+
 int main(void)
 {
     RUN(test_activation_hand_values);
@@ -285,5 +335,6 @@ int main(void)
     RUN(test_activation_errors);
     RUN(test_activation_determinism);
     RUN(test_gelu_fast_matches_reference);
+    RUN(test_gelu_grad_fast_matches_reference);
     return check_summary();
 }

@@ -8,7 +8,8 @@
  *   sigmoid'   = y (1 - y);  computed without overflow for any |x|
  *   tanh'      = 1 - y^2
  *   gelu'      = Phi(x) + x phi(x),  Phi = normal CDF, phi = normal density
- * The GELU forward has a vectorised erf (below; the erff loop stays as its reference).
+ * GELU forward and backward have a vectorised erf and exp (below; the erff / expf loops stay
+ * as their reference).
  * What it is not: parametric activations (PReLU with a learned slope), approximate GELU. */
 #include "tensor/ops.h"
 #include "tensor/ops/op_paths.h"
@@ -64,7 +65,7 @@ static inline float blend(int cond, float a, float b)
 }
 
 /* exp(x) for x in [-103, 0]; rint is the 1.5 * 2^23 trick (rintf does not vectorise). */
-static inline float exp_neg(float x)
+__attribute__((always_inline)) static inline float exp_neg(float x)
 {
     float k = (x * 1.44269504f + 12582912.0f) - 12582912.0f;
     float r = fmaf(k, -0.693145752f, x);
@@ -81,7 +82,7 @@ static inline float exp_neg(float x)
     return p * i2f((ki + 127) << 23);
 }
 
-static inline float erf_fast(float a)
+__attribute__((always_inline)) static inline float erf_fast(float a)
 {
     float t = fabsf(a), s = a * a;
     float r = fmaf(-1.72853470e-5f, t, 3.83197126e-4f);
@@ -166,6 +167,22 @@ static inline float gelu_grad(float x)
     return cdf + x * INV_SQRT2PI * expf(-0.5f * x * x);
 }
 
+/* The same with erf_fast / exp_neg (vectorises). Below -103 the density is taken as exactly
+ * 0, as expf's underflow gives the reference (so inf * 0 is NaN there too). */
+static inline float gelu_grad_fast(float x)
+{
+    float e = -0.5f * x * x; /* <= 0 or NaN: compare magnitudes as integers (vectorises) */
+    int under = (f2i(e) & 0x7fffffff) > f2i(103.0f);
+    float d = blend(under, 0.0f, exp_neg(blend(under, -103.0f, e)));
+    return 0.5f * (1.0f + erf_fast(x * INV_SQRT2)) + x * INV_SQRT2PI * d;
+}
+
+static void gelu_bwd_fast(const float *x, const float *gy, float *gx, long n, int nthr)
+{
+#pragma omp parallel for simd num_threads(nthr) schedule(static) if (n >= PAR_MIN)
+    for (long i = 0; i < n; i++) gx[i] += gy[i] * gelu_grad_fast(x[i]);
+}
+
 /* t[0] = x, t[1] = y, t[2] = gy, t[3] = gx (contiguous, same shape): gx += f'(x) * gy. */
 static int act_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
@@ -180,7 +197,10 @@ static int act_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *param
     case ACT_LEAKY: leaky_bwd(x, gy, gx, n, slope, nthr); break;
     case ACT_SIGMOID: FLAT_LOOP(gx[i] += gy[i] * y[i] * (1.0f - y[i])); break;
     case ACT_TANH: FLAT_LOOP(gx[i] += gy[i] * (1.0f - y[i] * y[i])); break;
-    default: FLAT_LOOP(gx[i] += gy[i] * gelu_grad(x[i])); break;
+    default:
+        if (lm_op_path() == LM_OP_PATH_FAST) gelu_bwd_fast(x, gy, gx, n, nthr);
+        else FLAT_LOOP(gx[i] += gy[i] * gelu_grad(x[i]));
+        break;
     }
     return 0;
 }
