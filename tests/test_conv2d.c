@@ -29,6 +29,8 @@ static const cfg CFGS[] = {
     {3, 32, 23, 37, 12, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 1, "several tiles per image"},
     {1, 24, 19, 21, 16, 3, 3, {2, 2, 1, 1, 1, 1, 2}, 1, "groups 2 stride 2, tiles"},
     {1, 128, 20, 20, 8, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 0, "K = 1152: column chunks"},
+    {2, 8, 9, 19, 8, 3, 3, {1, 1, 1, 1, 1, 1, 8}, 1, "3x3 depthwise (stencil backward)"},
+    {1, 4, 7, 11, 8, 3, 3, {1, 1, 1, 1, 1, 1, 4}, 0, "3x3 depthwise x2 (stencil dw)"},
 };
 #define NCFG ((int)(sizeof CFGS / sizeof CFGS[0]))
 

@@ -5,7 +5,8 @@
  * row. Parallel over planes: forward over (image, output channel), input gradient over
  * (image, input channel), weight gradient over output channels; each element is written by
  * one thread in a fixed order, so results do not depend on the thread count. The stride-1
- * forward has a faster stencil form (below; the per-tap loops stay as its reference).
+ * forward, input gradient (one output channel per input channel) and 3x3 weight gradient
+ * have faster stencil forms (below; the per-tap loops stay as their reference).
  * What it is not: the general path (conv2d_tiled.c) or the reference (conv2d.c). */
 #include "tensor/ops/gemm_internal.h"
 #include "tensor/ops/op_paths.h"
@@ -212,9 +213,51 @@ static void tap_bwd_x(const lm_conv_geom *g, const float *restrict dyp, float wv
     }
 }
 
+/* Stride-1 input gradient with one output channel per input channel: dx += the stencil of
+ * dy (padded by k - 1 - p) with the kernel rotated 180 degrees, into a per-thread plane that
+ * is then added to dx. Sums the taps before adding (the per-tap loops add tap by tap), so it
+ * agrees with them to rounding. */
+static int stencil_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *w,
+                         float *dx)
+{
+    lm_conv_geom r = *g; /* the adjoint as a forward: dy (Ho x Wo) -> dx (H x W) */
+    r.H = g->Ho, r.W = g->Wo, r.Ho = g->H, r.Wo = g->W;
+    r.ph = g->kh - 1 - g->ph, r.pw = g->kw - 1 - g->pw;
+    int khw = g->kh * g->kw, nt = lm_nthreads(c), Hp, Wp;
+    stencil_dims(&r, &Hp, &Wp);
+    long hw = (long)g->H * g->W, ohw = (long)g->Ho * g->Wo, planes = (long)g->B * g->Cin;
+    long pad = (long)Hp * Wp, per = pad + hw + khw;
+    lm_arena_mark m = lm_arena_get_mark(&c->arena);
+    float *bufs = lm_ctx_alloc(c, sizeof(float) * (size_t)per * (size_t)nt);
+    if (!bufs) return c->status;
+#pragma omp parallel num_threads(nt)
+    {
+        float *buf = bufs + per * omp_get_thread_num(), *tmp = buf + pad, *wr = tmp + hw;
+        memset(buf, 0, sizeof(float) * (size_t)pad);
+#pragma omp for schedule(static)
+        for (long pl = 0; pl < planes; pl++) {
+            int ci = (int)(pl % g->Cin);
+            const float *dyp = dy + pl * ohw;
+            for (int oy = 0; oy < g->Ho; oy++)
+                memcpy(buf + (long)(oy + r.ph) * Wp + r.pw, dyp + (long)oy * g->Wo,
+                       sizeof(float) * (size_t)g->Wo);
+            for (int t = 0; t < khw; t++) wr[t] = w[(long)ci * khw + khw - 1 - t];
+            if (g->kh == 3 && g->kw == 3) stencil_plane_3x3(&r, buf, Wp, wr, 0.0f, tmp);
+            else stencil_plane(&r, buf, Wp, wr, 0.0f, tmp);
+            float *d = dx + pl * hw;
+#pragma omp simd
+            for (long p = 0; p < hw; p++) d[p] += tmp[p];
+        }
+    }
+    lm_arena_rewind(&c->arena, m);
+    return 0;
+}
+
 int lm_conv2d_dw_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *w,
                        float *dx)
 {
+    if (stencil_applies(g) && g->Cout == g->Cin && g->ph < g->kh && g->pw < g->kw)
+        return stencil_bwd_x(c, g, dy, w, dx);
     int mult = g->Cout / g->Cin, khw = g->kh * g->kw;
     long hw = (long)g->H * g->W, ohw = (long)g->Ho * g->Wo, planes = (long)g->B * g->Cin;
 #pragma omp parallel for schedule(static) num_threads(lm_nthreads(c))
@@ -256,9 +299,72 @@ static double tap_dot(const lm_conv_geom *g, const float *restrict dyp, const fl
     return sum;
 }
 
+/* Stride-1 3x3 weight gradient: one pass over each (dy, padded x) plane pair with the nine
+ * taps' products accumulated in nine vector registers (lane l sums the columns l mod VL over
+ * all rows and images), summed across lanes in double at the end, per output channel. Agrees
+ * with the per-tap loops to rounding. */
+static int stencil_bwd_w_3x3(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
+                             float *dw)
+{
+    int mult = g->Cout / g->Cin, nt = lm_nthreads(c), Hp, Wp;
+    stencil_dims(g, &Hp, &Wp);
+    long hw = (long)g->H * g->W, ohw = (long)g->Ho * g->Wo, pad = (long)Hp * Wp;
+    lm_arena_mark m = lm_arena_get_mark(&c->arena);
+    float *bufs = lm_ctx_alloc(c, sizeof(float) * (size_t)pad * (size_t)nt);
+    if (!bufs) return c->status;
+#pragma omp parallel num_threads(nt)
+    {
+        float *buf = bufs + pad * omp_get_thread_num();
+        memset(buf, 0, sizeof(float) * (size_t)pad);
+#pragma omp for schedule(static)
+        for (int co = 0; co < g->Cout; co++) {
+            dw_vf acc[9];
+            for (int t = 0; t < 9; t++) acc[t] = (dw_vf){0};
+            for (int b = 0; b < g->B; b++) {
+                const float *xp = x + ((long)b * g->Cin + co / mult) * hw;
+                const float *dyp = dy + ((long)b * g->Cout + co) * ohw;
+                for (int iy = 0; iy < g->H; iy++)
+                    memcpy(buf + (long)(iy + g->ph) * Wp + g->pw, xp + (long)iy * g->W,
+                           sizeof(float) * (size_t)g->W);
+                for (int oy = 0; oy < g->Ho; oy++) {
+                    const float *r0 = buf + (long)oy * Wp, *r1 = r0 + Wp, *r2 = r1 + Wp;
+                    const float *drow = dyp + (long)oy * g->Wo;
+                    for (int x0 = 0; x0 < g->Wo; x0 += DW_VL) {
+                        dw_vf d;
+                        if (g->Wo - x0 >= DW_VL) {
+                            d = dw_load(drow + x0);
+                        } else {
+                            float t[DW_VL] = {0};
+                            memcpy(t, drow + x0, sizeof(float) * (size_t)(g->Wo - x0));
+                            d = dw_load(t);
+                        }
+                        acc[0] += d * dw_load(r0 + x0);
+                        acc[1] += d * dw_load(r0 + x0 + 1);
+                        acc[2] += d * dw_load(r0 + x0 + 2);
+                        acc[3] += d * dw_load(r1 + x0);
+                        acc[4] += d * dw_load(r1 + x0 + 1);
+                        acc[5] += d * dw_load(r1 + x0 + 2);
+                        acc[6] += d * dw_load(r2 + x0);
+                        acc[7] += d * dw_load(r2 + x0 + 1);
+                        acc[8] += d * dw_load(r2 + x0 + 2);
+                    }
+                }
+            }
+            for (int t = 0; t < 9; t++) {
+                double sum = 0.0;
+                for (int l = 0; l < DW_VL; l++) sum += acc[t][l];
+                dw[(long)co * 9 + t] += (float)sum;
+            }
+        }
+    }
+    lm_arena_rewind(&c->arena, m);
+    return 0;
+}
+
 int lm_conv2d_dw_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
                        float *dw)
 {
+    if (stencil_applies(g) && g->kh == 3 && g->kw == 3) return stencil_bwd_w_3x3(c, g, dy, x, dw);
     int mult = g->Cout / g->Cin, khw = g->kh * g->kw, nt = lm_nthreads(c);
     long hw = (long)g->H * g->W, ohw = (long)g->Ho * g->Wo;
     lm_arena_mark m = lm_arena_get_mark(&c->arena);
