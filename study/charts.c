@@ -500,7 +500,8 @@ static void failure_plots(FILE *f, const int *use, int nuse)
                 q == LM_COND_PHOTONS ? "set logscale y\nset yrange [*:*]\n"
                                      : "unset logscale y\nset yrange [0:*]\n");
         fprintf(f, "plot \"failure_%s.dat\" using 1:3:xtic(2) with boxes fs solid 0.5 notitle, "
-                   "\\\n     \"\" using 1:3:4 with labels offset 0,0.8 notitle\n", fn);
+                   "\\\n     \"\" using 1:3:4 with labels rotate by 90 left offset 0,0.4 "
+                   "font \",9\" notitle\n", fn);
     }
     fprintf(f, "unset multiplot\n");
 }
@@ -520,7 +521,7 @@ static lm_status failure_chart(const json_t *runs, const char *dir, lm_err *err)
     if (!f) return err->status;
     gp_head(f, "failure_3db", "", "", "");
     fprintf(f, "set datafile missing \"NaN\"\nset style fill solid 0.5\nset boxwidth 0.6\n"
-               "set xtics rotate by -30\nset xlabel \"\"\nset offsets 0.5, 0.5, graph 0.15, 0\n"
+               "set xtics rotate by -30\nset xlabel \"\"\nset offsets 0.5, 0.5, graph 0.35, 0\n"
                "unset key\n");
     failure_plots(f, use, nuse);
     fprintf(f, "set terminal svg size 960,640 dynamic noenhanced\nset output \"failure_3db.svg\"\n");

@@ -89,6 +89,13 @@ static void write_csv(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
     }
 }
 
+/* v with `digits` decimals, or "n/a" when it was not measured (null in the record). */
+static void fmt_or_na(FILE *f, int digits, double v)
+{
+    if (isfinite(v)) fprintf(f, "%.*f", digits, v);
+    else fprintf(f, "n/a");
+}
+
 /* "yes" on the Pareto front of PSNR at level k against seconds. */
 static void front(const json_t *runs, int k, int *on)
 {
@@ -117,8 +124,9 @@ static void md_main_table(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
     fprintf(f, "---:|---:|---:|---|\n");
     for (int i = 0; i < n; i++) {
         const json_t *r = json_array_get(runs, (size_t)i);
-        fprintf(f, "| %s | %.0f | %.2f | %.3f |", str(r, "preset"), num(r, "params"),
-                num(r, "macs_per_frame") / 1e9, num(r, "seconds_per_frame"));
+        fprintf(f, "| %s | %.0f | ", str(r, "preset"), num(r, "params"));
+        fmt_or_na(f, 2, num(r, "macs_per_frame") / 1e9); /* null for RGB models (MST++) */
+        fprintf(f, " | %.3f |", num(r, "seconds_per_frame"));
         for (int k = 0; k < cfg->nnoise; k++) fprintf(f, " %.2f |", level(r, k, "psnr"));
         const char *p = on0 && on10 && on0[i] ? (on10[i] ? "both" : "0 %")
                       : on10 && on10[i] ? "10 %" : "";
@@ -143,9 +151,11 @@ static void md_detail_table(FILE *f, const lm_study_cfg *cfg, const json_t *runs
                " final loss | validation PSNR |\n|---|---:|---:|---:|---:|---:|\n");
     for (size_t i = 0; i < json_array_size(runs); i++) {
         const json_t *r = json_array_get(runs, i), *t = json_object_get(r, "train");
-        fprintf(f, "| %s | %.0f | %.1f | %.5f | %.5f | %.3f |\n", str(r, "preset"),
+        fprintf(f, "| %s | %.0f | %.1f | %.5f | %.5f | ", str(r, "preset"),
                 num(t, "iterations"), num(t, "seconds"), num(t, "first_loss"),
-                num(t, "final_loss"), num(json_object_get(t, "val"), "psnr"));
+                num(t, "final_loss"));
+        fmt_or_na(f, 3, num(json_object_get(t, "val"), "psnr")); /* null: no val split */
+        fprintf(f, " |\n");
     }
 }
 

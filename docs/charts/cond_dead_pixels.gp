@@ -1,0 +1,25 @@
+# cond_dead_pixels.gp — written by lumosaic study; run `gnuplot cond_dead_pixels.gp` in this folder.
+if (strstrt(GPVAL_TERMINALS, "pngcairo") > 0) {
+    set terminal pngcairo size 960,640 noenhanced font "sans,11"
+} else {
+    set terminal png size 960,640 noenhanced
+}
+set output "cond_dead_pixels.png"
+set title "PSNR under dead_pixels (crosses: 3 dB below the model's clean PSNR)"
+set xlabel "dead pixels (% of the frame)"
+set ylabel "PSNR (dB)"
+set grid
+set key outside right top
+set datafile missing "NaN"
+plot "cond_dead_pixels_linear.dat" using 1:2 with linespoints lw 1.5 lc 1 title "linear", \
+     "cond_dead_pixels_srnet-tiny.dat" using 1:2 with linespoints lw 1.5 lc 2 title "srnet-tiny", \
+     "cond_dead_pixels_srnet.dat" using 1:2 with linespoints lw 1.5 lc 3 title "srnet", \
+     "cond_dead_pixels_mcan-tiny.dat" using 1:2 with linespoints lw 1.5 lc 4 title "mcan-tiny", \
+     "cond_dead_pixels_mcan.dat" using 1:2 with linespoints lw 1.5 lc 5 title "mcan", \
+     "cond_dead_pixels_han-tiny.dat" using 1:2 with linespoints lw 1.5 lc 6 title "han-tiny", \
+     "cond_dead_pixels_han-small.dat" using 1:2 with linespoints lw 1.5 lc 7 title "han-small", \
+     "cond_dead_pixels_mst.dat" using 1:2 with linespoints lw 1.5 lc 8 title "mst"
+set terminal svg size 960,640 dynamic noenhanced
+set output "cond_dead_pixels.svg"
+replot
+set output

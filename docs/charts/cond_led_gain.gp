@@ -1,0 +1,24 @@
+# cond_led_gain.gp — written by lumosaic study; run `gnuplot cond_led_gain.gp` in this folder.
+if (strstrt(GPVAL_TERMINALS, "pngcairo") > 0) {
+    set terminal pngcairo size 960,640 noenhanced font "sans,11"
+} else {
+    set terminal png size 960,640 noenhanced
+}
+set output "cond_led_gain.png"
+set title "PSNR under led_gain (crosses: 3 dB below the model's clean PSNR)"
+set xlabel "LED gain error (+- %)"
+set ylabel "PSNR (dB)"
+set grid
+set key outside right top
+set datafile missing "NaN"
+plot "cond_led_gain_linear.dat" using 1:2 with linespoints lw 1.5 lc 1 title "linear", \
+     "cond_led_gain_srnet-tiny.dat" using 1:2 with linespoints lw 1.5 lc 2 title "srnet-tiny", \
+     "cond_led_gain_srnet.dat" using 1:2 with linespoints lw 1.5 lc 3 title "srnet", \
+     "cond_led_gain_mcan-tiny.dat" using 1:2 with linespoints lw 1.5 lc 4 title "mcan-tiny", \
+     "cond_led_gain_mcan.dat" using 1:2 with linespoints lw 1.5 lc 5 title "mcan", \
+     "cond_led_gain_han-tiny.dat" using 1:2 with linespoints lw 1.5 lc 6 title "han-tiny", \
+     "cond_led_gain_han-small.dat" using 1:2 with linespoints lw 1.5 lc 7 title "han-small"
+set terminal svg size 960,640 dynamic noenhanced
+set output "cond_led_gain.svg"
+replot
+set output
