@@ -12,13 +12,15 @@ set grid
 set key outside right top
 set datafile missing "NaN"
 plot "cond_dead_pixels_linear.dat" using 1:2 with linespoints lw 1.5 lc 1 title "linear", \
-     "cond_dead_pixels_srnet-tiny.dat" using 1:2 with linespoints lw 1.5 lc 2 title "srnet-tiny", \
-     "cond_dead_pixels_srnet.dat" using 1:2 with linespoints lw 1.5 lc 3 title "srnet", \
-     "cond_dead_pixels_mcan-tiny.dat" using 1:2 with linespoints lw 1.5 lc 4 title "mcan-tiny", \
-     "cond_dead_pixels_mcan.dat" using 1:2 with linespoints lw 1.5 lc 5 title "mcan", \
-     "cond_dead_pixels_han-tiny.dat" using 1:2 with linespoints lw 1.5 lc 6 title "han-tiny", \
-     "cond_dead_pixels_han-small.dat" using 1:2 with linespoints lw 1.5 lc 7 title "han-small", \
-     "cond_dead_pixels_mst.dat" using 1:2 with linespoints lw 1.5 lc 8 title "mst"
+     "cond_dead_pixels_rt-8.dat" using 1:2 with linespoints lw 1.5 lc 2 title "rt-8", \
+     "cond_dead_pixels_rt-16.dat" using 1:2 with linespoints lw 1.5 lc 3 title "rt-16", \
+     "cond_dead_pixels_srnet-tiny.dat" using 1:2 with linespoints lw 1.5 lc 4 title "srnet-tiny", \
+     "cond_dead_pixels_srnet.dat" using 1:2 with linespoints lw 1.5 lc 5 title "srnet", \
+     "cond_dead_pixels_mcan-tiny.dat" using 1:2 with linespoints lw 1.5 lc 6 title "mcan-tiny", \
+     "cond_dead_pixels_mcan.dat" using 1:2 with linespoints lw 1.5 lc 7 title "mcan", \
+     "cond_dead_pixels_han-tiny.dat" using 1:2 with linespoints lw 1.5 lc 8 title "han-tiny", \
+     "cond_dead_pixels_han-small.dat" using 1:2 with linespoints lw 1.5 lc 9 title "han-small", \
+     "cond_dead_pixels_mst.dat" using 1:2 with linespoints lw 1.5 lc 10 title "mst"
 set terminal svg size 960,640 dynamic noenhanced
 set output "cond_dead_pixels.svg"
 replot

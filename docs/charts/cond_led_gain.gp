@@ -12,12 +12,14 @@ set grid
 set key outside right top
 set datafile missing "NaN"
 plot "cond_led_gain_linear.dat" using 1:2 with linespoints lw 1.5 lc 1 title "linear", \
-     "cond_led_gain_srnet-tiny.dat" using 1:2 with linespoints lw 1.5 lc 2 title "srnet-tiny", \
-     "cond_led_gain_srnet.dat" using 1:2 with linespoints lw 1.5 lc 3 title "srnet", \
-     "cond_led_gain_mcan-tiny.dat" using 1:2 with linespoints lw 1.5 lc 4 title "mcan-tiny", \
-     "cond_led_gain_mcan.dat" using 1:2 with linespoints lw 1.5 lc 5 title "mcan", \
-     "cond_led_gain_han-tiny.dat" using 1:2 with linespoints lw 1.5 lc 6 title "han-tiny", \
-     "cond_led_gain_han-small.dat" using 1:2 with linespoints lw 1.5 lc 7 title "han-small"
+     "cond_led_gain_rt-8.dat" using 1:2 with linespoints lw 1.5 lc 2 title "rt-8", \
+     "cond_led_gain_rt-16.dat" using 1:2 with linespoints lw 1.5 lc 3 title "rt-16", \
+     "cond_led_gain_srnet-tiny.dat" using 1:2 with linespoints lw 1.5 lc 4 title "srnet-tiny", \
+     "cond_led_gain_srnet.dat" using 1:2 with linespoints lw 1.5 lc 5 title "srnet", \
+     "cond_led_gain_mcan-tiny.dat" using 1:2 with linespoints lw 1.5 lc 6 title "mcan-tiny", \
+     "cond_led_gain_mcan.dat" using 1:2 with linespoints lw 1.5 lc 7 title "mcan", \
+     "cond_led_gain_han-tiny.dat" using 1:2 with linespoints lw 1.5 lc 8 title "han-tiny", \
+     "cond_led_gain_han-small.dat" using 1:2 with linespoints lw 1.5 lc 9 title "han-small"
 set terminal svg size 960,640 dynamic noenhanced
 set output "cond_led_gain.svg"
 replot

@@ -14,13 +14,15 @@ set logscale x
 set xrange [*:*] reverse
 set datafile missing "NaN"
 plot "cond_photons_linear.dat" using 1:2 with linespoints lw 1.5 lc 1 title "linear", \
-     "cond_photons_srnet-tiny.dat" using 1:2 with linespoints lw 1.5 lc 2 title "srnet-tiny", \
-     "cond_photons_srnet.dat" using 1:2 with linespoints lw 1.5 lc 3 title "srnet", \
-     "cond_photons_mcan-tiny.dat" using 1:2 with linespoints lw 1.5 lc 4 title "mcan-tiny", \
-     "cond_photons_mcan.dat" using 1:2 with linespoints lw 1.5 lc 5 title "mcan", \
-     "cond_photons_han-tiny.dat" using 1:2 with linespoints lw 1.5 lc 6 title "han-tiny", \
-     "cond_photons_han-small.dat" using 1:2 with linespoints lw 1.5 lc 7 title "han-small", \
-     "cond_photons_mst.dat" using 1:2 with linespoints lw 1.5 lc 8 title "mst"
+     "cond_photons_rt-8.dat" using 1:2 with linespoints lw 1.5 lc 2 title "rt-8", \
+     "cond_photons_rt-16.dat" using 1:2 with linespoints lw 1.5 lc 3 title "rt-16", \
+     "cond_photons_srnet-tiny.dat" using 1:2 with linespoints lw 1.5 lc 4 title "srnet-tiny", \
+     "cond_photons_srnet.dat" using 1:2 with linespoints lw 1.5 lc 5 title "srnet", \
+     "cond_photons_mcan-tiny.dat" using 1:2 with linespoints lw 1.5 lc 6 title "mcan-tiny", \
+     "cond_photons_mcan.dat" using 1:2 with linespoints lw 1.5 lc 7 title "mcan", \
+     "cond_photons_han-tiny.dat" using 1:2 with linespoints lw 1.5 lc 8 title "han-tiny", \
+     "cond_photons_han-small.dat" using 1:2 with linespoints lw 1.5 lc 9 title "han-small", \
+     "cond_photons_mst.dat" using 1:2 with linespoints lw 1.5 lc 10 title "mst"
 set terminal svg size 960,640 dynamic noenhanced
 set output "cond_photons.svg"
 replot

@@ -11,6 +11,8 @@ set ylabel "PSNR (dB)"
 set grid
 set key outside right top
 plot "noise_linear.dat" using 1:2 with linespoints lw 1.5 title "linear", \
+     "noise_rt-8.dat" using 1:2 with linespoints lw 1.5 title "rt-8", \
+     "noise_rt-16.dat" using 1:2 with linespoints lw 1.5 title "rt-16", \
      "noise_srnet-tiny.dat" using 1:2 with linespoints lw 1.5 title "srnet-tiny", \
      "noise_srnet.dat" using 1:2 with linespoints lw 1.5 title "srnet", \
      "noise_mcan-tiny.dat" using 1:2 with linespoints lw 1.5 title "mcan-tiny", \

@@ -14,6 +14,8 @@ set xrange [400:700]
 set yrange [380:720]
 plot x with lines dt 2 lc rgb "gray40" title "ideal", \
      "rainbow_linear.dat" using 1:2 with lines lw 1.5 title "linear", \
+     "rainbow_rt-8.dat" using 1:2 with lines lw 1.5 title "rt-8", \
+     "rainbow_rt-16.dat" using 1:2 with lines lw 1.5 title "rt-16", \
      "rainbow_srnet-tiny.dat" using 1:2 with lines lw 1.5 title "srnet-tiny", \
      "rainbow_srnet.dat" using 1:2 with lines lw 1.5 title "srnet", \
      "rainbow_mcan-tiny.dat" using 1:2 with lines lw 1.5 title "mcan-tiny", \

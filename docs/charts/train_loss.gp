@@ -12,6 +12,8 @@ set grid
 set key outside right top
 set logscale y
 plot "loss_linear.dat" using 1:3 with lines lw 1.5 title "linear", \
+     "loss_rt-8.dat" using 1:3 with lines lw 1.5 title "rt-8", \
+     "loss_rt-16.dat" using 1:3 with lines lw 1.5 title "rt-16", \
      "loss_srnet-tiny.dat" using 1:3 with lines lw 1.5 title "srnet-tiny", \
      "loss_srnet.dat" using 1:3 with lines lw 1.5 title "srnet", \
      "loss_mcan-tiny.dat" using 1:3 with lines lw 1.5 title "mcan-tiny", \
