@@ -203,6 +203,11 @@ static json_t *jarray_d(const double *v, int n)
 
 lm_status lm_auto_save(const char *path, const lm_auto_calib *a, lm_err *err)
 {
+    return lm_auto_save_ext(path, a, NULL, err);
+}
+
+lm_status lm_auto_save_ext(const char *path, const lm_auto_calib *a, json_t *extra, lm_err *err)
+{
     json_t *models = json_array(), *win = json_array();
     for (int b = 0; b < a->nbins; b++) json_array_append_new(win, json_integer(a->windows[b]));
     for (int m = 0; m < a->nmodels; m++) {
@@ -217,6 +222,10 @@ lm_status lm_auto_save(const char *path, const lm_auto_calib *a, lm_err *err)
                              "window", a->win_h, a->win_w, "stride", a->stride_y, a->stride_x,
                              "edges", jarray_d(a->edges, a->nbins - 1), "windows", win,
                              "models", models);
+    if (root && extra && json_object_update(root, extra)) {
+        json_decref(root);
+        root = NULL;
+    }
     int rc = root ? json_dump_file(root, path, JSON_INDENT(2) | JSON_REAL_PRECISION(10)) : -1;
     json_decref(root);
     if (rc) return lm_err_set(err, LM_ERR_IO, "auto: cannot write '%s'", path);

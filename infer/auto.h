@@ -90,6 +90,11 @@ lm_status lm_auto_validate(const lm_auto_calib *a, lm_err *err);
  * "psnr": [...]}]}. save: LM_ERR_IO; load: LM_ERR_IO (missing / unreadable), LM_ERR_FORMAT
  * (not JSON, wrong version, missing or bad fields); messages name the file. */
 lm_status lm_auto_save(const char *path, const lm_auto_calib *a, lm_err *err);
+/* lm_auto_save plus the members of `extra` (a jansson object, not consumed; NULL = none) added
+ * to the root, e.g. calibrate's "test" measurement. lm_auto_load ignores unknown members. */
+struct json_t;
+lm_status lm_auto_save_ext(const char *path, const lm_auto_calib *a, struct json_t *extra,
+                           lm_err *err);
 lm_status lm_auto_load(const char *path, lm_auto_calib *a, lm_err *err);
 
 /* Calibration samples of one scene: frame (height x width coded frame), truth (31 x height x

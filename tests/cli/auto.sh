@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
 # auto.sh — end-to-end tests of `lumosaic calibrate` and `lumosaic infer --model auto`: train a
 # linear and an mcan-tiny model briefly, calibrate them on procedural held-out scenes (auto.json
-# has the fields, one PSNR per bin and model, positive costs, the table is printed); infer
+# has the fields, one PSNR per bin and model, positive costs, the table is printed); with
+# --test-synth 2 the test table and the "test" object (a row per fixed model and per tolerance,
+# shares summing to 1, positive times, a huge tolerance = the cheapest model's PSNR with all its
+# windows, tolerance 0 = the best model per bin; infer --model auto still reads the file); infer
 # --model auto with tolerance 0 and a huge tolerance (every window on one model: the summary
 # says so and the cube equals that model's patch-wise cube, cli_cube_diff); the linear model runs
 # on the whole frame by default and agrees with --tiles (PSNR between them > 40 dB); bad input:
 # missing / broken calibration, --auto without auto, auto without --auto, one model, no scenes,
-# bad --split / --measure — one line on stderr, exit 2, no output left.
+# bad --split / --measure / --test-synth / --test-tol — one line on stderr, exit 2, no output
+# left.
 # usage: auto.sh LUMOSAIC MAKE_CUBE CUBE_PSNR CUBE_DIFF
 source "$(dirname "$0")/lib.sh"
 PSNR=$3
@@ -42,8 +46,59 @@ for m in j["models"]:
     assert m["cost_s_per_window"] > 0 and len(m["psnr"]) == 3, m
     assert all(5 < p < 100 for p in m["psnr"]), m
 assert j["models"][0]["macs_per_window"] < j["models"][1]["macs_per_window"]
+assert "test" not in j, j  # only with --test-synth
 PY
 check "auto.json fields" [ $? -eq 0 ]
+
+# ---- calibrate --test-synth: auto against the fixed models on other scenes -----------------
+"$LM" calibrate --models "$T/lin,$T/mc" --synth 2 --synth-size 132x128 --bins 3 \
+  --test-synth 2 --test-tol 0,0.5,1000 --threads 1 --output "$T/autot.json" > "$T/ttable" \
+  2> "$T/err"
+check "calibrate --test-synth: $(cat "$T/err")" [ $? -eq 0 ]
+cat "$T/ttable"
+check "test table: a row per fixed model" \
+  [ "$(grep -cE '^(linear|mcan-tiny) ' "$T/ttable")" -eq 2 ]
+check "test table: a row per tolerance" [ "$(grep -cE '^auto tol ' "$T/ttable")" -eq 3 ]
+check "test header" grep -q '^test: 2 procedural scene(s) of 132x128 .* 24 windows; 285 windows' \
+  "$T/ttable"
+python3 - "$T/auto.json" "$T/autot.json" <<'PY'
+import json, sys
+a, j = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+# the same calibration scenes and models: the fit is the same as without --test-synth
+assert j["edges"] == a["edges"] and j["windows"] == a["windows"], (a, j)
+t = j["test"]
+assert t["scenes"] == 2 and t["size"] == [132, 128] and t["windows"] == 24, t
+assert t["windows_per_640x480"] == 285 and t["threads"] == 1, t
+rows = t["rows"]
+assert [r["kind"] for r in rows] == ["fixed"] * 2 + ["auto"] * 3, rows
+assert [r.get("model") for r in rows[:2]] == ["linear", "mcan-tiny"], rows
+assert [r.get("tol_db") for r in rows[2:]] == [0, 0.5, 1000], rows
+ms = j["models"]
+for r in rows:
+    assert len(r["share"]) == 2 and abs(sum(r["share"]) - 1) < 1e-9, r
+    assert r["est_s_per_frame"] > 0 and r["measured_s"] > 0 and r["measured_s_per_frame"] > 0, r
+    assert 5 < r["psnr_db"] < 100 and r["speedup_est"] > 0, r
+    assert len(r["choice"]) == 3, r
+for m in range(2):
+    assert rows[m]["share"][m] == 1 and rows[m]["choice"] == [m] * 3, rows[m]
+    est = ms[m]["cost_s_per_window"] * 285
+    assert abs(rows[m]["est_s_per_frame"] - est) <= 1e-6 * est, (rows[m], est)
+best = max(range(2), key=lambda m: rows[m]["psnr_db"])
+assert t["best"] == ms[best]["preset"] and rows[best]["psnr_vs_best_db"] == 0, t
+# huge tolerance: every window on the cheapest model, its PSNR
+cheap = min(range(2), key=lambda m: ms[m]["cost_s_per_window"])
+huge = rows[4]
+assert huge["share"][cheap] == 1 and huge["choice"] == [cheap] * 3, huge
+assert abs(huge["psnr_db"] - rows[cheap]["psnr_db"]) < 1e-6, (huge, rows[cheap])
+# tolerance 0: the best model of each bin (lm_auto_choose)
+for b, c in enumerate(rows[2]["choice"]):
+    assert ms[c]["psnr"][b] == max(x["psnr"][b] for x in ms), (b, c, ms)
+PY
+check "autot.json test fields" [ $? -eq 0 ]
+"$LM" infer --model auto --auto "$T/autot.json" --input "$T/sim/frames/frame_0000.png" \
+  --output "$T/at" > /dev/null 2> "$T/err"
+check "infer --model auto reads a file with \"test\": $(cat "$T/err")" \
+  [ -s "$T/at/cube_0000.exr" ]
 
 # ---- infer --model auto ------------------------------------------------------------------
 # the cost order comes from the measurement: find the cheaper and the better model per file
@@ -111,4 +166,14 @@ expect_error "calibrate bad measure" 2 "--measure" "$T/e9.json" -- \
   "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --measure fft --output "$T/e9.json"
 expect_error "calibrate missing model" 2 "nope" "$T/e10.json" -- \
   "$LM" calibrate --models "$T/lin,$T/nope" --synth 1 --output "$T/e10.json"
+expect_error "calibrate negative --test-synth" 2 "--test-synth" "$T/e11.json" -- \
+  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --test-synth -1 --output "$T/e11.json"
+expect_error "calibrate bad --test-tol" 2 "--test-tol" "$T/e12.json" -- \
+  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --test-synth 1 --test-tol 0,x \
+  --output "$T/e12.json"
+expect_error "calibrate negative --test-tol" 2 "--test-tol" "$T/e13.json" -- \
+  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --test-synth 1 --test-tol -0.5 \
+  --output "$T/e13.json"
+expect_error "calibrate empty --test-tol" 2 "--test-tol" "$T/e14.json" -- \
+  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --test-tol , --output "$T/e14.json"
 finish
