@@ -56,8 +56,15 @@ static int concat_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
         const long len = t[i]->shape[p->dim] * inner, ld = t[nt - 1]->shape[p->dim] * inner;
         float *o = t[nt - 1]->data + start * inner;
         const float *s = t[i]->data;
+        /* jobs are (row, chunk) pairs, as in band_move: a single large row (batch 1, the
+         * whole-frame models) is split over the threads too */
+        enum { CHUNK = 16384 };
+        const long nch = (len + CHUNK - 1) / CHUNK, jobs = outer * nch;
 #pragma omp parallel for schedule(static) num_threads(lm_nthreads(c)) if (outer * len > 32768)
-        for (long r = 0; r < outer; r++) memcpy(o + r * ld, s + r * len, (size_t)len * sizeof *o);
+        for (long j = 0; j < jobs; j++) {
+            const long r = j / nch, a = (j % nch) * CHUNK, e = a + CHUNK < len ? a + CHUNK : len;
+            memcpy(o + r * ld + a, s + r * len + a, (size_t)(e - a) * sizeof *o);
+        }
         start += t[i]->shape[p->dim];
     }
     return 0;
