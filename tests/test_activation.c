@@ -228,17 +228,27 @@ static void test_activation_determinism(void)
     free(one);
 }
 
+/* The GELU test points: -12 .. 12 in steps of 1e-4, then zeros, tiny, the erf branch point,
+ * the density's underflow region and huge values. Returns n points (malloc'ed). */
+static float *gelu_points(long *n)
+{
+    enum { GRID = 240001 };
+    static const float sp[] = {0.0f, -0.0f, 1e-30f, -1e-30f, 1e-40f, 0.927734375f, -0.927734375f,
+                               0.9277344f, 14.3f, 88.0f, -88.0f, 1e30f, -1e30f};
+    *n = GRID + (long)(sizeof sp / sizeof sp[0]);
+    float *xv = malloc(sizeof(float) * (size_t)*n);
+    for (long i = 0; i < GRID; i++) xv[i] = -12.0f + (float)i * 1e-4f;
+    memcpy(xv + GRID, sp, sizeof sp);
+    return xv;
+}
+
 /* The vectorised GELU forward (its own erf) against the erff loop it replaces (the reference
  * path) on a dense grid of [-12, 12], tiny and special values: within 1.1 ulp of erf, i.e.
  * |fast - ref| <= |x| * 1.2e-7 + 1 ulp of the result; same for any thread count. */
 static void test_gelu_fast_matches_reference(void)
 {
-    const long n = 240001 + 12;
-    float *xv = malloc(sizeof(float) * n);
-    for (long i = 0; i < 240001; i++) xv[i] = -12.0f + (float)i * 1e-4f;
-    const float sp[12] = {0.0f, -0.0f, 1e-30f, -1e-30f, 1e-40f, 0.927734375f, -0.927734375f,
-                          0.9277344f, 88.0f, -88.0f, 1e30f, -1e30f};
-    memcpy(xv + 240001, sp, sizeof sp);
+    long n;
+    float *xv = gelu_points(&n);
     float *out[3];
     for (int v = 0; v < 3; v++) {
         lm_ctx c;
@@ -279,12 +289,8 @@ static void test_gelu_fast_matches_reference(void)
  * values, 1 and 2 threads (identical), and the non-finite inputs. */
 static void test_gelu_grad_fast_matches_reference(void)
 {
-    const long n = 240001 + 12;
-    float *xv = malloc(sizeof(float) * n);
-    for (long i = 0; i < 240001; i++) xv[i] = -12.0f + (float)i * 1e-4f;
-    const float sp[12] = {0.0f, -0.0f, 1e-30f, -1e-30f, 1e-40f, 0.927734375f, -0.927734375f,
-                          14.3f, 88.0f, -88.0f, 1e30f, -1e30f};
-    memcpy(xv + 240001, sp, sizeof sp);
+    long n;
+    float *xv = gelu_points(&n);
     float *out[3];
     for (int v = 0; v < 3; v++) {
         lm_ctx c;
