@@ -6,6 +6,7 @@
 #include "models/model.h"
 #include "tests/check.h"
 #include <stdlib.h>
+#include "tests/model_fixture.h"
 
 /* x -> a = 2x + 1 -> b = tanh(a), c = a * b, d = sigmoid(c) + a, e = d * x (x reused late) */
 static lm_tensor *branchy(lm_ctx *c, lm_tensor *x, lm_tensor **mid)
@@ -82,16 +83,6 @@ static void test_chain_peak(void)
               "reuse, %zu MB with", peak[0] >> 20, peak[1] >> 20);
 }
 
-static void test_mosaic(lm_mosaic *m)
-{
-    lm_mosaic_default(m);
-    for (int k = 0; k < m->nch; k++)
-        for (int j = 0; j < LM_MOSAIC_RESP_CH; j++) {
-            float d = (float)(j - 2.5f * k - 3) / 3.0f;
-            m->response[k][j] = expf(-0.5f * d * d);
-        }
-    m->has_response = 1;
-}
 
 /* Parameter and input gradients of a whole model: the same bits with and without reuse. */
 static void model_grads_same(const char *preset, int H, int W)

@@ -3,18 +3,8 @@
 #include "models/model.h"
 #include "tests/check.h"
 #include <stdlib.h>
+#include "tests/model_fixture.h"
 
-/* A smooth synthetic response table (Gaussian per LED) for models that need one. */
-static void test_mosaic(lm_mosaic *m)
-{
-    lm_mosaic_default(m);
-    for (int k = 0; k < m->nch; k++)
-        for (int j = 0; j < LM_MOSAIC_RESP_CH; j++) {
-            float d = (float)(j - 2.5f * k - 3) / 3.0f;
-            m->response[k][j] = expf(-0.5f * d * d);
-        }
-    m->has_response = 1;
-}
 
 static void check_count(const char *preset, long total, long trainable)
 {

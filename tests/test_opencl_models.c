@@ -15,20 +15,11 @@
 #include "tests/test_opencl_util.h"
 #include "models/model.h"
 #include "autograd/autograd.h"
+#include "tests/model_fixture.h"
 
 #define ATOL_SCALE 1e-4 /* absolute term, times max |reference| */
 #define RTOL 1e-3
 
-static void test_mosaic(lm_mosaic *m)
-{
-    lm_mosaic_default(m);
-    for (int k = 0; k < m->nch; k++)
-        for (int j = 0; j < LM_MOSAIC_RESP_CH; j++) {
-            float d = (float)(j - 2.5f * k - 3) / 3.0f;
-            m->response[k][j] = expf(-0.5f * d * d);
-        }
-    m->has_response = 1;
-}
 
 /* Worst differences of one compared tensor, and the number of elements out of tolerance. */
 typedef struct diff {
