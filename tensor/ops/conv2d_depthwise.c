@@ -9,6 +9,7 @@
  * have faster stencil forms (below; the per-tap loops stay as their reference).
  * What it is not: the general path (conv2d_tiled.c) or the reference (conv2d.c). */
 #include "tensor/ops/gemm_internal.h"
+#include "tensor/ops/simd.h"
 #include "tensor/ops/op_paths.h"
 #include <math.h>
 #include <omp.h>
@@ -54,31 +55,6 @@ static void fwd_plane(const lm_conv_geom *g, const float *xp, const float *wk, f
  * image), so the result is the same (bit for bit where multiply-adds are fused, as with
  * -march=native on x86-64); lm_op_set_path(LM_OP_PATH_REFERENCE) selects the per-tap loops
  * (tests compare the two). */
-#if defined(__AVX512F__)
-#define DW_VL 16
-#else
-#define DW_VL 8
-#endif
-typedef float dw_vf __attribute__((vector_size(DW_VL * sizeof(float))));
-
-static inline dw_vf dw_load(const float *p)
-{
-    dw_vf v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
-
-static inline void dw_store(float *p, dw_vf v, int n)
-{
-    if (n == DW_VL) {
-        memcpy(p, &v, sizeof v);
-    } else {
-        float t[DW_VL];
-        memcpy(t, &v, sizeof v);
-        memcpy(p, t, sizeof(float) * (size_t)n);
-    }
-}
-
 static int stencil_applies(const lm_conv_geom *g)
 {
     return lm_op_path() == LM_OP_PATH_FAST && g->sh == 1 && g->sw == 1 && g->dh == 1 &&
@@ -89,7 +65,7 @@ static int stencil_applies(const lm_conv_geom *g)
  * vector load of the last block of a row. */
 static void stencil_dims(const lm_conv_geom *g, int *Hp, int *Wp)
 {
-    int wp = (g->Wo + DW_VL - 1) / DW_VL * DW_VL + g->kw - 1;
+    int wp = (g->Wo + LM_VLN - 1) / LM_VLN * LM_VLN + g->kw - 1;
     if (wp < g->W + 2 * g->pw) wp = g->W + 2 * g->pw;
     *Hp = g->H + 2 * g->ph;
     *Wp = wp;
@@ -104,18 +80,18 @@ static void stencil_plane_3x3(const lm_conv_geom *g, const float *buf, int Wp, c
     for (int oy = 0; oy < g->Ho; oy++) {
         const float *r0 = buf + (long)oy * Wp, *r1 = r0 + Wp, *r2 = r1 + Wp;
         float *d = yp + (long)oy * g->Wo;
-        for (int x0 = 0; x0 < g->Wo; x0 += DW_VL) {
-            dw_vf acc = (dw_vf){0} + bv;
-            acc += w0 * dw_load(r0 + x0);
-            acc += w1 * dw_load(r0 + x0 + 1);
-            acc += w2 * dw_load(r0 + x0 + 2);
-            acc += w3 * dw_load(r1 + x0);
-            acc += w4 * dw_load(r1 + x0 + 1);
-            acc += w5 * dw_load(r1 + x0 + 2);
-            acc += w6 * dw_load(r2 + x0);
-            acc += w7 * dw_load(r2 + x0 + 1);
-            acc += w8 * dw_load(r2 + x0 + 2);
-            dw_store(d + x0, acc, g->Wo - x0 < DW_VL ? g->Wo - x0 : DW_VL);
+        for (int x0 = 0; x0 < g->Wo; x0 += LM_VLN) {
+            lm_vfn acc = (lm_vfn){0} + bv;
+            acc += w0 * lm_loadn(r0 + x0);
+            acc += w1 * lm_loadn(r0 + x0 + 1);
+            acc += w2 * lm_loadn(r0 + x0 + 2);
+            acc += w3 * lm_loadn(r1 + x0);
+            acc += w4 * lm_loadn(r1 + x0 + 1);
+            acc += w5 * lm_loadn(r1 + x0 + 2);
+            acc += w6 * lm_loadn(r2 + x0);
+            acc += w7 * lm_loadn(r2 + x0 + 1);
+            acc += w8 * lm_loadn(r2 + x0 + 2);
+            lm_storen(d + x0, acc, g->Wo - x0 < LM_VLN ? g->Wo - x0 : LM_VLN);
         }
     }
 }
@@ -126,18 +102,18 @@ static void stencil_plane(const lm_conv_geom *g, const float *buf, int Wp, const
 {
     for (int oy = 0; oy < g->Ho; oy++) {
         float *d = yp + (long)oy * g->Wo;
-        for (int x0 = 0; x0 < g->Wo; x0 += DW_VL) {
-            float acc[DW_VL];
-            for (int l = 0; l < DW_VL; l++) acc[l] = bv;
+        for (int x0 = 0; x0 < g->Wo; x0 += LM_VLN) {
+            float acc[LM_VLN];
+            for (int l = 0; l < LM_VLN; l++) acc[l] = bv;
             for (int i = 0; i < g->kh; i++) {
                 const float *r = buf + (long)(oy + i) * Wp + x0;
                 for (int j = 0; j < g->kw; j++) {
                     const float wv = wk[i * g->kw + j];
 #pragma omp simd
-                    for (int l = 0; l < DW_VL; l++) acc[l] = fmaf(wv, r[j + l], acc[l]);
+                    for (int l = 0; l < LM_VLN; l++) acc[l] = fmaf(wv, r[j + l], acc[l]);
                 }
             }
-            int n = g->Wo - x0 < DW_VL ? g->Wo - x0 : DW_VL;
+            int n = g->Wo - x0 < LM_VLN ? g->Wo - x0 : LM_VLN;
             memcpy(d + x0, acc, sizeof(float) * (size_t)n);
         }
     }
@@ -318,8 +294,8 @@ static int stencil_bwd_w_3x3(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
         memset(buf, 0, sizeof(float) * (size_t)pad);
 #pragma omp for schedule(static)
         for (int co = 0; co < g->Cout; co++) {
-            dw_vf acc[9];
-            for (int t = 0; t < 9; t++) acc[t] = (dw_vf){0};
+            lm_vfn acc[9];
+            for (int t = 0; t < 9; t++) acc[t] = (lm_vfn){0};
             for (int b = 0; b < g->B; b++) {
                 const float *xp = x + ((long)b * g->Cin + co / mult) * hw;
                 const float *dyp = dy + ((long)b * g->Cout + co) * ohw;
@@ -329,30 +305,30 @@ static int stencil_bwd_w_3x3(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
                 for (int oy = 0; oy < g->Ho; oy++) {
                     const float *r0 = buf + (long)oy * Wp, *r1 = r0 + Wp, *r2 = r1 + Wp;
                     const float *drow = dyp + (long)oy * g->Wo;
-                    for (int x0 = 0; x0 < g->Wo; x0 += DW_VL) {
-                        dw_vf d;
-                        if (g->Wo - x0 >= DW_VL) {
-                            d = dw_load(drow + x0);
+                    for (int x0 = 0; x0 < g->Wo; x0 += LM_VLN) {
+                        lm_vfn d;
+                        if (g->Wo - x0 >= LM_VLN) {
+                            d = lm_loadn(drow + x0);
                         } else {
-                            float t[DW_VL] = {0};
+                            float t[LM_VLN] = {0};
                             memcpy(t, drow + x0, sizeof(float) * (size_t)(g->Wo - x0));
-                            d = dw_load(t);
+                            d = lm_loadn(t);
                         }
-                        acc[0] += d * dw_load(r0 + x0);
-                        acc[1] += d * dw_load(r0 + x0 + 1);
-                        acc[2] += d * dw_load(r0 + x0 + 2);
-                        acc[3] += d * dw_load(r1 + x0);
-                        acc[4] += d * dw_load(r1 + x0 + 1);
-                        acc[5] += d * dw_load(r1 + x0 + 2);
-                        acc[6] += d * dw_load(r2 + x0);
-                        acc[7] += d * dw_load(r2 + x0 + 1);
-                        acc[8] += d * dw_load(r2 + x0 + 2);
+                        acc[0] += d * lm_loadn(r0 + x0);
+                        acc[1] += d * lm_loadn(r0 + x0 + 1);
+                        acc[2] += d * lm_loadn(r0 + x0 + 2);
+                        acc[3] += d * lm_loadn(r1 + x0);
+                        acc[4] += d * lm_loadn(r1 + x0 + 1);
+                        acc[5] += d * lm_loadn(r1 + x0 + 2);
+                        acc[6] += d * lm_loadn(r2 + x0);
+                        acc[7] += d * lm_loadn(r2 + x0 + 1);
+                        acc[8] += d * lm_loadn(r2 + x0 + 2);
                     }
                 }
             }
             for (int t = 0; t < 9; t++) {
                 double sum = 0.0;
-                for (int l = 0; l < DW_VL; l++) sum += acc[t][l];
+                for (int l = 0; l < LM_VLN; l++) sum += acc[t][l];
                 dw[(long)co * 9 + t] += (float)sum;
             }
         }

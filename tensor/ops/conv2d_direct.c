@@ -3,7 +3,7 @@
  * (3x3 at 8-32 channels, 1x1 12 -> 33) where im2col + GEMM spends its time copying columns.
  * What it is: per output row, the kh input rows of every input channel are copied into a
  * zero-padded per-thread buffer (padding and frame edges handled there, once); then for each
- * block of VL output pixels and each block of up to 16 output channels, the accumulators
+ * block of LM_VLN output pixels and each block of up to 16 output channels, the accumulators
  * (one vector per output channel) stay in registers while the loop runs over input channels
  * and taps: one vector load of input, one broadcast multiply-add per output channel.
  * Weights are first reordered to [ci][i][j][co]. Writes y = conv(x, w) + bias. Parallel over
@@ -11,15 +11,9 @@
  * fixed order (bias, then ci, i, j), so the result does not depend on the thread count.
  * What it is not: a backward (the tiled path does it) or strided / dilated / grouped conv. */
 #include "tensor/ops/gemm_internal.h"
+#include "tensor/ops/simd.h"
 #include <omp.h>
 #include <string.h>
-
-#if defined(__AVX512F__)
-#define VL 16
-#else
-#define VL 8
-#endif
-typedef float vf __attribute__((vector_size(VL * sizeof(float))));
 
 /* Built with -DLM_CONV_DIRECT_OFF, never (to benchmark the tiled path against this one). */
 int lm_conv2d_direct_applies(const lm_conv_geom *g)
@@ -30,7 +24,7 @@ int lm_conv2d_direct_applies(const lm_conv_geom *g)
 #endif
     return g->sh == 1 && g->sw == 1 && g->dh == 1 && g->dw == 1 && g->groups == 1 &&
            g->Cout <= LM_CONV_DIRECT_MAX_COUT && g->Cin * g->kh * g->kw <= 1024 &&
-           g->Wo >= VL / 2;
+           g->Wo >= LM_VLN / 2;
 }
 
 typedef struct direct_row {
@@ -42,25 +36,6 @@ typedef struct direct_row {
     int rows, kw, Wp, Wo, Cout;
 } direct_row;
 
-static inline vf vload(const float *p)
-{
-    vf v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
-
-/* p[0, n) = the first n lanes of v (n <= VL). */
-static inline void vstore(float *p, vf v, int n)
-{
-    if (n == VL) {
-        memcpy(p, &v, sizeof v);
-    } else {
-        float t[VL];
-        memcpy(t, &v, sizeof v);
-        memcpy(p, t, sizeof(float) * (size_t)n);
-    }
-}
-
 /* One output row, channels [co0, co0 + CB): the accumulators live in registers. */
 #define DIRECT_ROW(CB)                                                                        \
     static void direct_row_##CB(const direct_row *r, int co0)                                 \
@@ -69,19 +44,19 @@ static inline void vstore(float *p, vf v, int n)
         const int rows = r->rows, kw = r->kw, Wp = r->Wp, Wo = r->Wo, Cout = r->Cout;         \
         float b[CB];                                                                          \
         for (int q = 0; q < CB; q++) b[q] = r->bias ? r->bias[co0 + q] : 0.0f;                \
-        for (int x0 = 0; x0 < Wo; x0 += VL) {                                                 \
-            vf acc[CB];                                                                       \
-            _Pragma("GCC unroll 16") for (int q = 0; q < CB; q++) acc[q] = (vf){0} + b[q];    \
+        for (int x0 = 0; x0 < Wo; x0 += LM_VLN) {                                                 \
+            lm_vfn acc[CB];                                                                       \
+            _Pragma("GCC unroll 16") for (int q = 0; q < CB; q++) acc[q] = (lm_vfn){0} + b[q];    \
             for (int k = 0; k < rows; k++)                                                    \
                 for (int j = 0; j < kw; j++) {                                                \
-                    const vf xv = vload(buf + (long)k * Wp + x0 + j);                         \
+                    const lm_vfn xv = lm_loadn(buf + (long)k * Wp + x0 + j);                         \
                     const float *wp = wt + ((long)k * kw + j) * Cout;                         \
                     _Pragma("GCC unroll 16") for (int q = 0; q < CB; q++)                     \
                         acc[q] += wp[q] * xv;                                                 \
                 }                                                                             \
-            const int n = Wo - x0 < VL ? Wo - x0 : VL;                                        \
+            const int n = Wo - x0 < LM_VLN ? Wo - x0 : LM_VLN;                                        \
             _Pragma("GCC unroll 16") for (int q = 0; q < CB; q++)                             \
-                vstore(r->y + (co0 + q) * r->ys + x0, acc[q], n);                             \
+                lm_storen(r->y + (co0 + q) * r->ys + x0, acc[q], n);                             \
         }                                                                                     \
     }
 DIRECT_ROW(16)
@@ -119,7 +94,7 @@ int lm_conv2d_direct_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const
 {
     const int rows = g->Cin * g->kh, taps = g->kh * g->kw, nt = lm_nthreads(c);
     /* the padded row must hold the input (W + 2 pw) and every vector load of the last block */
-    int Wp = (g->Wo + VL - 1) / VL * VL + g->kw - 1;
+    int Wp = (g->Wo + LM_VLN - 1) / LM_VLN * LM_VLN + g->kw - 1;
     if (Wp < g->W + 2 * g->pw) Wp = g->W + 2 * g->pw;
     lm_arena_mark m = lm_arena_get_mark(&c->arena);
     float *wt = lm_ctx_alloc(c, sizeof(float) * (size_t)g->Cout * rows * g->kw);

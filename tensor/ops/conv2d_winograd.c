@@ -18,12 +18,11 @@
  * Accuracy: a few 1e-6 relative to the magnitude of the sums (tested against the reference).
  * What it is not: strided, dilated, grouped or non-3x3 convolution (conv2d_tiled.c). */
 #include "tensor/ops/gemm_internal.h"
+#include "tensor/ops/simd.h"
 #include <omp.h>
 #include <string.h>
 
 #define VL 8
-typedef float vf __attribute__((vector_size(VL * sizeof(float))));
-typedef int vi __attribute__((vector_size(VL * sizeof(int))));
 
 /* Tiles per chunk: the transformed input and output of a chunk take 36 x (Cin + Cout) x TC
  * floats. Measured (build/bench_conv, 1 thread, Zen 3 with 512 KiB L2 + 32 MiB L3): 2.5 MB
@@ -89,7 +88,7 @@ static void weight_transform_adjoint(const float dU[36], float *dg, int si, int 
 /* A^T m along one axis: 6 values in, 4 out. */
 #define AT4(o, m)                                                                               \
     do {                                                                                        \
-        vf s12 = m[1] + m[2], d12 = m[1] - m[2], s34 = m[3] + m[4], d34 = m[3] - m[4];          \
+        lm_vf8 s12 = m[1] + m[2], d12 = m[1] - m[2], s34 = m[3] + m[4], d34 = m[3] - m[4];          \
         o[0] = m[0] + s12 + s34;                                                                \
         o[1] = d12 + 2 * d34;                                                                   \
         o[2] = s12 + 4 * s34;                                                                   \
@@ -106,17 +105,6 @@ static void weight_transform_adjoint(const float dU[36], float *dg, int si, int 
         o[4] = m[0] - 2 * m[1] + 4 * m[2] - 8 * m[3];                                           \
         o[5] = m[3];                                                                            \
     } while (0)
-
-/* All lanes = x (one vbroadcastss; (vf){0} + x would add first: -0 + x is not x). */
-#define SPLAT(x) ((vf){(x), (x), (x), (x), (x), (x), (x), (x)})
-
-static inline void vstore(float *p, vf v) { memcpy(p, &v, sizeof v); }
-static inline vf vload(const float *p)
-{
-    vf v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
 
 /* Geometry of the tile grid of one convolution. Tiles are numbered row by row, each row
  * padded to a multiple of 8 tiles (txp), so that a group of 8 tiles (one per vector lane)
@@ -154,12 +142,12 @@ static inline void group_of(const wgrid *g, long t, int *b, int *ty, int *tx0)
 
 /* 4 x 4 transpose inside each 128-bit half of (a, b, c, d): r[q] half h = element q of the
  * four 4-float groups a, b, c, d of half h. Its own inverse. */
-static inline void transpose4x2(vf a, vf b, vf c, vf d, vf r[4])
+static inline void transpose4x2(lm_vf8 a, lm_vf8 b, lm_vf8 c, lm_vf8 d, lm_vf8 r[4])
 {
-    const vi lo = {0, 8, 1, 9, 4, 12, 5, 13}, hi = {2, 10, 3, 11, 6, 14, 7, 15};
-    const vi ml = {0, 1, 8, 9, 4, 5, 12, 13}, mh = {2, 3, 10, 11, 6, 7, 14, 15};
-    vf t0 = __builtin_shuffle(a, b, lo), t1 = __builtin_shuffle(a, b, hi);
-    vf t2 = __builtin_shuffle(c, d, lo), t3 = __builtin_shuffle(c, d, hi);
+    const lm_vi8 lo = {0, 8, 1, 9, 4, 12, 5, 13}, hi = {2, 10, 3, 11, 6, 14, 7, 15};
+    const lm_vi8 ml = {0, 1, 8, 9, 4, 5, 12, 13}, mh = {2, 3, 10, 11, 6, 7, 14, 15};
+    lm_vf8 t0 = __builtin_shuffle(a, b, lo), t1 = __builtin_shuffle(a, b, hi);
+    lm_vf8 t2 = __builtin_shuffle(c, d, lo), t3 = __builtin_shuffle(c, d, hi);
     r[0] = __builtin_shuffle(t0, t2, ml), r[1] = __builtin_shuffle(t0, t2, mh);
     r[2] = __builtin_shuffle(t1, t3, ml), r[3] = __builtin_shuffle(t1, t3, mh);
 }
@@ -199,12 +187,12 @@ static void input_transform(const wgrid *g, const float *x, long t0, int n, floa
         if (b != sb || ty != sty) stage_rows(g, x, b, ty, st), sb = b, sty = ty;
         for (int c = 0; c < g->C; c++) {
             const float *p = st + (long)c * 6 * g->wp + 4 * tx0;
-            vf d[6][6], o[6], t[6][6], col[6];
+            lm_vf8 d[6][6], o[6], t[6][6], col[6];
             #pragma GCC unroll 6
             for (int r = 0; r < 6; r++, p += g->wp) {
-                vf q4[4];
-                transpose4x2(vload(p), vload(p + 8), vload(p + 16), vload(p + 24), d[r]);
-                transpose4x2(vload(p + 4), vload(p + 12), vload(p + 20), vload(p + 28), q4);
+                lm_vf8 q4[4];
+                transpose4x2(lm_load8(p), lm_load8(p + 8), lm_load8(p + 16), lm_load8(p + 24), d[r]);
+                transpose4x2(lm_load8(p + 4), lm_load8(p + 12), lm_load8(p + 20), lm_load8(p + 28), q4);
                 d[r][4] = q4[0], d[r][5] = q4[1];
             }
             #pragma GCC unroll 6
@@ -220,7 +208,7 @@ static void input_transform(const wgrid *g, const float *x, long t0, int n, floa
             for (int r = 0; r < 6; r++) { /* rows: V[r][.] = t[r][.] B */
                 BT6(o, t[r]);
                 #pragma GCC unroll 6
-                for (int q = 0; q < 6; q++) vstore(dst + (r * 6 + q) * xis, o[q]);
+                for (int q = 0; q < 6; q++) lm_store8(dst + (r * 6 + q) * xis, o[q]);
             }
         }
     }
@@ -240,11 +228,11 @@ static void output_transform(const wgrid *g, const float *M, int ldm, long t0, i
         int full = ox + 4 * VL <= g->Wo;
         for (int c = 0; c < g->C; c++) {
             const float *src = M + (long)c * ldm + j0;
-            vf t[6][4], m[6], o[4], out[4][4];
+            lm_vf8 t[6][4], m[6], o[4], out[4][4];
             #pragma GCC unroll 6
             for (int r = 0; r < 6; r++) { /* rows: t[r][.] = M[r][.] A */
                 #pragma GCC unroll 6
-                for (int q = 0; q < 6; q++) m[q] = vload(src + (r * 6 + q) * xis);
+                for (int q = 0; q < 6; q++) m[q] = lm_load8(src + (r * 6 + q) * xis);
                 AT4(o, m);
                 #pragma GCC unroll 6
                 for (int q = 0; q < 4; q++) t[r][q] = o[q];
@@ -258,23 +246,23 @@ static void output_transform(const wgrid *g, const float *M, int ldm, long t0, i
                 for (int r = 0; r < 4; r++) out[r][q] = o[r];
             }
             float bv = bias ? bias[c] : 0.0f;
-            vf bvv = SPLAT(bv);
+            lm_vf8 bvv = LM_SPLAT8(bv);
             float *yc = y + ((long)b * g->C + c) * cs + (long)oy * g->Wo + ox;
             #pragma GCC unroll 6
             for (int r = 0; r < rh; r++) {
                 float *yr = yc + (long)r * g->Wo;
-                vf row[4]; /* row[k]: output columns 8k .. 8k+7 of the group, in order */
+                lm_vf8 row[4]; /* row[k]: output columns 8k .. 8k+7 of the group, in order */
                 transpose4x2(out[r][0], out[r][1], out[r][2], out[r][3], row);
                 if (full) {
                     #pragma GCC unroll 6
                     for (int k = 0; k < 4; k++) {
-                        vf v = row[k] + (accumulate ? vload(yr + 8 * k) : bvv);
-                        vstore(yr + 8 * k, v);
+                        lm_vf8 v = row[k] + (accumulate ? lm_load8(yr + 8 * k) : bvv);
+                        lm_store8(yr + 8 * k, v);
                     }
                 } else {
                     float tmp[4 * VL];
                     #pragma GCC unroll 6
-                    for (int k = 0; k < 4; k++) vstore(tmp + 8 * k, row[k]);
+                    for (int k = 0; k < 4; k++) lm_store8(tmp + 8 * k, row[k]);
                     int nw = g->Wo - ox;
                     for (int u = 0; u < nw; u++) yr[u] = tmp[u] + (accumulate ? yr[u] : bv);
                 }
@@ -296,22 +284,22 @@ static void grad_transform(const wgrid *g, const float *dy, long t0, int n, floa
         if (nw < 0) nw = 0;
         for (int c = 0; c < C; c++) {
             const float *yc = dy + ((long)b * C + c) * cs + (long)oy * g->Wo + ox;
-            vf e[4][4];
+            lm_vf8 e[4][4];
             #pragma GCC unroll 6
             for (int r = 0; r < 4; r++) {
-                vf row[4];
+                lm_vf8 row[4];
                 if (r < rh && nw == 4 * VL) {
                     #pragma GCC unroll 6
-                    for (int k = 0; k < 4; k++) row[k] = vload(yc + (long)r * g->Wo + 8 * k);
+                    for (int k = 0; k < 4; k++) row[k] = lm_load8(yc + (long)r * g->Wo + 8 * k);
                 } else {
                     float tmp[4 * VL] = {0};
                     for (int u = 0; r < rh && u < nw; u++) tmp[u] = yc[(long)r * g->Wo + u];
                     #pragma GCC unroll 6
-                    for (int k = 0; k < 4; k++) row[k] = vload(tmp + 8 * k);
+                    for (int k = 0; k < 4; k++) row[k] = lm_load8(tmp + 8 * k);
                 }
                 transpose4x2(row[0], row[1], row[2], row[3], e[r]);
             }
-            vf t[6][4], m[4], o[6];
+            lm_vf8 t[6][4], m[4], o[6];
             #pragma GCC unroll 6
             for (int q = 0; q < 4; q++) { /* columns: t[.][q] = A e[.][q] */
                 #pragma GCC unroll 6
@@ -325,7 +313,7 @@ static void grad_transform(const wgrid *g, const float *dy, long t0, int n, floa
             for (int r = 0; r < 6; r++) { /* rows: Mdy[r][.] = t[r][.] A^T */
                 A6(o, t[r]);
                 #pragma GCC unroll 6
-                for (int q = 0; q < 6; q++) vstore(dst + (r * 6 + q) * xis, o[q]);
+                for (int q = 0; q < 6; q++) lm_store8(dst + (r * 6 + q) * xis, o[q]);
             }
         }
     }

@@ -10,22 +10,11 @@
  * column blocking, so results do not depend on how work is split.
  * What it is not: a general GEMM (no transposes, no alpha/beta; see sgemm_avx512.c). */
 #include "tensor/ops/gemm_internal.h"
+#include "tensor/ops/simd.h"
 #include <string.h>
 
 #define VL 8
 #define MR LM_PANEL_MR
-typedef float vf __attribute__((vector_size(VL * sizeof(float))));
-#define SPLAT(x) ((vf){(x), (x), (x), (x), (x), (x), (x), (x)})
-
-static inline vf vload(const float *p)
-{
-    vf v;
-    memcpy(&v, p, sizeof v);
-    return v;
-}
-
-static inline void vstore(float *p, vf v) { memcpy(p, &v, sizeof v); }
-
 void lm_panel_pack(int M, int K, const float *A, long lda, float *Ap)
 {
     memset(Ap, 0, sizeof(float) * (size_t)lm_panel_size(M, K));
@@ -42,37 +31,37 @@ void lm_sgemm_panel(int M, int n, int K, const float *Ap, const float *B, long l
         for (int p = 0; p < M; p += MR) {
             const float *a = Ap + (long)p * K, *b = B + j;
             int rows = M - p < MR ? M - p : MR;
-            vf acc0[MR], acc1[MR];
+            lm_vf8 acc0[MR], acc1[MR];
 #pragma GCC unroll 6
             for (int r = 0; r < MR; r++) {
                 float b0 = bias && r < rows ? bias[p + r] : 0.0f;
-                acc0[r] = SPLAT(b0), acc1[r] = SPLAT(b0);
+                acc0[r] = LM_SPLAT8(b0), acc1[r] = LM_SPLAT8(b0);
                 if (accumulate && r < rows) {
-                    acc0[r] = vload(C + (long)(p + r) * ldc + j);
-                    if (two) acc1[r] = vload(C + (long)(p + r) * ldc + j + VL);
+                    acc0[r] = lm_load8(C + (long)(p + r) * ldc + j);
+                    if (two) acc1[r] = lm_load8(C + (long)(p + r) * ldc + j + VL);
                 }
             }
             if (two) {
                 for (int k = 0; k < K; k++, a += MR, b += ldb) {
-                    vf b0 = vload(b), b1 = vload(b + VL);
+                    lm_vf8 b0 = lm_load8(b), b1 = lm_load8(b + VL);
 #pragma GCC unroll 6
                     for (int r = 0; r < MR; r++) {
-                        vf av = SPLAT(a[r]);
+                        lm_vf8 av = LM_SPLAT8(a[r]);
                         acc0[r] += av * b0;
                         acc1[r] += av * b1;
                     }
                 }
             } else {
                 for (int k = 0; k < K; k++, a += MR, b += ldb) {
-                    vf b0 = vload(b);
+                    lm_vf8 b0 = lm_load8(b);
 #pragma GCC unroll 6
-                    for (int r = 0; r < MR; r++) acc0[r] += SPLAT(a[r]) * b0;
+                    for (int r = 0; r < MR; r++) acc0[r] += LM_SPLAT8(a[r]) * b0;
                 }
             }
             for (int r = 0; r < rows; r++) {
                 float *c = C + (long)(p + r) * ldc + j;
-                vstore(c, acc0[r]);
-                if (two) vstore(c + VL, acc1[r]);
+                lm_store8(c, acc0[r]);
+                if (two) lm_store8(c + VL, acc1[r]);
             }
         }
     }
