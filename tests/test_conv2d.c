@@ -232,19 +232,31 @@ static lm_conv_geom geom_of(const cfg *k)
     return g;
 }
 
+/* A fast path's eligibility: every shape of `on` takes it, none of `off` does. */
+static void check_applies(int (*applies)(const lm_conv_geom *), const char *path,
+                          const cfg *on, int non, const cfg *off, int noff)
+{
+    for (int i = 0; i < non + noff; i++) {
+        const cfg *k = i < non ? &on[i] : &off[i - non];
+        lm_conv_geom g = geom_of(k);
+        CHECK_MSG(!applies(&g) == !(i < non), "%s: %son the %s path", k->what,
+                  i < non ? "not " : "", path);
+    }
+}
+
+/* AUTO on 1, 2 and 3 threads (the paths under test). */
+static const int AUTO_123[3][2] = {{LM_CONV_PATH_AUTO, 1}, {LM_CONV_PATH_AUTO, 2},
+                                   {LM_CONV_PATH_AUTO, 3}};
+
 /* Winograd (AUTO) on 1, 2 and 3 threads against the direct loops in double. F(4x4, 3x3)
  * rounds more than a plain sum (its transforms scale terms by up to 8 and 1/24): 4e-6 of the
  * magnitude; the tiled path it replaces is held to 1e-6 on the same shapes. A wrong
  * transform coefficient gives errors of the order of the values themselves. */
 static void test_winograd_vs_direct(void)
 {
-    static const int wino[3][2] = {{LM_CONV_PATH_AUTO, 1}, {LM_CONV_PATH_AUTO, 2},
-                                   {LM_CONV_PATH_AUTO, 3}};
     static const int tiled[2][2] = {{LM_CONV_PATH_NO_WINOGRAD, 2}, {LM_CONV_PATH_SIMPLE, 1}};
     for (int i = 0; i < NWINO; i++) {
-        lm_conv_geom g = geom_of(&WINO[i]);
-        CHECK_MSG(lm_conv2d_winograd_applies(&g), "%s: not on the Winograd path", WINO[i].what);
-        check_config_paths(&WINO[i], wino, 3, 4e-6);
+        check_config_paths(&WINO[i], AUTO_123, 3, 4e-6);
         check_config_paths(&WINO[i], tiled, 2, 1e-6);
     }
     /* shapes the Winograd path must leave alone */
@@ -257,10 +269,8 @@ static void test_winograd_vs_direct(void)
         {1, 16, 9, 9, 16, 3, 3, {1, 1, 3, 3, 1, 1, 1}, 0, "pad 3"},
         {1, 16, 9, 9, 16, 5, 5, {1, 1, 2, 2, 1, 1, 1}, 0, "5x5"},
     };
-    for (int i = 0; i < (int)(sizeof other / sizeof other[0]); i++) {
-        lm_conv_geom g = geom_of(&other[i]);
-        CHECK_MSG(!lm_conv2d_winograd_applies(&g), "%s: on the Winograd path", other[i].what);
-    }
+    check_applies(lm_conv2d_winograd_applies, "Winograd", WINO, NWINO, other,
+                  (int)(sizeof other / sizeof other[0]));
 }
 
 /* 1x1 convs on the pointwise path (a plain sum, held to 1e-6 like the tiled path): pixel
@@ -268,28 +278,21 @@ static void test_winograd_vs_direct(void)
  * are not a multiple of the 6-row panel. */
 static void test_pointwise_vs_direct(void)
 {
-    static const int paths[3][2] = {{LM_CONV_PATH_AUTO, 1}, {LM_CONV_PATH_AUTO, 2},
-                                    {LM_CONV_PATH_AUTO, 3}};
     static const cfg pw[] = {
         {2, 20, 7, 9, 33, 1, 1, {1, 1, 0, 0, 1, 1, 1}, 1, "pointwise 20->33, 63 pixels"},
         {1, 12, 16, 40, 6, 1, 1, {1, 1, 0, 0, 1, 1, 1}, 0, "pointwise 12->6, 640 pixels"},
         {3, 5, 3, 8, 13, 1, 1, {1, 1, 0, 0, 1, 1, 1}, 1, "pointwise 5->13, 24 pixels"},
         {1, 64, 33, 32, 64, 1, 1, {1, 1, 0, 0, 1, 1, 1}, 1, "pointwise 64->64, several blocks"},
     };
-    for (int i = 0; i < (int)(sizeof pw / sizeof pw[0]); i++) {
-        lm_conv_geom g = geom_of(&pw[i]);
-        CHECK_MSG(lm_conv2d_pointwise_applies(&g), "%s: not on the pointwise path", pw[i].what);
-        check_config_paths(&pw[i], paths, 3, 1e-6);
-    }
+    int npw = (int)(sizeof pw / sizeof pw[0]);
+    for (int i = 0; i < npw; i++) check_config_paths(&pw[i], AUTO_123, 3, 1e-6);
     static const cfg other[] = {
         {1, 4, 9, 9, 6, 1, 1, {2, 2, 0, 0, 1, 1, 1}, 0, "1x1 stride 2"},
         {1, 4, 9, 9, 6, 1, 1, {1, 1, 1, 1, 1, 1, 1}, 0, "1x1 pad 1"},
         {1, 4, 9, 9, 6, 1, 1, {1, 1, 0, 0, 1, 1, 2}, 0, "1x1 groups 2"},
     };
-    for (int i = 0; i < (int)(sizeof other / sizeof other[0]); i++) {
-        lm_conv_geom g = geom_of(&other[i]);
-        CHECK_MSG(!lm_conv2d_pointwise_applies(&g), "%s: on the pointwise path", other[i].what);
-    }
+    check_applies(lm_conv2d_pointwise_applies, "pointwise", pw, npw, other,
+                  (int)(sizeof other / sizeof other[0]));
 }
 
 /* Hand-computed: 1 x 1 x 3 x 3 image, 2x2 kernel, pad 1, stride 2, bias 0.5. */
