@@ -1,9 +1,10 @@
 /* cmd_calibrate.c — `lumosaic calibrate`: the calibration file of `lumosaic infer --model auto`.
- * What it is: load the models, take held-out scenes (DATA scenes of the val / test splits by
- * name hash, and/or --synth N procedural scenes whose seeds are not drawn by training), simulate
- * each scene's coded frame, record per window the difficulty and every model's error
- * (lm_auto_scene), fit expected PSNR per difficulty bin (lm_auto_fit), store each model's
- * measured seconds per window and MACs, write the JSON and print the per-bin table.
+ * What it is: load the models, take held-out scenes (DATA scenes of the dataset's val / test
+ * splits, as training splits them, and/or --synth N procedural scenes whose seeds are not
+ * drawn by training), simulate each scene's coded frame, record per window the difficulty
+ * and every model's error (lm_auto_scene), fit expected PSNR per difficulty bin (lm_auto_fit),
+ * store each model's measured seconds per window and MACs, write the JSON and print the
+ * per-bin table.
  * With --test-synth N: N more procedural scenes (a seed stream disjoint from the calibration
  * scenes') reconstructed by every model alone and by the auto choice at each --test-tol (the
  * selection of `infer --model auto`: lm_auto_bin / lm_auto_choose per window, lm_auto_infer),
@@ -45,7 +46,7 @@ static void help(void)
            "information). Writes FILE (JSON) and prints the table per bin.\n\n"
            "  --models LIST    2..8 training run folders or .safetensors files, comma-separated\n"
            "  DATA...          scene files or folders; only scenes of --split are used\n"
-           "  --split S        which DATA scenes (by name hash, as training): val, test,\n"
+           "  --split S        which DATA scenes (the dataset's split, as training): val, test,\n"
            "                   valtest (default: both held-out splits) or all\n"
            "  --synth N        add N procedural scenes (default 0; seeds disjoint from the\n"
            "                   random 64-bit seeds training draws)\n"
@@ -217,17 +218,21 @@ static int list_scenes(cal_run *r, lm_err *e)
     int total = 0;
     for (int k = 0; k < 3; k++) total += lm_dataset_num_scenes(d, (lm_data_split)k);
     r->scenes = calloc((size_t)total + 1, sizeof *r->scenes);
-    for (int k = 0; k < 3 && r->scenes; k++)
-        for (int i = 0; i < lm_dataset_num_scenes(d, (lm_data_split)k); i++) {
-            lm_data_split s = lm_dataset_split_of(lm_dataset_scene_name(d, (lm_data_split)k, i));
-            const char *p = lm_dataset_scene_path(d, (lm_data_split)k, i);
-            int keep = r->o->split == 3 || (r->o->split == 2 && s != LM_SPLIT_TRAIN) ||
-                       (r->o->split == 0 && s == LM_SPLIT_VAL) ||
-                       (r->o->split == 1 && s == LM_SPLIT_TEST);
-            for (int j = 0; j < r->nscenes && keep; j++)
-                if (!strcmp(r->scenes[j], p)) keep = 0;
-            if (keep) snprintf(r->scenes[r->nscenes++], 1024, "%s", p);
+    for (int k = 0; k < 3 && r->scenes; k++) {
+        lm_data_split s = (lm_data_split)k; /* a borrowed list holds no scene of its split */
+        int keep = r->o->split == 3 ||
+                   (!lm_dataset_split_borrowed(d, s) &&
+                    ((r->o->split == 2 && s != LM_SPLIT_TRAIN) ||
+                     (r->o->split == 0 && s == LM_SPLIT_VAL) ||
+                     (r->o->split == 1 && s == LM_SPLIT_TEST)));
+        for (int i = 0; i < lm_dataset_num_scenes(d, s) && keep; i++) {
+            const char *p = lm_dataset_scene_path(d, s, i);
+            int add = 1;
+            for (int j = 0; j < r->nscenes && add; j++)
+                if (!strcmp(r->scenes[j], p)) add = 0;
+            if (add) snprintf(r->scenes[r->nscenes++], 1024, "%s", p);
         }
+    }
     lm_dataset_close(d);
     if (!r->scenes) return lm_cli_error(r->c, "out of memory"), 1;
     if (!r->nscenes && !r->o->synth)

@@ -1,9 +1,10 @@
 /* cmd_eval.c — `lumosaic eval`: score a trained model on scenes (system.md §10) and on the
  * rainbow scene (§7).
- * What it is: list the scenes of the given paths (data/dataset.h), keep the chosen split (by the
- * scene-name hash; `all` keeps every scene), per scene crop to the tile and normalise by its own
- * maximum, simulate the model's sensor frame at each noise level (Gaussian, k % of the largest
- * clean value, seeded per scene name and level): the coded frame, or for the passive RGB
+ * What it is: list the scenes of the given paths (data/dataset.h), keep the chosen split (the
+ * dataset's split lists, as in training; `all` keeps every scene), per scene crop to the tile
+ * and normalise by its own maximum, simulate the model's sensor frame at each noise level
+ * (Gaussian, k % of the largest clean value, seeded per scene name and level): the coded
+ * frame, or for the passive RGB
  * baseline (MST++, in_channels 3) the RGB camera image; reconstruct (patch-wise, infer/tile.h,
  * or whole-frame for MST++) and score PSNR / SSIM / MAE / SAM on the 31 bands (infer/eval.h);
  * with --motion, per scene and speed a 3-frame coded video of the scene translating at that
@@ -40,8 +41,8 @@ static void help(void)
            "around the largest band of the row's mean spectrum) against the true one.\n\n"
            "  --model RUN      a training run folder or a .safetensors written by 'lumosaic train'\n"
            "  DATA...          scenes (CAVE folders, .mat, spectral .exr) or folders of scenes\n"
-           "  --split S        test (default), val, train (by scene-name hash, as in training)\n"
-           "                   or all (every scene given)\n"
+           "  --split S        test (default), val, train (the dataset's split, as in training:\n"
+           "                   scene groups ranked by hash, 10%% test, 10%% val) or all\n"
            "  --noise LIST     Gaussian noise levels in %% of the largest clean value\n"
            "                   (default 0,5,10,15,20; at most %d levels, each 0..100)\n"
            "  --output DIR     write DIR/eval.json and DIR/eval.csv (DIR must not exist, or be\n"
@@ -165,6 +166,7 @@ static int parse(lm_cli *c, eval_opts *o)
 
 typedef struct scene_res {
     char name[256], path[1024];
+    lm_data_split split; /* the dataset's split of the scene (never a borrowed one) */
     int height, width;
     lm_metrics m[LM_EVAL_MAX_NOISE];
     lm_eval_motion mo[LM_EVAL_MAX_MOTION];
@@ -198,8 +200,9 @@ static int seen(const eval_run *r, const char *path)
     return 0;
 }
 
-/* The scenes of the chosen split among those the DATA paths name (union over the dataset's
- * split lists, which may borrow when fewer than 3 scenes exist, filtered by the name hash). */
+/* The scenes of the chosen split among those the DATA paths name: the dataset's list of that
+ * split, or every list for `all`. A borrowed list (fewer than 3 scenes, no scene of its own
+ * in that split) is skipped: its scenes are in their own split's list. */
 static int list_scenes(eval_run *r, lm_err *e)
 {
     lm_dataset_cfg cfg;
@@ -218,8 +221,8 @@ static int list_scenes(eval_run *r, lm_err *e)
         lm_dataset_close(d);
         return lm_cli_error(r->c, "out of memory"), 1;
     }
-    static const lm_data_split want[3] = {LM_SPLIT_TEST, LM_SPLIT_VAL, LM_SPLIT_TRAIN};
-    for (int k = 0; k < 3; k++)
+    for (int k = 0; k < 3; k++) {
+        if (lm_dataset_split_borrowed(d, (lm_data_split)k)) continue;
         for (int i = 0; i < lm_dataset_num_scenes(d, (lm_data_split)k); i++) {
             const char *name = lm_dataset_scene_name(d, (lm_data_split)k, i);
             const char *path = lm_dataset_scene_path(d, (lm_data_split)k, i);
@@ -227,13 +230,16 @@ static int list_scenes(eval_run *r, lm_err *e)
             scene_res *s = &r->sc[r->nsc++];
             snprintf(s->name, sizeof s->name, "%s", name);
             snprintf(s->path, sizeof s->path, "%s", path);
+            s->split = (lm_data_split)k;
         }
+    }
     lm_dataset_close(d);
+    static const lm_data_split want[3] = {LM_SPLIT_TEST, LM_SPLIT_VAL, LM_SPLIT_TRAIN};
     int given = r->nsc;
     if (r->o->split < 3) {
         r->nsc = 0;
         for (int i = 0; i < given; i++)
-            if (lm_dataset_split_of(r->sc[i].name) == want[r->o->split]) r->sc[r->nsc++] = r->sc[i];
+            if (r->sc[i].split == want[r->o->split]) r->sc[r->nsc++] = r->sc[i];
     }
     if (r->nsc == 0)
         return lm_cli_error(r->c, "no scene of split '%s' among the %d given (try --split all)",

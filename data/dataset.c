@@ -1,5 +1,5 @@
-/* dataset.c — scene listing, split by name hash, lazy LRU cube cache, sample synthesis and a
- * small worker pool that prepares the next batch ahead (dataset.h).
+/* dataset.c — scene listing, split by scene group (quotas by hash rank), lazy LRU cube cache,
+ * sample synthesis and a small worker pool that prepares the next batch ahead (dataset.h).
  * What it is: a sample is a pure function of (seed, split, index): every random choice is
  * drawn from lm_rng_split(split generator, index) in a fixed order (sample_plan), so worker
  * threads, the cache state and the order of preparation never change the numbers.
@@ -24,9 +24,11 @@
 
 typedef struct scene {
     char *path;          /* what lm_cube_read opens */
-    char *name;          /* hashed for the split */
+    char *name;          /* file name without extension, or the CAVE band folder's name */
+    char *group;         /* group key (lm_dataset_group_key): hashed for the split */
+    uint64_t hash;       /* split_hash(group) */
     int height, width;
-    lm_data_split split;
+    lm_data_split split; /* by the rule; the lists may also borrow (build_splits) */
 } scene;
 
 typedef struct cache_entry {
@@ -52,6 +54,7 @@ struct lm_dataset {
     scene *scenes;
     int nscenes;
     int *list[3], count[3], borrowed[3];
+    int ngroups;         /* scene groups (assign_splits) */
     int too_small;       /* scenes smaller than the patch (in no list) */
     lm_synth_palette pal;
     lm_rng rng[3];
@@ -75,17 +78,38 @@ void lm_dataset_default_cfg(lm_dataset_cfg *cfg)
                             .val_noise = 0.0f, .synth_narrowband = 0.5f};
 }
 
-/* ---- split ------------------------------------------------------------------------------ */
-lm_data_split lm_dataset_split_of(const char *name)
+/* ---- split: group keys and the hash ---------------------------------------------------- */
+/* FNV-1a, then a splitmix finaliser. */
+static uint64_t split_hash(const char *s)
 {
-    uint64_t h = 0xcbf29ce484222325ull; /* FNV-1a, then a splitmix finaliser */
-    for (const unsigned char *p = (const unsigned char *)name; *p; p++)
+    uint64_t h = 0xcbf29ce484222325ull;
+    for (const unsigned char *p = (const unsigned char *)s; *p; p++)
         h = (h ^ *p) * 0x100000001b3ull;
     h = (h ^ (h >> 30)) * 0xBF58476D1CE4E5B9ull;
     h = (h ^ (h >> 27)) * 0x94D049BB133111EBull;
-    h ^= h >> 31;
-    int bucket = (int)(h % 10);
-    return bucket < 8 ? LM_SPLIT_TRAIN : bucket == 8 ? LM_SPLIT_VAL : LM_SPLIT_TEST;
+    return h ^ (h >> 31);
+}
+
+/* Where name's trailing "<digits>" starts (len if none); *value its number (-1 if it has more
+ * than 9 digits). */
+static size_t trailing_digits(const char *name, size_t len, long *value)
+{
+    size_t p = len;
+    while (p > 0 && name[p - 1] >= '0' && name[p - 1] <= '9') p--;
+    *value = len - p <= 9 && p < len ? strtol(name + p, NULL, 10) : -1;
+    return p;
+}
+
+int lm_dataset_group_key(const char *name, int height, int width, char *out, size_t n)
+{
+    size_t len = strlen(name), keep = len;
+    long v;
+    size_t p = trailing_digits(name, len, &v);
+    if (p < len && p >= 5 && !strncmp(name + p - 5, "_crop", 5)) keep = p - 5;
+    else if (p < len && p >= 1 && name[p - 1] == '_' && v >= 0 && (v == height || v == width))
+        keep = p - 1;
+    if (keep == 0) keep = len; /* "_256" alone: no stem to keep */
+    return snprintf(out, n, "%.*s", (int)keep, name);
 }
 
 /* ---- scene discovery -------------------------------------------------------------------- */
@@ -269,14 +293,58 @@ static int fits(const lm_dataset *d, const scene *s)
     return s->height >= d->cfg.patch_h && s->width >= d->cfg.patch_w;
 }
 
+/* A scene's place in the group order: by group hash, ties by group key. */
+typedef struct group_rank {
+    uint64_t hash;
+    const char *group;
+    int scene;
+} group_rank;
+
+static int cmp_group(const void *pa, const void *pb)
+{
+    const group_rank *a = pa, *b = pb;
+    return a->hash != b->hash ? (a->hash < b->hash ? -1 : 1) : strcmp(a->group, b->group);
+}
+
+/* Each scene's group key and hash, then the split by group rank: with G groups, the first
+ * (G + 5) / 10 = floor(0.1 G + 0.5) groups (smallest hash) are test, as many next are val, the
+ * rest train. Scenes smaller than the patch count too, so the split depends on the scene set
+ * alone, not on the patch size. */
+static lm_status assign_splits(lm_dataset *d, lm_err *err)
+{
+    group_rank *o = malloc((size_t)(d->nscenes + 1) * sizeof *o);
+    if (!o) return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory");
+    for (int i = 0; i < d->nscenes; i++) {
+        scene *s = &d->scenes[i];
+        size_t n = (size_t)lm_dataset_group_key(s->name, s->height, s->width, NULL, 0) + 1;
+        s->group = malloc(n);
+        if (!s->group) return free(o), lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory");
+        lm_dataset_group_key(s->name, s->height, s->width, s->group, n);
+        s->hash = split_hash(s->group);
+        o[i] = (group_rank){s->hash, s->group, i};
+    }
+    qsort(o, (size_t)d->nscenes, sizeof *o, cmp_group);
+    d->ngroups = 0;
+    for (int i = 0; i < d->nscenes; i++) d->ngroups += i == 0 || cmp_group(&o[i - 1], &o[i]) != 0;
+    int n_test = (d->ngroups + 5) / 10, n_val = (d->ngroups + 5) / 10, rank = -1;
+    for (int i = 0; i < d->nscenes; i++) {
+        rank += i == 0 || cmp_group(&o[i - 1], &o[i]) != 0;
+        d->scenes[o[i].scene].split = rank < n_test ? LM_SPLIT_TEST
+                                    : rank < n_test + n_val ? LM_SPLIT_VAL : LM_SPLIT_TRAIN;
+    }
+    free(o);
+    return LM_OK;
+}
+
 static lm_status build_splits(lm_dataset *d, lm_err *err)
 {
     for (int k = 0; k < 3; k++) {
         d->list[k] = malloc((size_t)(d->nscenes + 1) * sizeof(int));
         if (!d->list[k]) return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory");
     }
+    lm_status st = assign_splits(d, err);
+    if (st != LM_OK) return st;
     for (int i = 0; i < d->nscenes; i++) {
-        d->scenes[i].split = lm_dataset_split_of(d->scenes[i].name);
         if (!fits(d, &d->scenes[i])) d->too_small++;
         else d->list[d->scenes[i].split][d->count[d->scenes[i].split]++] = i;
     }
@@ -686,23 +754,48 @@ const char *lm_dataset_scene_path(const lm_dataset *d, lm_data_split split, int 
     return i < 0 || i >= lm_dataset_num_scenes(d, split) ? NULL : d->scenes[d->list[split][i]].path;
 }
 
+int lm_dataset_split_borrowed(const lm_dataset *d, lm_data_split split)
+{
+    return (int)split >= 0 && split <= LM_SPLIT_TEST ? d->borrowed[split] : 0;
+}
+
+int lm_dataset_split_of_scene(const lm_dataset *d, const char *name_or_path)
+{
+    for (int pass = 0; pass < 2; pass++)
+        for (int i = 0; i < d->nscenes; i++)
+            if (!strcmp(pass ? d->scenes[i].name : d->scenes[i].path, name_or_path))
+                return (int)d->scenes[i].split;
+    return -1;
+}
+
+/* ": a, b, c" — the scene names of split k's list. */
+static void describe_names(const lm_dataset *d, int k, FILE *f)
+{
+    for (int i = 0; i < d->count[k]; i++)
+        fprintf(f, "%s%s", i ? ", " : ": ", d->scenes[d->list[k][i]].name);
+}
+
 void lm_dataset_describe(const lm_dataset *d, FILE *f)
 {
     static const char *names[3] = {"train", "val", "test"};
     const lm_dataset_cfg *c = &d->cfg;
-    fprintf(f, "dataset: %d scenes; patch %d x %d; synthetic %.0f%% (%.0f%% of them narrowband, "
-            "the rest procedural); noise k ~ U[%g, %g]; flips %s; seed %llu; %d workers; cache "
-            "%d scenes\n", d->nscenes, c->patch_h, c->patch_w, 100.0 * c->synth_fraction,
-            100.0 * c->synth_narrowband, c->noise_min, c->noise_max, c->flips ? "on" : "off",
-            (unsigned long long)c->seed, d->nthreads, d->cache_cap);
+    fprintf(f, "dataset: %d scenes in %d groups; patch %d x %d; synthetic %.0f%% (%.0f%% of them "
+            "narrowband, the rest procedural); noise k ~ U[%g, %g]; flips %s; seed %llu; %d "
+            "workers; cache %d scenes\n", d->nscenes, d->ngroups, c->patch_h, c->patch_w,
+            100.0 * c->synth_fraction, 100.0 * c->synth_narrowband, c->noise_min, c->noise_max,
+            c->flips ? "on" : "off", (unsigned long long)c->seed, d->nthreads, d->cache_cap);
+    fprintf(f, "  split by scene group (name without a _crop<N> or _<height|width> tag): test "
+            "and val take %d of the %d groups each (a tenth, rounded), by hash rank\n",
+            (d->ngroups + 5) / 10, d->ngroups);
     for (int k = 0; k < 3; k++) {
         fprintf(f, "  %-5s %d scenes%s", names[k], d->count[k],
                 d->borrowed[k] ? " (borrowed: fewer than 3 scenes, this split reuses all of "
                                  "them)" : "");
         if (k > 0) fprintf(f, ", %d fixed samples (noise k = %g)", lm_dataset_eval_count(d, k),
                            c->val_noise);
-        if (d->count[k] == 0) fprintf(f, " (no scene hashed here: %s)", k ? "not evaluated"
+        if (d->count[k] == 0) fprintf(f, " (no scene here: %s)", k ? "not evaluated"
                                       : "synthetic samples only");
+        if (k > 0 && !d->borrowed[k]) describe_names(d, k, f);
         fputc('\n', f);
     }
     if (d->too_small)
@@ -797,7 +890,8 @@ void lm_dataset_close(lm_dataset *d)
     for (int k = 0; k < 2; k++) free(d->slot[k].raw), free(d->slot[k].target);
     for (int e = 0; e < d->cache_cap && d->cache; e++) lm_cube_free(&d->cache[e].cube);
     free(d->cache);
-    for (int i = 0; i < d->nscenes; i++) free(d->scenes[i].path), free(d->scenes[i].name);
+    for (int i = 0; i < d->nscenes; i++)
+        free(d->scenes[i].path), free(d->scenes[i].name), free(d->scenes[i].group);
     free(d->scenes);
     for (int k = 0; k < 3; k++) free(d->list[k]);
     pthread_cond_destroy(&d->work_cv);

@@ -1,8 +1,10 @@
 /* dataset.h — training/validation/test samples simulated on the fly (system.md §4, §7).
  *
  * What it is: a folder (or list) of scenes in mixed formats (CAVE folders, ARAD/KAUST .mat,
- * spectral EXR), split 80/10/10 by scene deterministically (by a hash of the scene's name, so
- * adding a scene does not reshuffle the others), loaded lazily into a bounded cache. A sample is
+ * spectral EXR), loaded lazily into a bounded cache and split by scene group deterministically:
+ * variants of one scene (`x_crop150`, `x_256` of a 256 x 256 scene) form a group and share a
+ * split; of G groups ranked by a hash of their key, round(G/10) are test, as many val, the
+ * rest train (adding a scene moves at most the groups at the two boundaries). A sample is
  * a tile-aligned patch (66 x 64 by default), flipped at random (on the cube, before simulation),
  * mirrored 31 -> 41 bins, passed through the forward model with noise, paired with its
  * 33-channel target. A configurable proportion of samples are synthetic (data/synth.h:
@@ -56,9 +58,9 @@ void lm_dataset_default_cfg(lm_dataset_cfg *cfg);
  * file is read whole, matio offering no cheap header read). A folder is a CAVE scene if it
  * holds band images (or its single sub-folder does, scene/scene/); otherwise it is a folder of
  * scenes: its .mat/.exr files and CAVE scene folders, in name order. Scenes smaller than the
- * patch are left out. Errors name the file. A split with
- * no scene borrows from the others only if fewer than 3 scenes exist (documented in the
- * message printed by lm_dataset_describe). */
+ * patch are left out of the lists (they still count in the split rule below). Errors name the
+ * file. A split with no scene borrows from the others only if fewer than 3 scenes exist
+ * (documented in the message printed by lm_dataset_describe). */
 lm_dataset *lm_dataset_open(const lm_dataset_cfg *cfg, lm_err *err);
 void lm_dataset_close(lm_dataset *d);
 int lm_dataset_num_scenes(const lm_dataset *d, lm_data_split split);
@@ -74,13 +76,30 @@ lm_status lm_dataset_batch(lm_dataset *d, long index, int batch, float *raw, flo
 lm_status lm_dataset_eval_sample(lm_dataset *d, lm_data_split split, int i, float *raw,
                                  float *target, lm_err *err);
 int lm_dataset_eval_count(const lm_dataset *d, lm_data_split split);
+/* Prints the settings, the split rule, each split's scene count and the names of the val and
+ * test scenes (the real scenes held out). */
 void lm_dataset_describe(const lm_dataset *d, FILE *f);
 
 /* ---- introspection (tests, `lumosaic info`) ------------------------------------------- */
-/* The split of a scene name: a 64-bit hash of the name, bucket hash % 10: 0-7 train, 8 val,
- * 9 test. A scene's name is its file name without extension, or for CAVE the name of the
- * folder holding the band images. */
-lm_data_split lm_dataset_split_of(const char *scene_name);
+/* The split rule. A scene's name is its file name without extension, or for CAVE the name of
+ * the folder holding the band images. Its group key is the name with one trailing
+ * `_crop<digits>` removed, or else one trailing `_<digits>` removed when that number equals
+ * the scene's height or width (a resolution tag: `clay_256` of 256 x 256 -> `clay`;
+ * `ARAD_1K_0001` of 482 x 512 keeps its name). The G groups of the dataset's scenes (all
+ * listed scenes, including those smaller than the patch) are sorted by a 64-bit hash of the
+ * key (FNV-1a + splitmix; ties by key): the first floor(0.1 G + 0.5) are test, the next
+ * floor(0.1 G + 0.5) val, the rest train. So fewer than 5 groups are all train.
+ *
+ * lm_dataset_group_key writes the key of `name` to out (n bytes, truncated as snprintf) and
+ * returns its length. */
+int lm_dataset_group_key(const char *name, int height, int width, char *out, size_t n);
+/* The split the rule gives scene `name_or_path` (its path as listed, else its name) in this
+ * dataset: LM_SPLIT_*, or -1 if no scene has that path or name. Never a borrowed split. */
+int lm_dataset_split_of_scene(const lm_dataset *d, const char *name_or_path);
+/* 1 if the split's scene list is borrowed (fewer than 3 scenes: a split with no scene of its
+ * own reuses them all), else 0. A borrowed list holds no scene of that split: held-out
+ * evaluation must not use it. */
+int lm_dataset_split_borrowed(const lm_dataset *d, lm_data_split split);
 /* Name and path of scene i (0 <= i < lm_dataset_num_scenes(d, split)) of a split; NULL if out
  * of range. */
 const char *lm_dataset_scene_name(const lm_dataset *d, lm_data_split split, int i);

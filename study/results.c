@@ -240,9 +240,10 @@ static void md_held_out(FILE *f, const lm_study_cfg *cfg, const json_t *h)
     const json_t *sc = json_object_get(h, "scenes");
     if (!strcmp(str(h, "kind"), "procedural")) {
         fprintf(f, "**Held-out set: %zu procedural scenes** (%d x %d, data/synth.h). The test "
-                   "split of the data is empty (every scene's name hashes into train or val), "
-                   "so the models are scored on procedural scenes whose seeds come from a "
-                   "stream of the study seed that training never draws from.\n\n",
+                   "split of the data is empty (a tenth of the scene groups, rounded: none "
+                   "here; data/dataset.h), so the models are scored on procedural scenes "
+                   "whose seeds come from a stream of the study seed that training never "
+                   "draws from.\n\n",
                 json_array_size(sc), cfg->eval_h, cfg->eval_w);
         return;
     }

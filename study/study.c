@@ -54,8 +54,8 @@ static lm_status load_system(const lm_study_cfg *cfg, lm_system *sys, lm_err *er
     return st;
 }
 
-/* The data's scenes whose name hashes into the test split (every split list searched, so a
- * borrowed scene is not counted as held out). */
+/* The data's test split: the dataset's test list, unless borrowed (fewer than 3 scenes: it
+ * then holds training scenes, which are not held out). */
 static lm_status list_test_scenes(const lm_study_cfg *cfg, held *h, lm_err *err)
 {
     lm_system sys;
@@ -71,21 +71,20 @@ static lm_status list_test_scenes(const lm_study_cfg *cfg, held *h, lm_err *err)
     dc.synth_fraction = 0.0f;
     lm_dataset *d = lm_dataset_open(&dc, err);
     lm_status st = d ? LM_OK : err->status;
-    int total = 0;
-    for (int k = 0; d && k < 3; k++) total += lm_dataset_num_scenes(d, (lm_data_split)k);
+    int total = d && !lm_dataset_split_borrowed(d, LM_SPLIT_TEST)
+                ? lm_dataset_num_scenes(d, LM_SPLIT_TEST) : 0;
     h->name = calloc((size_t)total + 1, sizeof *h->name);
     h->path = calloc((size_t)total + 1, sizeof *h->path);
     if (!st && (!h->name || !h->path)) st = lm_err_set(err, LM_ERR_NOMEM, "study: out of memory");
-    for (int k = 0; !st && k < 3; k++)
-        for (int i = 0; i < lm_dataset_num_scenes(d, (lm_data_split)k); i++) {
-            const char *nm = lm_dataset_scene_name(d, (lm_data_split)k, i);
-            const char *p = lm_dataset_scene_path(d, (lm_data_split)k, i);
-            int dup = 0;
-            for (int j = 0; j < h->n; j++) dup |= !strcmp(h->path[j], p);
-            if (dup || lm_dataset_split_of(nm) != LM_SPLIT_TEST) continue;
-            snprintf(h->name[h->n], sizeof h->name[0], "%s", nm);
-            snprintf(h->path[h->n++], sizeof h->path[0], "%s", p);
-        }
+    for (int i = 0; !st && i < total; i++) {
+        const char *nm = lm_dataset_scene_name(d, LM_SPLIT_TEST, i);
+        const char *p = lm_dataset_scene_path(d, LM_SPLIT_TEST, i);
+        int dup = 0;
+        for (int j = 0; j < h->n; j++) dup |= !strcmp(h->path[j], p);
+        if (dup) continue;
+        snprintf(h->name[h->n], sizeof h->name[0], "%s", nm);
+        snprintf(h->path[h->n++], sizeof h->path[0], "%s", p);
+    }
     lm_dataset_close(d);
     lm_system_free(&sys);
     return st;

@@ -7,8 +7,8 @@
  * one JSON object, written to <dir>/runs/<preset>/result.json; a preset whose result.json
  * exists is not run again (resume), and a preset with a checkpoint but no result.json
  * continues its training from the checkpoint.
- * Held-out scenes: the scenes of the configured data whose name hashes into the test split
- * (data/dataset.h); when there is none, `eval_scenes` procedural scenes (data/synth.h) whose
+ * Held-out scenes: the scenes of the configured data's test split (data/dataset.h: scene
+ * groups ranked by hash, 10 % test); when there is none, `eval_scenes` procedural scenes (data/synth.h) whose
  * seeds come from a stream of the study seed that the training sampler never uses.
  * What it is not: the summary files and table (study/results.c, lm_study_write) or the charts
  * (study/charts.h). */

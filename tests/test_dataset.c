@@ -1,12 +1,13 @@
-/* test_dataset.c — the sampler (data/dataset.h): split by name hash (determinism, 80/10/10,
- * disjoint, stable when scenes are added, borrowing below 3 scenes), tile-aligned patches
+/* test_dataset.c — the sampler (data/dataset.h): split by scene group (group keys, groups
+ * never split, exact quotas, determinism, disjoint lists, at most boundary groups move when
+ * scenes are added, the real 27-scene split, borrowing below 3 scenes), tile-aligned patches
  * (a fixture whose values encode the position: the target tells where the patch came from and
  * the raw equals lm_forward_clean of that crop), flips applied to the cube before simulation,
  * the 33-channel target written out here, batch determinism across datasets, worker counts
  * and batch sizes, noise level distribution and actual noise, synthetic proportion, the LRU
  * bound (load counts), fixed evaluation samples, and bad input. Fixtures are spectral EXR files
  * written to a mkdtemp folder (removed at the end); the real CAVE samples come from
- * $LM_SHARED_DIR/data/cave. */
+ * $LM_SHARED_DIR/data/cave (and cave-256 for the real split). */
 #define _GNU_SOURCE
 #include "tests/check.h"
 #include "data/cube_io.h"
@@ -104,20 +105,33 @@ static lm_dataset_cfg base_cfg(const char *const *paths, int npaths)
 static char g_posdir[1024], g_pospath[1100];
 
 /* ---- split ------------------------------------------------------------------------------ */
-static void test_split_hash_proportions(void)
+static void check_key(const char *name, int h, int w, const char *want)
 {
-    int n[3] = {0, 0, 0};
-    const int N = 3000;
-    for (int i = 0; i < N; i++) {
-        char name[32];
-        snprintf(name, sizeof name, "scene_%04d", i);
-        lm_data_split s = lm_dataset_split_of(name);
-        CHECK(s == lm_dataset_split_of(name));
-        n[s]++;
-    }
-    CHECK_CLOSE(n[0] / (double)N, 0.8, 0.025, 0);
-    CHECK_CLOSE(n[1] / (double)N, 0.1, 0.02, 0);
-    CHECK_CLOSE(n[2] / (double)N, 0.1, 0.02, 0);
+    char key[64];
+    int n = lm_dataset_group_key(name, h, w, key, sizeof key);
+    CHECK_MSG(!strcmp(key, want) && n == (int)strlen(want), "%s (%d x %d) -> '%s', expected '%s'",
+              name, h, w, key, want);
+}
+
+static void test_group_key(void)
+{
+    check_key("clay_256", 256, 256, "clay");
+    check_key("ARAD_1K_0001", 482, 512, "ARAD_1K_0001");
+    check_key("balloons_crop100", 100, 100, "balloons");
+    check_key("chart_and_stuffed_toy_crop150", 150, 150, "chart_and_stuffed_toy");
+    check_key("chart_and_stuffed_toy_256", 256, 256, "chart_and_stuffed_toy");
+    check_key("scene_128", 100, 128, "scene");       /* the width */
+    check_key("scene_100", 100, 128, "scene");       /* the height */
+    check_key("scene_256", 128, 128, "scene_256");   /* not its size: part of the name */
+    check_key("scene_crop7_256", 256, 256, "scene_crop7"); /* one suffix only */
+    check_key("a_crop1_crop2", 9, 9, "a_crop1");
+    check_key("scene_crop", 9, 9, "scene_crop");     /* no digits */
+    check_key("scenecrop12", 12, 12, "scenecrop12"); /* no underscore */
+    check_key("_256", 256, 256, "_256");             /* nothing would be left */
+    check_key("scene_99999999999", 9, 9, "scene_99999999999");
+    char small[4];
+    CHECK(lm_dataset_group_key("clay_256", 256, 256, small, sizeof small) == 4 &&
+          !strcmp(small, "cla"));
 }
 
 static int in_split(const lm_dataset *d, lm_data_split s, const char *name)
@@ -127,50 +141,158 @@ static int in_split(const lm_dataset *d, lm_data_split s, const char *name)
     return 0;
 }
 
-static void test_split_open(void)
+/* The split fixture: group g is fake_g<NN> (9 x 8) plus one variant of it (_crop5, _8 = the
+ * width or _9 = the height); fake_g00_7 is a group of its own (7 is not a size). */
+#define SPLIT_MAX_GROUPS 24
+#define ODD_GROUP (SPLIT_MAX_GROUPS - 1)
+static void split_name(char *out, size_t n, int g, int variant)
 {
-    char dir[1024], path[1100];
-    subdir(dir, sizeof dir, "fake");
-    const int NS = 14;
-    for (int i = 0; i < NS; i++) {
-        snprintf(path, sizeof path, "%s/fake_scene_%02d.exr", dir, i);
+    static const char *suffix[3] = {"_crop5", "_8", "_9"};
+    snprintf(out, n, "fake_g%02d%s", g, variant ? suffix[g % 3] : "");
+}
+
+static void add_split_group(const char *dir, int g)
+{
+    char path[1200], name[64];
+    for (int v = 0; v < 2; v++) {
+        split_name(name, sizeof name, g, v);
+        snprintf(path, sizeof path, "%s/%s.exr", dir, name);
         write_scene(path, 9, 8, 0);
     }
+}
+
+static lm_dataset *open_split_dir(const char *dir)
+{
     const char *paths[1] = {dir};
     lm_dataset_cfg cfg = base_cfg(paths, 1);
     cfg.patch_h = 6;
     cfg.patch_w = 8;
     lm_err e;
     lm_err_clear(&e);
-    lm_dataset *d = lm_dataset_open(&cfg, &e), *d2 = lm_dataset_open(&cfg, &e);
-    CHECK_MSG(d && d2, "%s", e.msg);
-    if (!d || !d2) return;
-    int total = 0;
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    return d;
+}
+
+/* Groups 0..ng-1 (and fake_g00_7): both scenes of a group in one split, every scene in exactly
+ * one list, the quotas exact; split[g] receives group g's split, split[ODD_GROUP] that of
+ * fake_g00_7. */
+static void check_split_rule(const lm_dataset *d, int ng, int *split)
+{
+    int groups[3] = {0, 0, 0}, total = 0;
+    char name[64];
+    for (int g = 0; g < ng; g++) {
+        split_name(name, sizeof name, g, 0);
+        split[g] = lm_dataset_split_of_scene(d, name);
+        CHECK_MSG(split[g] >= 0 && in_split(d, split[g], name), "%s", name);
+        split_name(name, sizeof name, g, 1);
+        CHECK_MSG(lm_dataset_split_of_scene(d, name) == split[g], "%s", name);
+        if (split[g] >= 0) groups[split[g]]++;
+    }
+    int odd = split[ODD_GROUP] = lm_dataset_split_of_scene(d, "fake_g00_7");
+    CHECK(odd >= 0 && in_split(d, odd, "fake_g00_7"));
+    if (odd >= 0) groups[odd]++;
+    int G = ng + 1, q = (G + 5) / 10; /* floor(0.1 G + 0.5) */
+    CHECK_MSG(groups[LM_SPLIT_TEST] == q && groups[LM_SPLIT_VAL] == q &&
+              groups[LM_SPLIT_TRAIN] == G - 2 * q, "%d groups: test %d, val %d, train %d", G,
+              groups[LM_SPLIT_TEST], groups[LM_SPLIT_VAL], groups[LM_SPLIT_TRAIN]);
     for (int s = 0; s < 3; s++) {
         total += lm_dataset_num_scenes(d, s);
-        CHECK(lm_dataset_num_scenes(d, s) == lm_dataset_num_scenes(d2, s));
+        CHECK(!lm_dataset_split_borrowed(d, s));
         for (int i = 0; i < lm_dataset_num_scenes(d, s); i++) {
             const char *nm = lm_dataset_scene_name(d, s, i);
-            CHECK(lm_dataset_split_of(nm) == (lm_data_split)s);
-            CHECK(!strcmp(nm, lm_dataset_scene_name(d2, s, i)));
+            CHECK(lm_dataset_split_of_scene(d, nm) == s);
+            CHECK(lm_dataset_split_of_scene(d, lm_dataset_scene_path(d, s, i)) == s);
             CHECK(in_split(d, s, nm) + in_split(d, (s + 1) % 3, nm) +
                   in_split(d, (s + 2) % 3, nm) == 1); /* never in two splits */
         }
     }
-    CHECK(total == NS);
-    /* adding scenes leaves the others where they were */
-    for (int i = NS; i < NS + 6; i++) {
-        snprintf(path, sizeof path, "%s/fake_scene_%02d.exr", dir, i);
-        write_scene(path, 9, 8, 0);
+    CHECK(total == 2 * ng + 1);
+    CHECK(lm_dataset_split_of_scene(d, "no_such_scene") == -1);
+}
+
+/* Quotas exact, groups never split, the same split on every open; adding one group at a time
+ * moves at most one old group across each boundary (test/val, val/train), and one more into
+ * val when the quota grows (val then gains a group from train at both ends). */
+static void test_split_groups_and_quotas(void)
+{
+    char dir[1024], path[1200];
+    subdir(dir, sizeof dir, "fake");
+    int ng = 12;
+    for (int g = 0; g < ng; g++) add_split_group(dir, g);
+    snprintf(path, sizeof path, "%s/fake_g00_7.exr", dir);
+    write_scene(path, 9, 8, 0);
+    int prev[SPLIT_MAX_GROUPS] = {0}, cur[SPLIT_MAX_GROUPS] = {0}, again[SPLIT_MAX_GROUPS] = {0};
+    lm_dataset *d = open_split_dir(dir), *d2 = open_split_dir(dir);
+    if (!d || !d2) goto done;
+    check_split_rule(d, ng, prev);
+    check_split_rule(d2, ng, again);
+    CHECK(memcmp(prev, again, sizeof prev) == 0);
+    for (; ng < 16; ng++) { /* 13 .. 17 groups: the quota grows from 1 to 2 at 15 */
+        add_split_group(dir, ng);
+        lm_dataset_close(d);
+        d = open_split_dir(dir);
+        if (!d) goto done;
+        check_split_rule(d, ng + 1, cur);
+        int moved = 0, grew = (ng + 2 + 5) / 10 > (ng + 1 + 5) / 10;
+        for (int g = 0; g < SPLIT_MAX_GROUPS; g++) {
+            if (g >= ng && g != ODD_GROUP) continue;
+            moved += cur[g] != prev[g];
+            CHECK(abs(cur[g] - prev[g]) <= 1); /* only to the neighbouring split */
+        }
+        CHECK_MSG(moved <= 2 + grew, "%d groups: %d old groups moved", ng + 2, moved);
+        memcpy(prev, cur, sizeof cur);
     }
-    lm_dataset *d3 = lm_dataset_open(&cfg, &e);
-    CHECK_MSG(d3 != NULL, "%s", e.msg);
-    for (int s = 0; s < 3 && d3; s++)
-        for (int i = 0; i < lm_dataset_num_scenes(d, s); i++)
-            CHECK(in_split(d3, s, lm_dataset_scene_name(d, s, i)));
+done:
     lm_dataset_close(d);
     lm_dataset_close(d2);
-    lm_dataset_close(d3);
+}
+
+/* The real data: 27 scenes in 26 groups (cave's two chart_and_stuffed_toy variants are one);
+ * 3 test and 3 val groups by hash rank, named in the describe output. Reads band-01 headers. */
+static void test_split_real_scenes(void)
+{
+    char cave[1024], cave256[1100];
+    snprintf(cave, sizeof cave, "%s/data/cave", shared_dir());
+    snprintf(cave256, sizeof cave256, "%s/data/cave-256", shared_dir());
+    struct stat st;
+    if (stat(cave, &st) != 0 || stat(cave256, &st) != 0) {
+        fprintf(stderr, "test_split_real_scenes: skipped, %s or %s absent\n", cave, cave256);
+        return;
+    }
+    const char *paths[2] = {cave, cave256};
+    lm_dataset_cfg cfg;
+    lm_dataset_default_cfg(&cfg);
+    cfg.paths = paths;
+    cfg.npaths = 2;
+    cfg.sys = &g_sys;
+    cfg.workers = 0;
+    cfg.synth_fraction = 0.0f;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    if (!d) return;
+    static const char *test[3] = {"cd_256", "fake_and_real_tomatoes_256",
+                                  "real_and_fake_apples_256"};
+    static const char *val[3] = {"watercolors_256", "glass_tiles_256", "pompoms_256"};
+    CHECK(lm_dataset_num_scenes(d, LM_SPLIT_TEST) == 3 && lm_dataset_num_scenes(d, LM_SPLIT_VAL)
+          == 3 && lm_dataset_num_scenes(d, LM_SPLIT_TRAIN) == 21);
+    char *buf = NULL;
+    size_t n = 0;
+    FILE *f = open_memstream(&buf, &n);
+    lm_dataset_describe(d, f);
+    fclose(f);
+    for (int i = 0; i < 3; i++) {
+        CHECK_MSG(in_split(d, LM_SPLIT_TEST, test[i]), "%s not in test", test[i]);
+        CHECK_MSG(in_split(d, LM_SPLIT_VAL, val[i]), "%s not in val", val[i]);
+        CHECK_MSG(buf && strstr(buf, test[i]) && strstr(buf, val[i]), "describe: %s", buf);
+    }
+    CHECK(buf && strstr(buf, "27 scenes in 26 groups"));
+    free(buf);
+    CHECK(in_split(d, LM_SPLIT_TRAIN, "chart_and_stuffed_toy_256") &&
+          in_split(d, LM_SPLIT_TRAIN, "chart_and_stuffed_toy_crop150"));
+    lm_dataset_close(d);
 }
 
 static void test_borrow_below_three_scenes(void)
@@ -183,6 +305,9 @@ static void test_borrow_below_three_scenes(void)
     CHECK_MSG(d != NULL, "%s", e.msg);
     if (!d) return;
     for (int s = 0; s < 3; s++) CHECK(lm_dataset_num_scenes(d, s) == 1);
+    CHECK(lm_dataset_split_of_scene(d, "posscene") == LM_SPLIT_TRAIN);
+    CHECK(!lm_dataset_split_borrowed(d, LM_SPLIT_TRAIN) && lm_dataset_split_borrowed(d,
+          LM_SPLIT_VAL) && lm_dataset_split_borrowed(d, LM_SPLIT_TEST));
     CHECK(lm_dataset_eval_count(d, LM_SPLIT_VAL) == 4 && lm_dataset_eval_count(d, LM_SPLIT_TEST));
     char *buf = NULL;
     size_t n = 0;
@@ -376,10 +501,13 @@ static void test_cave_scenes_listed(void)
     int total = 0;
     for (int s = 0; s < 3; s++) total += lm_dataset_num_scenes(d, s);
     CHECK(total >= 3);
-    int found = 0; /* exactly one split holds it */
-    for (int s = 0; s < 3; s++) found += in_split(d, s, "balloons_crop100");
-    CHECK(found == 1);
-    CHECK(in_split(d, lm_dataset_split_of("chart_and_stuffed_toy_256"), "chart_and_stuffed_toy_256"));
+    /* 2 groups (balloons, chart_and_stuffed_toy): a tenth of 2, rounded, is 0: all train, and
+     * with 3 scenes val and test do not borrow */
+    CHECK(lm_dataset_num_scenes(d, LM_SPLIT_TRAIN) == 3);
+    CHECK(lm_dataset_num_scenes(d, LM_SPLIT_VAL) == 0 && lm_dataset_num_scenes(d, LM_SPLIT_TEST)
+          == 0 && !lm_dataset_split_borrowed(d, LM_SPLIT_TEST));
+    CHECK(in_split(d, LM_SPLIT_TRAIN, "balloons_crop100"));
+    CHECK(lm_dataset_split_of_scene(d, "chart_and_stuffed_toy_256") == LM_SPLIT_TRAIN);
     lm_dataset_close(d);
 }
 
@@ -523,14 +651,9 @@ static void test_lru_bound(void)
 {
     char dir[1024], path[1100];
     subdir(dir, sizeof dir, "lru");
-    int made = 0;
-    for (int i = 0; made < 4 && i < 1000; i++) {
-        char name[32];
-        snprintf(name, sizeof name, "lru_%d", i);
-        if (lm_dataset_split_of(name) != LM_SPLIT_TRAIN) continue;
-        snprintf(path, sizeof path, "%s/%s.exr", dir, name);
-        write_scene(path, 15, 16, made + 1 == 3);
-        made++;
+    for (int i = 0; i < 4; i++) { /* 4 groups: all train */
+        snprintf(path, sizeof path, "%s/lru_%d.exr", dir, i);
+        write_scene(path, 15, 16, i == 2);
     }
     const char *paths[1] = {dir};
     lm_dataset_cfg cfg = base_cfg(paths, 1);
@@ -692,8 +815,9 @@ int main(void)
     subdir(g_posdir, sizeof g_posdir, "pos");
     snprintf(g_pospath, sizeof g_pospath, "%s/posscene.exr", g_posdir);
     write_scene(g_pospath, POS_H, POS_W, 1);
-    RUN(test_split_hash_proportions);
-    RUN(test_split_open);
+    RUN(test_group_key);
+    RUN(test_split_groups_and_quotas);
+    RUN(test_split_real_scenes);
     RUN(test_borrow_below_three_scenes);
     RUN(test_eval_samples_fixed);
     RUN(test_patches_on_tile_grid);

@@ -68,7 +68,7 @@ check "another seed, the same noise-free rows" \
   cmp -s <(grep ',0,' "$O/eval.csv") <(grep ',0,' "$T/ev3/eval.csv")
 check_not "another seed, other noise" cmp -s <(grep ',10,' "$O/eval.csv") <(grep ',10,' "$T/ev3/eval.csv")
 
-# the scene is in exactly one split (by its name hash); the others have nothing to evaluate
+# the scene is in exactly one split (one scene: train; the others borrow, nothing to evaluate)
 n_ok=0
 for s in test val train; do
   "$LM" eval --model "$R" "$CAVE" --split $s --noise 0 --rainbow 0 > /dev/null 2> "$T/err_$s"

@@ -7,7 +7,7 @@
 # error consistent), the sweep's light records; results.json/csv/md exist, the table
 # has a row per preset, the records have sane fields (parameters and multiply-adds larger for
 # mcan-tiny, PSNR(0) >= PSNR(10) - 0.5 dB, rainbow), the held-out set is procedural (the scene
-# hashes into train) and the output says so; the chart scripts, PNGs and SVGs exist and the
+# is in the train split) and the output says so; the chart scripts, PNGs and SVGs exist and the
 # Pareto files hold exactly the non-dominated points of speed.dat (recomputed here); running
 # again skips both finished presets and leaves their weights alone; a preset without
 # result.json is measured again from its checkpoint; without gnuplot on PATH the run stops with
