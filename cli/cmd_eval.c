@@ -62,6 +62,8 @@ static void help(void)
            "  --device D       where the network runs: cpu or opencl (default: env LM_DEVICE,\n"
            "                   else cpu); the weights are copied to the device once;\n"
            "                   MST++ models run on the CPU only\n"
+           "  --noise-oracle   models that read the noise level (lmmse, residuals on it) get\n"
+           "                   the simulated level instead of estimating it from the frame\n"
            "  --help           this text\n", LM_EVAL_MAX_NOISE, LM_EVAL_MAX_MOTION);
 }
 
@@ -74,6 +76,7 @@ typedef struct eval_opts {
     double speed[LM_EVAL_MAX_MOTION];
     int nmotion;
     long long seed, threads, rainbow, batch;
+    int noise_oracle;
 } eval_opts;
 
 static const char *const split_names[] = {"test", "val", "train", "all", NULL};
@@ -128,7 +131,8 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_int(c, "--rainbow", 0, 4096, &o->rainbow)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
         (r = lm_cli_value(c, "--noise", &noise)) ||
-        (r = lm_cli_value(c, "--motion", &motion))) {
+        (r = lm_cli_value(c, "--motion", &motion)) ||
+        (r = lm_cli_flag(c, "--noise-oracle", &o->noise_oracle))) {
         if (r < 0) return 2;
         if (noise && parse_noise(c, noise, o)) return 2;
         if (motion && parse_motion(c, motion, o)) return 2;
@@ -470,6 +474,7 @@ static int run(eval_run *r)
     lm_err e;
     lm_err_clear(&e);
     if (lm_infer_model_load(r->o->model, r->o->system, &r->im, &e)) return fail(r->c, &e);
+    r->im.noise_oracle = r->o->noise_oracle;
     int rc = list_scenes(r, &e);
     if (rc) return rc;
     if (r->o->output && lm_cli_stage_dir(r->c, r->o->output, r->tmp, sizeof r->tmp)) {

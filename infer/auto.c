@@ -2,6 +2,7 @@
  * choice and the mixed-model fold (see auto.h).
  * What it is not: model loading or the CLI. */
 #include "infer/auto.h"
+#include "infer/model_io.h"
 #include <jansson.h>
 #include <math.h>
 #include <omp.h>
@@ -398,6 +399,7 @@ lm_status lm_auto_fold(lm_ctx *c, lm_model *const *models, int nmodels, const in
     fo.batch = o->batch * nmodels;
     mix x = {models, nmodels, o->batch, 0, win_model, windows, malloc(sizeof(int) * fo.batch)};
     if (!x.idx) return lm_err_set(err, LM_ERR_NOMEM, "auto: out of memory");
+    for (int k = 0; k < nmodels; k++) lm_infer_set_noise(models[k], frame, height, width);
     lm_status st = lm_tile_fold(c, frame, height, width, models[0]->mosaic.ty,
                                 models[0]->mosaic.tx, &fo, mix_fn, &x, out_ch, out, err);
     free(x.idx);
@@ -484,6 +486,7 @@ lm_status lm_auto_scene(lm_ctx *c, lm_model *const *models, int nmodels, lm_auto
             for (int j = 0; j < o->win_w; j++) K[i * o->win_w + j] = ky[i] * kx[j];
     }
     for (int m = 0; m < nmodels && !st; m++) {
+        lm_infer_set_noise(models[m], frame, height, width);
         calib_cb x = {models[m], truth, height, width, nx, 0, ys, xs, K, mse + (size_t)m * nwin, 0};
         st = lm_tile_fold(c, frame, height, width, ty, tx, o, calib_fn, &x,
                           LM_MODEL_OUT_CHANNELS, out, err);

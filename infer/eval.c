@@ -127,8 +127,20 @@ static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *tr
     lm_noise_opts no;
     memset(&no, 0, sizeof no);
     no.gauss_k = k;
-    lm_status st = simulate(im, truth, &no, rng, lm_nthreads(c), frame, err);
+    float clean_max = 0.0f;
+    const size_t npx = (size_t)truth->height * truth->width;
+    lm_status st = LM_OK;
+    if (im->noise_oracle && im->model->noise_input) { /* the true sd: k x the clean maximum */
+        st = simulate(im, truth, NULL, NULL, lm_nthreads(c), frame, err);
+        for (size_t i = 0; !st && i < npx; i++) clean_max = frame[i] > clean_max ? frame[i] : clean_max;
+    }
+    if (!st) st = simulate(im, truth, &no, rng, lm_nthreads(c), frame, err);
     if (st) return st;
+    if (im->noise_oracle && im->model->noise_input) { /* noise_given is relative to the frame's max */
+        float mx = 0.0f;
+        for (size_t i = 0; i < npx; i++) mx = frame[i] > mx ? frame[i] : mx;
+        im->model->noise_given = mx > 0.0f ? k * clean_max / mx : 0.0f;
+    }
     lm_cube pred;
     st = lm_eval_reconstruct(c, im, frame, truth->height, truth->width, to, 0, &pred, err);
     if (st) return st;

@@ -1,6 +1,7 @@
 /* model_io.c — load a trained model for inference (see model_io.h).
  * What it is not: a checkpoint resumer (no optimizer state is read). */
 #include "infer/model_io.h"
+#include "data/noise_est.h"
 #include <inttypes.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -101,6 +102,20 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
     }
     lm_params_set_requires_grad(&im->model->params, 0);
     return LM_OK;
+}
+
+void lm_infer_set_noise(lm_model *m, const float *frame, int height, int width)
+{
+    if (!m || !m->noise_input) return;
+    m->noise_sigma_items = NULL;
+    if (m->noise_given >= 0.0f) {
+        float mx = 0.0f;
+        for (size_t i = 0; i < (size_t)height * width; i++) mx = frame[i] > mx ? frame[i] : mx;
+        m->noise_sigma = m->noise_given * mx;
+        return;
+    }
+    float s = lm_noise_estimate(frame, height, width, m->mosaic.ty, m->mosaic.tx);
+    m->noise_sigma = s > 0.0f ? s : 0.0f;
 }
 
 void lm_infer_model_free(lm_infer_model *im)

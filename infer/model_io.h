@@ -15,6 +15,7 @@ typedef struct lm_infer_model {
     lm_system sys;        /* the system description the model runs with */
     char weights[1024];   /* the .safetensors file loaded */
     char system_path[1024];
+    int noise_oracle;     /* eval only: give noise-reading models the simulated level */
 } lm_infer_model;
 
 /* Load path (a folder holding model.safetensors, or a .safetensors file). system_override
@@ -27,5 +28,11 @@ typedef struct lm_infer_model {
 lm_status lm_infer_model_load(const char *path, const char *system_override, lm_infer_model *im,
                               lm_err *err);
 void lm_infer_model_free(lm_infer_model *im);
+
+/* For a model that reads its input's noise level (m->noise_input): set m->noise_sigma for this
+ * frame (height x width raw mosaic), from m->noise_given (k x the frame's maximum) when >= 0,
+ * else estimated from the frame itself (data/noise_est.h). No-op for other models. Called by
+ * every frame-level inference entry (tile, whole, auto). */
+void lm_infer_set_noise(lm_model *m, const float *frame, int height, int width);
 
 #endif

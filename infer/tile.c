@@ -1,6 +1,7 @@
 /* tile.c — patch-wise inference: window grid, weighting kernel, batched fold (see tile.h).
  * What it is not: a tensor op (no autograd: inference only) or model loading. */
 #include "infer/tile.h"
+#include "infer/model_io.h"
 #include "kernels-opencl/cl_backend.h"
 #include <math.h>
 #include <omp.h>
@@ -240,6 +241,7 @@ lm_status lm_tile_infer(lm_ctx *c, lm_model *m, const float *frame, int height, 
                           m->preset, m->out_channels, LM_MODEL_OUT_CHANNELS);
     if (lm_tile_check(o, height, width, m->mosaic.ty, m->mosaic.tx, err)) return err->status;
     const size_t plane = (size_t)height * width;
+    lm_infer_set_noise(m, frame, height, width);
     float *full = malloc(sizeof(float) * plane * LM_MODEL_OUT_CHANNELS);
     if (!full) return lm_err_set(err, LM_ERR_NOMEM, "tile: out of memory (%dx%d frame)", height,
                                  width);

@@ -1,14 +1,8 @@
 /* whole.c — strip-wise whole-frame inference (see whole.h). */
 #include "infer/whole.h"
+#include "infer/model_io.h"
 #include <stdlib.h>
 #include <string.h>
-
-/* Declared receptive fields: rows added by the convolutions after the demosaic, per family. */
-typedef struct whole_rf { const char *family; int conv_rows; } whole_rf;
-static const whole_rf receptive_fields[] = {
-    {"linear", 0}, /* 1x1 */
-    {"rt", 2},     /* two 3x3 (the 1x1 convs add nothing) */
-};
 
 void lm_whole_default_opts(lm_whole_opts *o)
 {
@@ -18,15 +12,11 @@ void lm_whole_default_opts(lm_whole_opts *o)
 
 int lm_whole_halo(const lm_model *m)
 {
-    const int n = (int)(sizeof receptive_fields / sizeof receptive_fields[0]);
     const int ty = m->mosaic.ty;
-    for (int i = 0; i < n; i++)
-        if (!strcmp(m->family, receptive_fields[i].family)) {
-            /* demosaic: up to ty - 1 rows at a strip edge see a clamped neighbour */
-            int rows = ty - 1 + receptive_fields[i].conv_rows;
-            return (rows + ty - 1) / ty * ty;
-        }
-    return -1;
+    if (m->conv_rows < 0 || m->in_channels != 1) return -1;
+    /* demosaic: up to ty - 1 rows at a strip edge see a clamped neighbour */
+    int rows = ty - 1 + m->conv_rows;
+    return (rows + ty - 1) / ty * ty;
 }
 
 static lm_status whole_check(const lm_model *m, int height, int width, const lm_whole_opts *o,
@@ -89,6 +79,7 @@ lm_status lm_whole_forward(lm_ctx *c, lm_model *m, const float *frame, int heigh
     const int ty = m->mosaic.ty, halo = o->halo >= 0 ? o->halo : lm_whole_halo(m);
     int S = o->strip_rows > 0 ? o->strip_rows : LM_WHOLE_STRIP_ROWS;
     S = (S + ty - 1) / ty * ty;
+    lm_infer_set_noise(m, frame, height, width);
     int grad = lm_ctx_set_grad(c, 0);
     for (int y0 = 0; y0 < height && !st; y0 += S) {
         int y1 = y0 + S < height ? y0 + S : height;

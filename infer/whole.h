@@ -6,7 +6,7 @@
  * of one strip instead of the frame, and without the ~4.4x pixel overlap of the §8 windows
  * (infer/tile.h), which real-time inference cannot pay.
  *
- * The receptive field is declared here per model family (lm_whole_halo): the demosaic reads
+ * The receptive field is declared by the model (lm_model.conv_rows, lm_whole_halo): the demosaic reads
  * sample rows less than one tile row (ty) away, and each k x k convolution (stride 1) adds
  * (k - 1) / 2 rows. Strips and halos are multiples of ty, so every strip keeps the frame's
  * mosaic phase. Models with global context (attention, global pooling: han, mcan, srnet) have

@@ -34,6 +34,7 @@ lm_status lm_linear_build(lm_model *m, lm_err *err)
     if (lm_conv_declare(&m->params, &n->proj, "proj", s, 1, err)) return err->status;
     m->forward = linear_forward;
     m->init = linear_init;
+    m->conv_rows = 0; /* 1x1 */
     snprintf(m->family, sizeof m->family, "linear");
     return LM_OK;
 }

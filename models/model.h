@@ -21,6 +21,24 @@ struct lm_model {
     void (*init)(lm_model *m, lm_rng *r);   /* default initialisation, declaration order */
     void (*free_impl)(lm_model *m);
     void *impl;
+    /* Capabilities (set by the builder; callers ask these, not the family name). */
+    int conv_rows;                 /* rows of context each output row needs beyond the
+                                    * demosaic's (finite receptive field: whole frames run in
+                                    * strips, infer/whole.h); -1 = global context (default) */
+    int noise_input;               /* 1: forward reads the input's noise level (below) */
+    /* The input's Gaussian noise sd in input units (as data/noise_est.h estimates it), for
+     * models with noise_input: noise_sigma_items[b] per batch item when non-NULL, else
+     * noise_sigma for every item (< 0 = unknown: such a model's forward fails). Set by the
+     * caller before each forward (train loop, infer, eval). */
+    float noise_sigma;
+    const float *noise_sigma_items;
+    float noise_given;             /* inference: the level k given by the user (sigma = k x the
+                                    * frame's maximum), < 0 = estimate it from each frame */
+    /* Residual on a base model (lm_model_create_residual): forward = this net + base. The
+     * base's parameters live in this model's block as "base.<name>" (frozen unless made
+     * trainable), so checkpoints and devices carry both. */
+    lm_model *base;
+    lm_tensor *res_scale;          /* residual only: 33 gates on the net's output */
 };
 
 /* Create by preset name (see lm_model_presets); mosaic NULL = lm_mosaic_default. Parameters
@@ -29,6 +47,15 @@ lm_model *lm_model_create(const char *preset, const lm_mosaic *mosaic, uint64_t 
                           lm_err *err);
 void lm_model_free(lm_model *m);
 lm_tensor *lm_model_forward(lm_ctx *c, lm_model *m, lm_tensor *raw);
+/* The residual model `preset` + `base_preset` (both preset names): the net's parameters as
+ * lm_model_create gives them, then the base's under "base." (trainable when train_base), then
+ * "res_scale" (33 per-channel gates on the net's output, initialised to res_init: 0 makes
+ * the model equal to the base at iteration 0). Noise level and capabilities pass through. */
+lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
+                                   const lm_mosaic *mosaic, uint64_t seed, int train_base,
+                                   float res_init, lm_err *err);
+/* Is name a preset (a listed name or lmmse-K)? */
+int lm_model_preset_known(const char *name);
 /* NULL-terminated list of preset names. */
 const char *const *lm_model_presets(void);
 
@@ -49,6 +76,17 @@ lm_status lm_mst_build(lm_model *m, int stages, int raw_input, lm_err *err);
  * (planar, host), out = out_channels x H x W. Own ctx with nthreads (0 = all cores). */
 lm_status lm_mst_reconstruct(lm_model *m, const float *in, int H, int W, float *out,
                              int nthreads, lm_err *err);
+/* Closed-form linear floor (models/lmmse.c): per tile phase a K x K raw window -> 33
+ * channels, one filter set per noise level of lm_lmmse_sigmas (absolute noise sd of the input),
+ * interpolated between levels. Presets "lmmse" (K = 11) and "lmmse-K" (odd K). */
+#define LM_LMMSE_LEVELS 10
+extern const float lm_lmmse_sigmas[LM_LMMSE_LEVELS];
+lm_status lm_lmmse_build(lm_model *m, int K, lm_err *err);
+/* K of an lmmse model, 0 for any other model. */
+int lm_lmmse_window(const lm_model *m);
+/* Set the filter of (level, phase) from coef[(K*K + 1) x 33] (row f = window position
+ * u * K + v, last row = bias), as the fit produces it. */
+lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *coef, lm_err *err);
 /* Real-time: demosaic + raw, two 3x3 convs at `width`, 1x1 head (models/rt.c). */
 lm_status lm_rt_build(lm_model *m, int width, lm_err *err);
 

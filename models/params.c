@@ -1,5 +1,6 @@
 /* params.c — parameter declaration, the contiguous data/grad blocks, initialisers. */
 #include "models/params.h"
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
@@ -27,9 +28,12 @@ lm_param *lm_params_find(const lm_params *p, const char *name)
     return NULL;
 }
 
-lm_tensor *lm_params_add(lm_params *p, const char *name, int ndim, const int *shape,
+lm_tensor *lm_params_add(lm_params *p, const char *name_in, int ndim, const int *shape,
                          int trainable, lm_err *err)
 {
+    char name[2 * LM_PARAM_NAME_MAX];
+    snprintf(name, sizeof name, "%s%s", p->prefix, name_in);
+    if (p->frozen) trainable = 0;
     if (p->finalized) {
         lm_err_set(err, LM_ERR_ARG, "parameter %s declared after finalize", name);
         return NULL;

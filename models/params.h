@@ -26,6 +26,10 @@ typedef struct lm_params {
                                     * zero pages take no memory until a gradient is written, so
                                     * inference pays nothing for it */
     int finalized;
+    /* While declaring: names get this prefix, and frozen makes every new parameter
+     * non-trainable (a frozen base model declared into its residual's block). */
+    char prefix[32];
+    int frozen;
 } lm_params;
 
 void lm_params_init(lm_params *p);

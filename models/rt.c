@@ -55,6 +55,7 @@ lm_status lm_rt_build(lm_model *m, int width, lm_err *err)
         return err->status;
     m->forward = rt_forward;
     m->init = rt_init;
+    m->conv_rows = 2; /* two 3x3 (the 1x1 convs add nothing) */
     snprintf(m->family, sizeof m->family, "rt");
     return LM_OK;
 }

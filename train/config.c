@@ -52,6 +52,13 @@ static const field fields[] = {
     FLD("checkpoint_interval", F_LONG, checkpoint_interval, "N", "updates between checkpoints"),
     FLD("log_interval", F_LONG, log_interval, "N", "updates between progress lines (no tty)"),
     FLD("output", F_STR, output, "DIR", "run folder (checkpoints, log.csv)"),
+    FLD("fit", F_STR, fit, "M", "auto | closed | sgd (auto: closed form for lmmse presets)"),
+    FLD("fit_patches", F_LONG, fit_patches, "N", "closed form: training patches (4096)"),
+    FLD("base", F_STR, base, "RUN", "train as a residual on this run's model (e.g. an lmmse fit)"),
+    FLD("base_trainable", F_INT, base_trainable, "0|1", "fine-tune the base with the net (0)"),
+    FLD("res_init", F_FLOAT, res_init, "F", "initial residual gates (0: starts at the base)"),
+    FLD("minutes", F_FLOAT, minutes, "M", "time budget in minutes (0 = none; the schedule "
+        "spans it)"),
 };
 #define NFIELDS (int)(sizeof fields / sizeof fields[0])
 
@@ -77,6 +84,8 @@ void lm_train_cfg_default(lm_train_cfg *c)
     c->checkpoint_interval = 1000;
     c->log_interval = 100;
     snprintf(c->output, sizeof c->output, "runs/train");
+    snprintf(c->fit, sizeof c->fit, "auto");
+    c->fit_patches = 4096;
 }
 
 static const field *find_field(const char *key)
@@ -218,7 +227,8 @@ static lm_status set_json(lm_train_cfg *c, const field *f, json_t *v, const char
         break;
     case F_STR:
         ok = json_is_string(v);
-        if (ok && !strcmp(f->name, "system") && json_string_length(v))
+        if (ok && (!strcmp(f->name, "system") || !strcmp(f->name, "base")) &&
+            json_string_length(v))
             resolve_path(base_dir, json_string_value(v), buf, sizeof buf);
         else if (ok) snprintf(buf, sizeof buf, "%s", json_string_value(v));
         break;
@@ -328,9 +338,7 @@ lm_status lm_train_cfg_load(lm_train_cfg *c, const char *path, lm_err *err)
 #define BAD(fmt, ...) return lm_err_set(err, LM_ERR_ARG, "config: field " fmt, __VA_ARGS__)
 lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
 {
-    int known = 0;
-    for (const char *const *p = lm_model_presets(); *p; p++) known |= !strcmp(*p, c->model);
-    if (!known) BAD("'model': unknown preset '%s' (see lumosaic info --list)", c->model);
+    if (!lm_model_preset_known(c->model)) BAD("'model': unknown preset '%s' (see lumosaic info --list)", c->model);
     if (c->version != LM_TRAIN_CFG_VERSION) BAD("'version': must be %d", LM_TRAIN_CFG_VERSION);
     if (c->batch < 1) BAD("'batch': must be >= 1 (got %d)", c->batch);
     if (c->accum_steps < 1) BAD("'accum_steps': must be >= 1 (got %d)", c->accum_steps);
@@ -365,6 +373,14 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
         BAD("'checkpoint_interval': must be >= 0 (got %ld)", c->checkpoint_interval);
     if (c->log_interval < 1) BAD("'log_interval': must be >= 1 (got %ld)", c->log_interval);
     if (!c->output[0]) BAD("'output': must name a folder%s", "");
+    if (strcmp(c->fit, "auto") && strcmp(c->fit, "closed") && strcmp(c->fit, "sgd"))
+        BAD("'fit': must be auto, closed or sgd (got '%s')", c->fit);
+    if (c->fit_patches < 1) BAD("'fit_patches': must be >= 1 (got %ld)", c->fit_patches);
+    if (c->base_trainable != 0 && c->base_trainable != 1)
+        BAD("'base_trainable': must be 0 or 1 (got %d)", c->base_trainable);
+    if (!(c->minutes >= 0 && c->minutes <= 1e6))
+        BAD("'minutes': must be in [0, 1e6] (got %g)", c->minutes);
+    if (!isfinite(c->res_init)) BAD("'res_init': must be finite (got %g)", c->res_init);
     if (c->ndata == 0 && c->synth_fraction < 1)
         BAD("'data': no scenes given (add --data PATH, or set synth_fraction to 1)%s", "");
     return LM_OK;
@@ -390,6 +406,11 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
         "val_interval", (json_int_t)c->val_interval, "val_patches", c->val_patches,
         "checkpoint_interval", (json_int_t)c->checkpoint_interval,
         "log_interval", (json_int_t)c->log_interval, "output", c->output);
+    if (root)
+        json_object_update_new(root, json_pack("{s:s, s:I, s:s, s:i, s:f, s:f}", "fit", c->fit,
+                               "fit_patches", (json_int_t)c->fit_patches, "base", c->base,
+                               "base_trainable", c->base_trainable,
+                               "res_init", (double)c->res_init, "minutes", (double)c->minutes));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

@@ -5,8 +5,13 @@
 #include "data/rgbcam.h"
 #include "data/dataset.h"
 #include "data/spectra.h"
+#include "train/fit_lmmse.h"
 #include "train/mosaic_system.h"
+#include <jansson.h>
+#include <math.h>
+#include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 static lm_status ds_batch(void *u, long index, int B, float *raw, float *target, lm_err *err)
 {
@@ -23,7 +28,8 @@ lm_train_source lm_train_source_dataset(lm_dataset *d)
     return (lm_train_source){d, ds_batch, ds_count, ds_eval};
 }
 
-static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, lm_err *err)
+static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int clean,
+                             lm_err *err)
 {
     const char *paths[LM_TRAIN_MAX_PATHS];
     for (int i = 0; i < cfg->ndata; i++) paths[i] = cfg->data[i];
@@ -41,8 +47,125 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, lm_e
     dc.workers = cfg->workers;
     dc.val_patches = cfg->val_patches;
     dc.val_noise = cfg->val_noise;
+    if (clean) dc.noise_min = dc.noise_max = dc.val_noise = 0.0f; /* the fit adds noise itself */
     return lm_dataset_open(&dc, err);
 }
+
+/* ---- residual on a trained base ---------------------------------------------------------- */
+/* The weights file of a run folder or a .safetensors path. */
+static void weights_path(const char *run, char *out, size_t n)
+{
+    struct stat st;
+    if (stat(run, &st) == 0 && S_ISDIR(st.st_mode)) snprintf(out, n, "%s/model.safetensors", run);
+    else snprintf(out, n, "%s", run);
+}
+
+/* Load the "base.*" parameters of m from the base run's weights (names without the prefix). */
+static lm_status load_base(lm_model *m, const char *file, lm_err *err)
+{
+    lm_params v;
+    lm_params_init(&v);
+    lm_status st = LM_OK;
+    for (int i = 0; i < m->params.n && !st; i++) {
+        const lm_param *e = m->params.items[i];
+        if (strncmp(e->name, "base.", 5)) continue;
+        lm_tensor *t = lm_params_add(&v, e->name + 5, e->t.ndim, e->t.shape, 0, err);
+        if (!t) st = err->status;
+        else t->data = e->t.data;
+    }
+    if (!st) st = lm_params_load(&v, file, 0, err);
+    lm_params_free(&v);
+    return st;
+}
+
+/* The model of the run: the preset, or the preset as a residual on cfg->base. */
+static lm_model *create_model(const lm_train_cfg *cfg, const lm_mosaic *mo, uint64_t sys_hash,
+                              lm_err *err)
+{
+    if (!cfg->base[0]) return lm_model_create(cfg->model, mo, cfg->seed, err);
+    char file[LM_TRAIN_PATH_LEN + 32];
+    weights_path(cfg->base, file, sizeof file);
+    char *bp = lm_safetensors_meta(file, "preset", err);
+    char *bh = bp ? lm_safetensors_meta(file, "system_hash", err) : NULL;
+    char want[32];
+    snprintf(want, sizeof want, "%016llx", (unsigned long long)sys_hash);
+    lm_model *m = NULL;
+    if (!bp && !err->status)
+        lm_err_set(err, LM_ERR_FORMAT, "base %s: not a Lumosaic model (no preset)", file);
+    else if (bp && bh && sys_hash && strcmp(bh, want))
+        lm_err_set(err, LM_ERR_ARG, "base %s: trained for another system description", file);
+    else if (bp && (m = lm_model_create_residual(cfg->model, bp, mo, cfg->seed,
+                                                  cfg->base_trainable, cfg->res_init, err)) &&
+             load_base(m, file, err)) {
+        lm_model_free(m);
+        m = NULL;
+    }
+    free(bp);
+    free(bh);
+    return m;
+}
+
+/* ---- closed-form fit --------------------------------------------------------------------- */
+static lm_status write_fit_report(const lm_train_cfg *cfg, const lm_lmmse_fit_report *r,
+                                  int K, lm_err *err)
+{
+    json_t *lv = json_array();
+    for (int l = 0; l < LM_LMMSE_LEVELS; l++)
+        json_array_append_new(lv, json_pack("{s:f, s:f, s:o}", "sigma", (double)lm_lmmse_sigmas[l],
+                              "ridge", r->ridge[l], "val_psnr", isfinite(r->val_psnr[l])
+                              ? json_real(r->val_psnr[l]) : json_null()));
+    json_t *root = json_pack("{s:s, s:i, s:I, s:I, s:I, s:f, s:b, s:o}", "model", cfg->model,
+                             "window", K, "patches", (json_int_t)r->patches,
+                             "val_patches", (json_int_t)r->val_patches, "rows", (json_int_t)r->rows,
+                             "seconds", r->seconds, "ridge_from_validation", r->val_patches > 0,
+                             "levels", lv);
+    char path[LM_TRAIN_PATH_LEN + 32], tmp[LM_TRAIN_PATH_LEN + 48];
+    snprintf(path, sizeof path, "%s/fit.json", cfg->output);
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    int rc = root ? json_dump_file(root, tmp, JSON_INDENT(2) | JSON_REAL_PRECISION(6)) : -1;
+    json_decref(root);
+    if (rc || rename(tmp, path)) {
+        remove(tmp);
+        return lm_err_set(err, LM_ERR_IO, "%s: cannot write the fit report", path);
+    }
+    snprintf(path, sizeof path, "%s/log.csv", cfg->output);
+    FILE *f = fopen(path, "w");
+    int ok = f && fprintf(f, "iteration,loss,lr,psnr,ssim,mae,sam\n0,,,") > 0;
+    if (ok && isfinite(r->val_psnr[0])) ok = fprintf(f, "%.6f", r->val_psnr[0]) > 0;
+    ok = ok && fprintf(f, ",,,\n") > 0;
+    if (f && fclose(f)) ok = 0;
+    return ok ? LM_OK : lm_err_set(err, LM_ERR_IO, "%s: cannot write the log", path);
+}
+
+static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
+                            const lm_train_opts *opts, lm_train_result *res, lm_err *err)
+{
+    FILE *out = opts->progress_out ? opts->progress_out : stderr;
+    lm_lmmse_fit_report r;
+    char path[LM_TRAIN_PATH_LEN + 16];
+    snprintf(path, sizeof path, "%s/config.json", cfg->output);
+    lm_status st = lm_train_make_dir(cfg->output, err);
+    if (!st) st = lm_lmmse_fit(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches, cfg->batch, &r,
+                               err);
+    if (!st) st = lm_train_cfg_save(cfg, path, err);
+    if (!st) st = lm_train_save_checkpoint(cfg->output, m, NULL, 0, 0, opts, cfg, err);
+    if (!st) st = write_fit_report(cfg, &r, lm_lmmse_window(m), err);
+    if (st) return st;
+    if (opts->progress) {
+        fprintf(out, "train: %s fitted in closed form in %.1f s (%ld patches, %ld pixels; %ld "
+                "validation patches)\n", cfg->model, r.seconds, r.patches, r.rows, r.val_patches);
+        for (int l = 0; l < LM_LMMSE_LEVELS; l++)
+            fprintf(out, "  noise sd %-7g ridge %-6g validation PSNR %.2f dB\n",
+                    (double)lm_lmmse_sigmas[l], r.ridge[l], r.val_psnr[l]);
+        if (!r.val_patches) fprintf(out, "  (no validation split: ridge fixed)\n");
+    }
+    memset(res, 0, sizeof *res);
+    res->seconds = r.seconds;
+    res->validated = r.val_patches > 0;
+    res->val.psnr = r.val_psnr[0];
+    return LM_OK;
+}
+
 
 lm_status lm_train_session(const lm_train_cfg *cfg, const lm_train_opts *opts_in,
                            lm_train_result *res, lm_err *err)
@@ -63,10 +186,19 @@ lm_status lm_train_session(const lm_train_cfg *cfg, const lm_train_opts *opts_in
     lm_model *m = NULL;
     lm_dataset *d = NULL;
     lm_status st = lm_mosaic_from_system(&sys, &mo, err);
-    if (!st && !(m = lm_model_create(cfg->model, &mo, cfg->seed, err))) st = err->status;
-    if (!st && !(d = open_data(cfg, &sys, err))) st = err->status;
+    if (!st && !(m = create_model(cfg, &mo, opts.system_hash, err))) st = err->status;
+    int closed = !st && lm_lmmse_window(m) && !m->base && strcmp(cfg->fit, "sgd");
+    if (!st && !closed && !strcmp(cfg->fit, "closed"))
+        st = lm_err_set(err, LM_ERR_ARG, "config: field 'fit': model %s has no closed form (only "
+                        "lmmse presets)", cfg->model);
+    if (!st && closed && opts.resume)
+        st = lm_err_set(err, LM_ERR_ARG, "resume: %s is fitted in closed form, nothing to resume "
+                        "(use --fit sgd to fine-tune)", cfg->model);
+    if (!st && !(d = open_data(cfg, &sys, closed, err))) st = err->status;
     if (!st && opts.progress) lm_dataset_describe(d, opts.progress_out ? opts.progress_out : stderr);
-    if (!st && m->in_channels == 3) {
+    if (!st && closed) {
+        st = fit_closed(cfg, m, d, &opts, res, err);
+    } else if (!st && m->in_channels == 3) {
         /* the passive RGB baseline (MST++): same samples, seen through an RGB camera */
         lm_train_source src;
         st = lm_train_source_rgb_open(&src, d, NULL, LM_RGBCAM_D65, NULL, cfg->patch_h,

@@ -7,6 +7,7 @@
  * pipeline (data/dataset.h). */
 #include "train/train.h"
 #include "autograd/autograd.h"
+#include "data/noise_est.h"
 #include "kernels-opencl/cl_backend.h"
 #include <errno.h>
 #include <math.h>
@@ -27,11 +28,14 @@ typedef struct loop {
     lm_tensor **ps, *held;        /* device runs: the parameters swapped in for each step */
     int np;                       /* 0 on the CPU: no swapping, the path is unchanged */
     float *raw, *target, *pred;   /* one batch, host */
+    float *sigma;                 /* per item: the input's estimated noise sd (noise_input) */
     FILE *log;
     long it0;                     /* iteration this invocation started at */
     long saved;                   /* iteration of the checkpoint on disk (-1: none yet) */
     double t0, last_print;
     int tty;
+    long total;                   /* iterations of the schedule (cfg->iterations, or resolved
+                                   * from the time budget) */
 } loop;
 
 static double now_s(void)
@@ -41,7 +45,7 @@ static double now_s(void)
     return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
-static lm_status make_dir(const char *path, lm_err *err)
+lm_status lm_train_make_dir(const char *path, lm_err *err)
 {
     char buf[LM_TRAIN_PATH_LEN];
     snprintf(buf, sizeof buf, "%s", path);
@@ -72,6 +76,20 @@ static void params_back(loop *L)
     if (L->np) lm_tensors_swap_back(&L->ctx, L->ps, L->np, L->held);
 }
 
+/* Models that read the input's noise level get it estimated from each item, as infer does
+ * from each frame (data/noise_est.h). */
+static void set_noise(loop *L, int B)
+{
+    lm_model *m = L->model;
+    if (!m->noise_input) return;
+    const int H = L->cfg->patch_h, W = L->cfg->patch_w;
+    for (int b = 0; b < B; b++) {
+        float s = lm_noise_estimate(L->raw + (size_t)b * H * W, H, W, m->mosaic.ty, m->mosaic.tx);
+        L->sigma[b] = s > 0.0f ? s : 0.0f;
+    }
+    m->noise_sigma_items = L->sigma;
+}
+
 /* ---- one iteration -------------------------------------------------------------------- */
 /* Forward + L1 + backward of batch `index`; adds the unscaled loss to *loss_sum. */
 static lm_status micro_step(loop *L, long index, double *loss_sum, lm_err *err)
@@ -82,6 +100,7 @@ static lm_status micro_step(loop *L, long index, double *loss_sum, lm_err *err)
     lm_ctx *c = &L->ctx;
     lm_ctx_reset(c);
     params_in(L);
+    set_noise(L, B);
     lm_tensor *raw = lm_tensor_from(c, 4, (int[]){B, L->model->in_channels, H, W}, L->raw);
     lm_tensor *tgt = lm_tensor_from(c, 4, (int[]){B, LM_MODEL_OUT_CHANNELS, H, W}, L->target);
     if (L->model->out_channels == 31) tgt = lm_slice(c, tgt, 1, 1, 31); /* 400..700 nm */
@@ -172,6 +191,7 @@ static lm_status validate(loop *L, lm_metrics *out, lm_err *err)
         if (st) break;
         lm_ctx_reset(c);
         params_in(L);
+        set_noise(L, b);
         lm_tensor *raw = lm_tensor_from(c, 4, (int[]){b, L->model->in_channels, H, W}, L->raw);
         lm_tensor *pred = lm_model_forward(c, L->model, raw);
         int bad = !pred || lm_tensor_read(c, pred, L->pred);
@@ -207,7 +227,7 @@ static void progress(loop *L, long done, double loss, float lr, int final)
     if (!L->opts->progress) return;
     FILE *f = L->opts->progress_out ? L->opts->progress_out : stderr;
     double t = now_s(), el = t - L->t0;
-    long total = L->cfg->iterations, here = done - L->it0;
+    long total = L->total, here = done - L->it0;
     if (L->tty && !final && t - L->last_print < 0.2) return;
     if (!L->tty && !final && done % L->cfg->log_interval) return;
     L->last_print = t;
@@ -303,13 +323,14 @@ static lm_status setup(loop *L, lm_err *err)
     L->raw = malloc(bn * L->model->in_channels * sizeof(float));
     L->target = malloc(bn * LM_MODEL_OUT_CHANNELS * sizeof(float));
     L->pred = malloc(bn * LM_MODEL_OUT_CHANNELS * sizeof(float));
-    if (!L->raw || !L->target || !L->pred)
+    L->sigma = malloc((size_t)cfg->batch * sizeof(float));
+    if (!L->raw || !L->target || !L->pred || !L->sigma)
         return lm_err_set(err, LM_ERR_NOMEM, "train: out of memory for batch %d of %dx%d",
                           cfg->batch, cfg->patch_h, cfg->patch_w);
     lm_adam_cfg ac;
     lm_train_cfg_adam(cfg, &ac);
     if (lm_adam_init(&L->opt, &L->model->params, &ac, err)) return err->status;
-    return make_dir(cfg->output, err);
+    return lm_train_make_dir(cfg->output, err);
 }
 
 static void teardown(loop *L)
@@ -318,6 +339,8 @@ static void teardown(loop *L)
     free(L->raw);
     free(L->target);
     free(L->pred);
+    free(L->sigma);
+    L->model->noise_sigma_items = NULL;
     lm_adam_free(&L->opt);
     lm_ctx_free(&L->ctx); /* before its backend */
     lm_backend_close(L->backend);
@@ -348,12 +371,37 @@ static lm_status begin(loop *L, long *start, lm_err *err)
     return open_log(L, 1, *start, err);
 }
 
+/* Time budget of a fresh run: at 3 % and 50 % of the budget, the schedule's length becomes the
+ * iterations that fit in it at the speed measured so far (at most cfg->iterations), and
+ * config.json records it, so a resume or a rerun with --iterations continues the same schedule. */
+static void resolve_budget(loop *L, long done, double *next_mark, long *end)
+{
+    const lm_train_cfg *cfg = L->cfg;
+    double el = now_s() - L->t0, budget = cfg->minutes * 60.0;
+    if (budget <= 0 || L->opts->resume || el < *next_mark || done - L->it0 < 5) return;
+    *next_mark = *next_mark < 0.5 * budget ? 0.5 * budget : INFINITY;
+    long fit = done + (long)((budget - el) / (el / (double)(done - L->it0)));
+    if (fit > cfg->iterations) fit = cfg->iterations;
+    if (fit <= done) fit = done + 1;
+    L->total = fit;
+    L->opt.cfg.total_steps = fit;
+    if (*end > fit || L->opts->stop_after <= 0) *end = fit;
+    lm_train_cfg rc = *cfg;
+    rc.iterations = fit;
+    char path[LM_TRAIN_PATH_LEN + 16];
+    snprintf(path, sizeof path, "%s/config.json", cfg->output);
+    lm_err e2;
+    lm_err_clear(&e2);
+    lm_train_cfg_save(&rc, path, &e2); /* best effort: the checkpoint is what resume needs */
+}
+
 static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err)
 {
     const lm_train_cfg *cfg = L->cfg;
-    long end = cfg->iterations;
+    long end = L->total;
     if (L->opts->stop_after > 0 && start + L->opts->stop_after < end)
         end = start + L->opts->stop_after;
+    double budget = cfg->minutes * 60.0, mark = 0.03 * budget;
     for (long it = start; it < end; it++) {
         float lr = lm_adam_lr(&L->opt.cfg, L->opt.step);
         double loss = 0;
@@ -365,9 +413,12 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
         if (it == start) res->first_loss = loss;
         res->last_loss = loss;
         res->iterations_done = it + 1;
+        resolve_budget(L, it + 1, &mark, &end);
+        int out_of_time = budget > 0 && now_s() - L->t0 >= budget;
+        if (out_of_time) end = it + 1;
         int last = it + 1 == end;
         int val = (cfg->val_interval > 0 && (it + 1) % cfg->val_interval == 0) ||
-                  it + 1 == cfg->iterations;
+                  it + 1 == L->total || out_of_time;
         if (val && L->src->eval_count && L->src->eval_count(L->src->user) > 0) {
             if (validate(L, &res->val, err)) return err->status;
             res->validated = 1;
@@ -400,7 +451,7 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
         return lm_err_set(err, LM_ERR_ARG, "config: field 'patch': %dx%d is not a multiple of the "
                           "%d x %d tile", cfg->patch_h, cfg->patch_w, model->mosaic.ty,
                           model->mosaic.tx);
-    loop L = {.cfg = cfg, .opts = opts, .src = src, .model = model};
+    loop L = {.cfg = cfg, .opts = opts, .src = src, .model = model, .total = cfg->iterations};
     L.tty = isatty(fileno(opts->progress_out ? opts->progress_out : stderr));
     long start = 0;
     lm_status st = setup(&L, err);

@@ -58,6 +58,15 @@ typedef struct lm_train_cfg {
     long checkpoint_interval;       /* iterations between checkpoints (0 = only at the end) */
     long log_interval;              /* progress lines when stderr is not a tty */
     char output[LM_TRAIN_PATH_LEN]; /* run folder */
+    /* closed-form models (lmmse): "auto" = closed form for lmmse presets, SGD otherwise;
+     * "closed"; "sgd" (Adam from the default initialisation) */
+    char fit[16];
+    long fit_patches;               /* closed form: training patches accumulated (4096) */
+    char base[LM_TRAIN_PATH_LEN];   /* residual on this trained run's model ("" = none) */
+    int base_trainable;             /* 1: the base is fine-tuned with the net */
+    float res_init;                 /* initial residual gates (0: the model starts at the base) */
+    float minutes;                  /* time budget (0 = none): the schedule spans it, the run
+                                     * stops with a checkpoint when it is spent */
 } lm_train_cfg;
 
 /* Paper defaults (system.md §7) with output "runs/train". */
@@ -155,6 +164,8 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
                                    const lm_train_cfg *cfg, lm_err *err);
 lm_status lm_train_load_checkpoint(const char *dir, lm_model *m, lm_adam *opt, long *iteration,
                                    long *next_batch, uint64_t *seed, lm_err *err);
+/* mkdir -p. */
+lm_status lm_train_make_dir(const char *path, lm_err *err);
 /* FNV-1a 64 of a file's bytes (0 if unreadable). */
 uint64_t lm_file_hash(const char *path);
 

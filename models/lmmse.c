@@ -1,0 +1,201 @@
+/* lmmse.c — the closed-form linear floor (issue 13): per mosaic phase p (ty x tx phases), a
+ * K x K window of the raw coded frame centred on the pixel, plus a bias, maps linearly to the
+ * 33 output channels:
+ *     y[c](Y, X) = sum_{u,v} W_l[p][c][u][v] raw(Y - r + u, X - r + v) + b_l[p][c],
+ *     p = (Y mod ty) tx + (X mod tx), r = K / 2,
+ * for a family of noise levels l (the input's Gaussian noise sd, absolute, in input units:
+ * LM_LMMSE_SIGMAS); at a noise sd s between two levels the filters are interpolated linearly.
+ * Fitted in closed form by train/fit_lmmse.c (normal equations + ridge), but also an ordinary
+ * differentiable model built from existing ops, so Adam can fine-tune it:
+ *   raw --pixel_unshuffle--> ty*tx phase planes, reflect-padded by whole tiles (phase kept)
+ *       --conv (ty*tx -> 33*ty*tx, kernel kh x kw tiles)--> pixel_shuffle --> B x 33 x H x W,
+ * where each phase's K x K filter is placed (zero-padded) into the tile-unit kernel by
+ * pad2d + pixel_unshuffle of the parameter itself (so gradients reach the K x K weights).
+ * Frame borders: the phase planes are reflected (PyTorch 'reflect' at tile resolution), so a
+ * border pixel's window reads the same LED's samples mirrored; a finite receptive field of
+ * r rows, so whole frames run in strips (infer/whole.h).
+ * Noise level: the caller sets m->noise_sigma (or noise_sigma_items per batch item), as the
+ * estimator of data/noise_est.h gives it; forward fails when neither is set.
+ * What it is not: the fit (train/fit_lmmse.c) or the noise estimator. */
+#include "models/model.h"
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+const float lm_lmmse_sigmas[LM_LMMSE_LEVELS] = {0.0f,  0.0025f, 0.005f, 0.01f, 0.02f,
+                                                0.035f, 0.05f,  0.075f, 0.1f,  0.15f};
+
+typedef struct lmmse_net {
+    lm_tensor *w;              /* L x P x 33 x K x K */
+    lm_tensor *b;              /* L x P x 33 */
+    int K, P;
+    int lo_y, hi_y, lo_x, hi_x; /* tile offsets the windows reach (lo <= 0 <= hi) */
+} lmmse_net;
+
+static int floor_div(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+/* Level pair and weight for noise sd s: filter = (1 - t) level[i] + t level[i + 1]. */
+static void level_pair(float s, int *i, float *t)
+{
+    const int L = LM_LMMSE_LEVELS;
+    if (!(s > 0.0f)) { *i = 0; *t = 0.0f; return; }
+    if (s >= lm_lmmse_sigmas[L - 1]) { *i = L - 2; *t = 1.0f; return; }
+    int k = 0;
+    while (k + 2 < L && s >= lm_lmmse_sigmas[k + 1]) k++;
+    *i = k;
+    *t = (s - lm_lmmse_sigmas[k]) / (lm_lmmse_sigmas[k + 1] - lm_lmmse_sigmas[k]);
+}
+
+/* Parameters of one level (or the blend of two) as views: w P x 33 x K x K, b P x 33. */
+static void blend(lm_ctx *c, const lmmse_net *n, float s, lm_tensor **w, lm_tensor **b)
+{
+    int i;
+    float t;
+    level_pair(s, &i, &t);
+    int ws[4] = {n->P, LM_MODEL_OUT_CHANNELS, n->K, n->K}, bs[2] = {n->P, LM_MODEL_OUT_CHANNELS};
+    lm_tensor *w0 = lm_reshape(c, lm_slice(c, n->w, 0, i, 1), 4, ws);
+    lm_tensor *b0 = lm_reshape(c, lm_slice(c, n->b, 0, i, 1), 2, bs);
+    if (t == 0.0f) { *w = w0; *b = b0; return; }
+    lm_tensor *w1 = lm_reshape(c, lm_slice(c, n->w, 0, i + 1, 1), 4, ws);
+    lm_tensor *b1 = lm_reshape(c, lm_slice(c, n->b, 0, i + 1, 1), 2, bs);
+    if (t == 1.0f) { *w = w1; *b = b1; return; }
+    *w = lm_add(c, lm_affine(c, w0, 1.0f - t, 0.0f), lm_affine(c, w1, t, 0.0f));
+    *b = lm_add(c, lm_affine(c, b0, 1.0f - t, 0.0f), lm_affine(c, b1, t, 0.0f));
+}
+
+/* The tile-unit conv weight (33 P) x P x kh x kw, output channel c P + p (pixel_shuffle order),
+ * and bias (33 P), from per-phase K x K filters. */
+static void tile_kernel(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm_tensor *w,
+                        lm_tensor *b, lm_tensor **cw, lm_tensor **cb)
+{
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, P = n->P, O = LM_MODEL_OUT_CHANNELS;
+    const int kh = n->hi_y - n->lo_y + 1, kw = n->hi_x - n->lo_x + 1, r = n->K / 2;
+    lm_tensor *parts[LM_MOSAIC_MAX_CH];
+    int ps[4] = {O, 1, n->K, n->K};
+    for (int p = 0; p < P; p++) {
+        const int i = p / tx, j = p % tx;
+        const int top = -r - ty * n->lo_y + i, left = -r - tx * n->lo_x + j;
+        lm_tensor *wp = lm_reshape(c, lm_slice(c, w, 0, p, 1), 4, ps);
+        wp = lm_pad2d(c, wp, top, ty * kh - n->K - top, left, tx * kw - n->K - left, LM_PAD_ZERO);
+        parts[p] = lm_pixel_unshuffle(c, wp, ty, tx); /* O x P x kh x kw */
+    }
+    lm_tensor *all = lm_concat(c, parts, P, 0);        /* (P O) x P x kh x kw, row p O + c */
+    int s3[3] = {P, O, P * kh * kw}, perm[3] = {1, 0, 2}, s4[4] = {O * P, P, kh, kw};
+    *cw = lm_reshape(c, lm_permute(c, lm_reshape(c, all, 3, s3), perm), 4, s4);
+    int s1[1] = {O * P};
+    *cb = lm_reshape(c, lm_transpose(c, b, 0, 1), 1, s1);
+}
+
+/* Items [b0, b0 + nb) of raw with one noise level. */
+static lm_tensor *run_group(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw, float s)
+{
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx;
+    lm_tensor *w, *b, *cw, *cb;
+    blend(c, n, s, &w, &b);
+    tile_kernel(c, m, n, w, b, &cw, &cb);
+    lm_tensor *u = lm_pixel_unshuffle(c, raw, ty, tx); /* B x P x h x w */
+    if (!u) return NULL;
+    const int h = u->shape[2], wd = u->shape[3];
+    lm_pad_mode mode = (h > n->hi_y && h > -n->lo_y && wd > n->hi_x && wd > -n->lo_x)
+                           ? LM_PAD_REFLECT : LM_PAD_ZERO; /* reflect needs pad < size */
+    u = lm_pad2d(c, u, -n->lo_y, n->hi_y, -n->lo_x, n->hi_x, mode);
+    return lm_pixel_shuffle(c, lm_conv2d(c, u, cw, cb, NULL), ty, tx);
+}
+
+static lm_tensor *lmmse_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
+{
+    lmmse_net *n = m->impl;
+    const float *sig = m->noise_sigma_items;
+    if (!sig && !(m->noise_sigma >= 0.0f)) {
+        lm_ctx_fail(c, LM_ERR_ARG, "%s: the input's noise level is not set (noise_sigma; the "
+                    "caller estimates it, data/noise_est.h)", m->preset);
+        return NULL;
+    }
+    const int B = raw->shape[0];
+    if (!sig) return run_group(c, m, n, raw, m->noise_sigma);
+    lm_tensor *outs[64];
+    int nout = 0, b0 = 0;
+    while (b0 < B) { /* runs of items with the same level share one conv */
+        int b1 = b0 + 1;
+        while (b1 < B && sig[b1] == sig[b0]) b1++;
+        if (nout == 64) {
+            lm_ctx_fail(c, LM_ERR_ARG, "%s: more than 64 distinct noise levels in a batch",
+                        m->preset);
+            return NULL;
+        }
+        outs[nout++] = run_group(c, m, n, lm_slice(c, raw, 0, b0, b1 - b0), sig[b0]);
+        b0 = b1;
+    }
+    return nout == 1 ? outs[0] : lm_concat(c, outs, nout, 0);
+}
+
+/* Default initialisation: every level the same PyTorch-default conv init (fan_in K^2), so an
+ * untrained lmmse behaves like a fresh K x K conv; the closed-form fit overwrites it. */
+static void lmmse_init(lm_model *m, lm_rng *r)
+{
+    lmmse_net *n = m->impl;
+    float bound = 1.0f / (float)n->K;
+    lm_init_uniform(n->w, r, bound);
+    lm_init_uniform(n->b, r, bound);
+}
+
+static void lmmse_free(lm_model *m)
+{
+    free(m->impl);
+    m->impl = NULL;
+}
+
+lm_status lm_lmmse_build(lm_model *m, int K, lm_err *err)
+{
+    lmmse_net *n = calloc(1, sizeof *n);
+    m->impl = n;
+    m->free_impl = lmmse_free;
+    if (!n) return lm_err_set(err, LM_ERR_NOMEM, "lmmse: out of memory");
+    if (K < 1 || K > 31 || K % 2 == 0)
+        return lm_err_set(err, LM_ERR_ARG, "lmmse: window %d must be odd, 1..31", K);
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, r = K / 2;
+    n->K = K;
+    n->P = ty * tx;
+    if (n->P > LM_MOSAIC_MAX_CH)
+        return lm_err_set(err, LM_ERR_ARG, "lmmse: %d x %d tile has too many phases", ty, tx);
+    n->lo_y = floor_div(-r, ty);
+    n->hi_y = floor_div(ty - 1 + r, ty);
+    n->lo_x = floor_div(-r, tx);
+    n->hi_x = floor_div(tx - 1 + r, tx);
+    int ws[5] = {LM_LMMSE_LEVELS, n->P, LM_MODEL_OUT_CHANNELS, K, K};
+    int bs[3] = {LM_LMMSE_LEVELS, n->P, LM_MODEL_OUT_CHANNELS};
+    if (!(n->w = lm_params_add(&m->params, "filters.weight", 5, ws, 1, err)) ||
+        !(n->b = lm_params_add(&m->params, "filters.bias", 3, bs, 1, err)))
+        return err->status;
+    m->forward = lmmse_forward;
+    m->init = lmmse_init;
+    m->conv_rows = ty * (n->hi_y > -n->lo_y ? n->hi_y : -n->lo_y);
+    m->noise_input = 1;
+    snprintf(m->family, sizeof m->family, "lmmse");
+    return LM_OK;
+}
+
+int lm_lmmse_window(const lm_model *m)
+{
+    return m && !strcmp(m->family, "lmmse") ? ((const lmmse_net *)m->impl)->K : 0;
+}
+
+lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *coef, lm_err *err)
+{
+    const int K = lm_lmmse_window(m);
+    if (!K) return lm_err_set(err, LM_ERR_ARG, "lmmse: model %s is not an lmmse model",
+                              m ? m->preset : "(null)");
+    lmmse_net *n = m->impl;
+    if (level < 0 || level >= LM_LMMSE_LEVELS || phase < 0 || phase >= n->P)
+        return lm_err_set(err, LM_ERR_ARG, "lmmse: level %d / phase %d out of range", level,
+                          phase);
+    const int O = LM_MODEL_OUT_CHANNELS, F = K * K;
+    float *w = n->w->data + ((size_t)level * n->P + phase) * O * F;
+    float *b = n->b->data + ((size_t)level * n->P + phase) * O;
+    for (int c = 0; c < O; c++) {
+        for (int f = 0; f < F; f++) w[(size_t)c * F + f] = (float)coef[(size_t)f * O + c];
+        b[c] = (float)coef[(size_t)F * O + c];
+    }
+    return LM_OK;
+}

@@ -1,0 +1,264 @@
+/* test_lmmse.c — the closed-form linear floor (models/lmmse.c, train/fit_lmmse.c) and residual
+ * models (lm_model_create_residual): the forward against a direct per-pixel double loop (with
+ * the tile-reflected borders), noise-level interpolation, finite-difference gradients, the
+ * fit's optimality on the very samples it was fitted on, and a residual that starts at its base. */
+#include "data/dataset.h"
+#include "data/system.h"
+#include "data/spectra.h"
+#include "models/model.h"
+#include "tests/check.h"
+#include "tests/model_fixture.h"
+#include "train/fit_lmmse.h"
+#include "train/mosaic_system.h"
+#include <stdlib.h>
+
+#define O LM_MODEL_OUT_CHANNELS
+
+/* Tile-resolution reflect (PyTorch 'reflect' on the phase planes) of a raw coordinate. */
+static int reflect_raw(int v, int n, int t)
+{
+    int q = v >= 0 ? v / t : -((-v + t - 1) / t), ph = v - q * t, nt = n / t;
+    if (q < 0) q = -q;
+    if (q >= nt) q = 2 * (nt - 1) - q;
+    return q * t + ph;
+}
+
+/* y[c] at (Y, X) for level weights (level l, blend t with l + 1), in double. */
+static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y, int X, int c,
+                        int l, double t)
+{
+    const lm_param *wp = lm_params_find(&m->params, "filters.weight");
+    const lm_param *bp = lm_params_find(&m->params, "filters.bias");
+    const int K = lm_lmmse_window(m), r = K / 2, ty = m->mosaic.ty, tx = m->mosaic.tx;
+    const int P = ty * tx, p = (Y % ty) * tx + X % tx;
+    double acc = 0;
+    for (int lv = l; lv <= l + 1; lv++) {
+        double a = lv == l ? 1 - t : t;
+        if (a == 0) continue;
+        const float *w = wp->t.data + (((size_t)lv * P + p) * O + c) * K * K;
+        double s = bp->t.data[((size_t)lv * P + p) * O + c];
+        for (int u = 0; u < K; u++)
+            for (int v = 0; v < K; v++)
+                s += w[u * K + v] * raw[reflect_raw(Y - r + u, H, ty) * W + reflect_raw(X - r + v, W, tx)];
+        acc += a * s;
+    }
+    return acc;
+}
+
+static void check_forward(const char *preset, int H, int W, float sigma, int l, double t)
+{
+    lm_mosaic mo;
+    test_mosaic(&mo);
+    lm_err e = {0};
+    lm_model *m = lm_model_create(preset, &mo, 3, &e);
+    CHECK_MSG(m != NULL, "%s", e.msg);
+    if (!m) return;
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_rng r;
+    lm_rng_seed(&r, 4);
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){1, 1, H, W}, &r, 0.0f, 1.0f);
+    m->noise_sigma = sigma;
+    lm_tensor *y = lm_model_forward(&c, m, x);
+    CHECK_MSG(y && y->shape[1] == O && y->shape[2] == H && y->shape[3] == W, "%s", c.msg);
+    double worst = 0;
+    for (int ch = 0; y && ch < O; ch += 4)
+        for (int Y = 0; Y < H; Y++)
+            for (int X = 0; X < W; X++) {
+                double d = fabs(ref_pixel(m, x->data, H, W, Y, X, ch, l, t) -
+                                y->data[((size_t)ch * H + Y) * W + X]);
+                worst = d > worst ? d : worst;
+            }
+    CHECK_MSG(worst < 2e-5, "%s sigma %g: forward differs from the direct loop by %g", preset,
+              sigma, worst);
+    lm_ctx_free(&c);
+    lm_model_free(m);
+}
+
+static void test_forward_matches_direct_loop(void)
+{
+    check_forward("lmmse", 18, 24, 0.0f, 0, 0.0);           /* K 11, 6 x 6 tiles */
+    check_forward("lmmse-5", 12, 16, 0.0f, 0, 0.0);
+    check_forward("lmmse-3", 9, 12, lm_lmmse_sigmas[3], 3, 0.0);
+    /* halfway between two levels: the filters blend linearly */
+    float s = 0.5f * (lm_lmmse_sigmas[4] + lm_lmmse_sigmas[5]);
+    check_forward("lmmse-5", 12, 16, s, 4, 0.5);
+    check_forward("lmmse-3", 9, 12, 10.0f, LM_LMMSE_LEVELS - 2, 1.0); /* clamped at the top */
+}
+
+static void test_counts_and_capabilities(void)
+{
+    lm_err e = {0};
+    lm_model *m = lm_model_create("lmmse", NULL, 1, &e);
+    CHECK_MSG(m != NULL, "%s", e.msg);
+    if (!m) return;
+    CHECK(lm_params_count(&m->params, 0) == (long)LM_LMMSE_LEVELS * 12 * (11 * 11 + 1) * 33);
+    CHECK(lm_lmmse_window(m) == 11 && m->noise_input && m->conv_rows == 6);
+    lm_model_free(m);
+    CHECK(lm_model_create("lmmse-4", NULL, 1, &e) == NULL && e.status == LM_ERR_ARG);
+    CHECK(lm_model_preset_known("lmmse-7") && !lm_model_preset_known("lmmse-x"));
+    /* no noise level set: a clear error, not the clean filter */
+    m = lm_model_create("lmmse-3", NULL, 1, &e);
+    lm_ctx c;
+    lm_ctx_init(&c, 1);
+    lm_tensor *x = lm_tensor_zeros(&c, 4, (int[]){1, 1, 6, 8});
+    CHECK(m && lm_model_forward(&c, m, x) == NULL && strstr(c.msg, "noise level"));
+    lm_ctx_free(&c);
+    lm_model_free(m);
+}
+
+typedef struct gc_user { lm_model *m; } gc_user;
+static lm_tensor *model_fn(lm_ctx *c, lm_tensor *const *in, int nin, void *u)
+{
+    (void)nin;
+    return lm_model_forward(c, ((gc_user *)u)->m, in[0]);
+}
+
+static void gradcheck(lm_model *m, const float *sig)
+{
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_rng r;
+    lm_rng_seed(&r, 2);
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){3, 1, 9, 12}, &r, 0.1f, 1.0f);
+    lm_tensor_set_requires_grad(x, 1);
+    m->noise_sigma_items = sig;
+    int np = m->params.n;
+    lm_tensor *in[8];
+    in[0] = x;
+    for (int i = 0; i < np && i < 7; i++) in[i + 1] = &m->params.items[i]->t;
+    lm_gradcheck_opts o;
+    lm_gradcheck_default_opts(&o);
+    o.eps = 1e-3;
+    o.max_checks = 40;
+    o.atol = 2e-3;
+    o.rtol = 2e-2;
+    gc_user u = {m};
+    CHECK_GRAD(&c, model_fn, in, (np < 7 ? np : 7) + 1, &u, &o);
+    lm_ctx_free(&c);
+}
+
+static void test_gradients(void)
+{
+    lm_err e = {0};
+    lm_model *m = lm_model_create("lmmse-5", NULL, 7, &e);
+    CHECK_MSG(m != NULL, "%s", e.msg);
+    if (!m) return;
+    /* three items, two of them sharing a level, one between levels */
+    const float sig[3] = {0.0f, 0.0f, 0.5f * (lm_lmmse_sigmas[2] + lm_lmmse_sigmas[3])};
+    gradcheck(m, sig);
+    lm_model_free(m);
+    /* a residual net (linear) on an lmmse base, the base trainable, gates non-zero */
+    lm_model *rm = lm_model_create_residual("linear", "lmmse-3", NULL, 7, 1, 0.5f, &e);
+    CHECK_MSG(rm != NULL, "%s", e.msg);
+    if (rm) gradcheck(rm, sig);
+    lm_model_free(rm);
+}
+
+/* A residual with gates 0 is its base exactly; the base's parameters are frozen, named base.* */
+static void test_residual_starts_at_base(void)
+{
+    lm_err e = {0};
+    lm_model *rm = lm_model_create_residual("rt-8", "lmmse-5", NULL, 3, 0, 0.0f, &e);
+    lm_model *b = lm_model_create("lmmse-5", NULL, 9, &e);
+    CHECK_MSG(rm && b, "%s", e.msg);
+    if (!rm || !b) return lm_model_free(rm), lm_model_free(b);
+    const lm_param *bw = lm_params_find(&rm->params, "base.filters.weight");
+    CHECK(bw && !bw->trainable && lm_params_find(&rm->params, "res_scale"));
+    CHECK(rm->noise_input && rm->conv_rows == 3); /* lmmse-5 reaches one tile row */
+    /* same base weights in both */
+    for (int i = 0; i < b->params.n; i++) {
+        char nm[LM_PARAM_NAME_MAX + 8];
+        snprintf(nm, sizeof nm, "base.%s", b->params.items[i]->name);
+        lm_param *dst = lm_params_find(&rm->params, nm);
+        CHECK(dst != NULL);
+        if (dst) memcpy(dst->t.data, b->params.items[i]->t.data,
+                        sizeof(float) * lm_tensor_numel(&dst->t));
+    }
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_rng r;
+    lm_rng_seed(&r, 5);
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){2, 1, 12, 16}, &r, 0.0f, 1.0f);
+    rm->noise_sigma = b->noise_sigma = 0.02f;
+    lm_tensor *y1 = lm_model_forward(&c, rm, x), *y2 = lm_model_forward(&c, b, x);
+    CHECK_MSG(y1 && y2, "%s", c.msg);
+    if (y1 && y2) CHECK_ARRAY_CLOSE(y1->data, y2->data, lm_tensor_numel(y2), 0.0, 0.0);
+    lm_ctx_free(&c);
+    lm_model_free(rm);
+    lm_model_free(b);
+}
+
+/* The fit minimises the squared error on the patches it saw: on those interior pixels the
+ * fitted model beats the same model with any one filter coefficient nudged. */
+static void test_fit_is_least_squares(void)
+{
+    char sysp[1024], cave[1024];
+    lm_err e = {0};
+    const char *sh = getenv("LM_SHARED_DIR");
+    snprintf(cave, sizeof cave, "%s/data/cave", sh ? sh : "../shared");
+    lm_system sys;
+    CHECK_MSG(lm_data_path("systems/default.json", sysp, sizeof sysp, &e) == LM_OK &&
+              lm_system_load(sysp, &sys, &e) == LM_OK, "%s", e.msg);
+    lm_mosaic mo;
+    CHECK(lm_mosaic_from_system(&sys, &mo, &e) == LM_OK);
+    lm_model *m = lm_model_create("lmmse-5", &mo, 1, &e);
+    const char *paths[1] = {cave};
+    lm_dataset_cfg dc;
+    lm_dataset_default_cfg(&dc);
+    dc.paths = paths, dc.npaths = 1, dc.sys = &sys, dc.workers = 0;
+    dc.patch_h = 24, dc.patch_w = 32, dc.noise_min = dc.noise_max = 0.0f;
+    lm_dataset *d = lm_dataset_open(&dc, &e);
+    CHECK_MSG(m && d, "%s", e.msg);
+    lm_lmmse_fit_report rep;
+    const int NP = 48, B = 16;
+    CHECK_MSG(lm_lmmse_fit(m, d, 24, 32, NP, B, &rep, &e) == LM_OK, "%s", e.msg);
+    CHECK(rep.patches == NP && rep.rows == (long)NP * (24 - 4) * (32 - 4));
+    /* ridge without validation is the small default: nudging must not help, clean level */
+    float *raw = malloc(sizeof(float) * NP * 24 * 32), *tgt = malloc(sizeof(float) * NP * O * 24 * 32);
+    for (int k = 0; k < NP / B; k++)
+        CHECK(lm_dataset_batch(d, k, B, raw + (size_t)k * B * 24 * 32,
+                               tgt + (size_t)k * B * O * 24 * 32, &e) == LM_OK);
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    m->noise_sigma = 0.0f;
+    double base = 0, nudged[2] = {0, 0};
+    lm_param *w = lm_params_find(&m->params, "filters.weight");
+    const size_t coef = (size_t)(1 * O + 5) * 25 + 12; /* phase 1, channel 5, centre tap */
+    for (int pass = 0; pass < 3; pass++) {
+        float keep = w->t.data[coef];
+        if (pass) w->t.data[coef] = keep * (pass == 1 ? 1.02f : 0.98f) + (pass == 1 ? 1e-3f : -1e-3f);
+        double sse = 0;
+        lm_ctx_reset(&c);
+        lm_tensor *x = lm_tensor_from(&c, 4, (int[]){NP, 1, 24, 32}, raw);
+        lm_tensor *y = lm_model_forward(&c, m, x);
+        for (int b = 0; y && b < NP; b++)
+            for (int ch = 0; ch < O; ch++)
+                for (int Y = 2; Y < 22; Y++)
+                    for (int X = 2; X < 30; X++) {
+                        size_t i = (((size_t)b * O + ch) * 24 + Y) * 32 + X;
+                        double dd = (double)y->data[i] - tgt[i];
+                        sse += dd * dd;
+                    }
+        if (pass) nudged[pass - 1] = sse;
+        else base = sse;
+        w->t.data[coef] = keep;
+    }
+    CHECK_MSG(base > 0 && base < nudged[0] && base < nudged[1], "fit SSE %.9g, nudged %.9g / %.9g",
+              base, nudged[0], nudged[1]);
+    free(raw), free(tgt);
+    lm_ctx_free(&c);
+    lm_dataset_close(d);
+    lm_model_free(m);
+    lm_system_free(&sys);
+}
+
+int main(void)
+{
+    RUN(test_forward_matches_direct_loop);
+    RUN(test_counts_and_capabilities);
+    RUN(test_gradients);
+    RUN(test_residual_starts_at_base);
+    RUN(test_fit_is_least_squares);
+    return check_summary();
+}

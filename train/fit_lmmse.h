@@ -1,0 +1,27 @@
+/* fit_lmmse.h — the closed-form fit of the lmmse floor (models/lmmse.c): normal equations of
+ * every tile phase's K x K raw window -> 33 channels, accumulated in double over clean training
+ * patches of the loader, solved by Cholesky for every noise level of the family with the noise
+ * added analytically (s^2 on the window diagonal) and a ridge chosen on the validation split.
+ * What it is not: SGD (train.c) or the model itself. */
+#ifndef LM_FIT_LMMSE_H
+#define LM_FIT_LMMSE_H
+#include "models/model.h"
+
+typedef struct lm_lmmse_fit_report {
+    long patches, val_patches;   /* training / validation patches read */
+    long rows;                   /* training pixels (rows of the normal equations), all phases */
+    double ridge[LM_LMMSE_LEVELS];    /* chosen ridge per level, relative to the mean window
+                                       * second moment (the default when no validation) */
+    double val_psnr[LM_LMMSE_LEVELS]; /* validation PSNR (31 bands, interior pixels, noise at
+                                       * the level's sd); NaN without a validation split */
+    double seconds;
+} lm_lmmse_fit_report;
+
+typedef struct lm_dataset lm_dataset;
+/* Fit m (an lmmse model) from `patches` training patches of d (batches 0.. of `batch`; d must
+ * be opened without noise: the fit adds it analytically) of size ph x pw, and d's validation
+ * samples. Writes every level's filters into m. */
+lm_status lm_lmmse_fit(lm_model *m, lm_dataset *d, int ph, int pw, long patches, int batch,
+                       lm_lmmse_fit_report *rep, lm_err *err);
+
+#endif
