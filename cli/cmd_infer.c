@@ -64,20 +64,23 @@ static void help(void)
            "                   reconstructed unaligned, with a warning)\n"
            "  --device D       where the network runs: cpu or opencl (default: env LM_DEVICE,\n"
            "                   else cpu); the weights are copied to the device once\n"
+           "  --noise-level K  for models that read the noise level (lmmse and residuals on\n"
+           "                   it): Gaussian noise sd = K x the frame's maximum (0..1), as\n"
+           "                   simulate --noise K. Default: estimated from each frame\n"
            "  --help           this text\n");
 }
 
 typedef struct infer_opts {
     const char *model, *input, *output, *system, *device, *auto_file;
     long long batch, threads;
-    double auto_tol;
+    double auto_tol, noise_level;
     int no_align, tiles, is_auto;
 } infer_opts;
 
 /* 1: run, 0: help printed, 2: bad usage (printed). */
 static int parse(lm_cli *c, infer_opts *o)
 {
-    *o = (infer_opts){.batch = 8, .auto_tol = 0.5};
+    *o = (infer_opts){.batch = 8, .auto_tol = 0.5, .noise_level = -1.0};
     while (!lm_cli_done(c)) {
         int r;
         if (lm_cli_is_help(c)) {
@@ -91,6 +94,7 @@ static int parse(lm_cli *c, infer_opts *o)
             (r = lm_cli_value(c, "--device", &o->device)) ||
             (r = lm_cli_value(c, "--auto", &o->auto_file)) ||
             (r = lm_cli_real(c, "--auto-tol", 0.0, 1e6, &o->auto_tol)) ||
+            (r = lm_cli_real(c, "--noise-level", 0.0, 1.0, &o->noise_level)) ||
             (r = lm_cli_flag(c, "--tiles", &o->tiles)) ||
             (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
             (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
@@ -385,6 +389,8 @@ static int open_inputs(infer_run *r, lm_err *e)
         if (rc) return rc;
     } else if (lm_infer_model_load(r->o->model, r->o->system, &r->im, e)) {
         return fail(r->c, e, 0);
+    } else {
+        r->im.model->noise_given = (float)r->o->noise_level;
     }
     r->whole = !r->o->is_auto && !r->o->tiles && lm_whole_halo(r->im.model) > 0;
     if (lm_frame_seq_open(r->o->input, &r->seq, e)) return fail(r->c, e, 0);

@@ -167,5 +167,7 @@ int lm_cmd_study(int argc, char **argv)
     if (a.threads > 0) omp_set_num_threads((int)a.threads);
     /* As in `lumosaic train`: a fixed mmap threshold keeps big per-step buffers off the heap. */
     mallopt(M_MMAP_THRESHOLD, 128 * 1024);
-    return run(&c, &a, &cfg, dir);
+    int rc = run(&c, &a, &cfg, dir);
+    lm_study_cfg_free(&cfg);
+    return rc;
 }

@@ -126,6 +126,14 @@ int lm_cmd_train(int argc, char **argv)
         lm_cli_error(&c, "%s", e.msg);
         return st == LM_ERR_ARG || st == LM_ERR_FORMAT || st == LM_ERR_SHAPE ? 2 : 1;
     }
+    if (res.closed_form) {
+        printf("fitted %s in closed form (%.1f s); fit.json has every noise level\n", cfg.model,
+               res.seconds);
+        if (res.validated)
+            printf("validation (clean, interior pixels): PSNR %.3f dB\n", res.val.psnr);
+        printf("checkpoint: %s\n", ck);
+        return 0;
+    }
     printf("trained %s for %ld iterations (%.1f s this run), final loss %.6f\n", cfg.model,
            res.iterations_done, res.seconds, res.last_loss);
     if (res.validated)

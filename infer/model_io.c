@@ -89,7 +89,14 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
     lm_status st = read_meta(path, im, preset, sizeof preset, &hash, err);
     if (!st) st = load_system(im, system_override, hash, err);
     if (!st) st = lm_mosaic_from_system(&im->sys, &mo, err);
-    if (!st && !(im->model = lm_model_create(preset, &mo, 0, err))) st = err->status;
+    lm_err e3 = {0};
+    char *base = st ? NULL : lm_safetensors_meta(im->weights, "base_preset", &e3);
+    if (!st && base && base[0])
+        im->model = lm_model_create_residual(preset, base, &mo, 0, 0, 0.0f, err);
+    else if (!st)
+        im->model = lm_model_create(preset, &mo, 0, err);
+    free(base);
+    if (!st && !im->model) st = err->status;
     if (!st) {
         lm_err e2;
         lm_err_clear(&e2);

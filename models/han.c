@@ -174,6 +174,8 @@ lm_status lm_han_build(lm_model *m, lm_han_cfg cfg, lm_err *err)
         lm_conv3_declare(p, &h->tail, "tail.1", C, m->out_channels, err))
         return err->status;
     m->forward = han_forward;
+    m->out_layers[0] = &h->tail;
+    m->n_out_layers = 1;
     m->init = han_init;
     snprintf(m->family, sizeof m->family, "han");
     return LM_OK;

@@ -35,6 +35,8 @@ lm_status lm_linear_build(lm_model *m, lm_err *err)
     m->forward = linear_forward;
     m->init = linear_init;
     m->conv_rows = 0; /* 1x1 */
+    m->out_layers[0] = &n->proj;
+    m->n_out_layers = 1;
     snprintf(m->family, sizeof m->family, "linear");
     return LM_OK;
 }

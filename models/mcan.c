@@ -193,6 +193,9 @@ lm_status lm_mcan_build(lm_model *m, int feats, lm_err *err)
     if (lm_conv_declare(p, &n->back, "convt_br1_back.0.cov_block.0", back, 1, err))
         return err->status;
     m->forward = mcan_forward;
+    m->out_layers[0] = &n->back; /* output = back(features) + lift(white-balanced mosaic) */
+    m->out_layers[1] = &n->lift;
+    m->n_out_layers = 2;
     m->init = mcan_init;
     snprintf(m->family, sizeof m->family, "mcan");
     return LM_OK;

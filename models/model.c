@@ -151,6 +151,10 @@ lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
     lm_rng_seed(&r, seed ^ 0x9E3779B97F4A7C15ull);
     b->init(b, &r);
     lm_init_const(g, res_init);
+    for (int i = 0; i < m->n_out_layers; i++) { /* the net starts at 0: the model is its base */
+        lm_init_const(m->out_layers[i]->w, 0.0f);
+        if (m->out_layers[i]->b) lm_init_const(m->out_layers[i]->b, 0.0f);
+    }
     m->conv_rows = m->conv_rows < 0 || b->conv_rows < 0 ? -1
                    : m->conv_rows > b->conv_rows ? m->conv_rows : b->conv_rows;
     m->noise_input |= b->noise_input;

@@ -39,6 +39,10 @@ struct lm_model {
      * trainable), so checkpoints and devices carry both. */
     lm_model *base;
     lm_tensor *res_scale;          /* residual only: 33 gates on the net's output */
+    /* The layers whose outputs add up to the network's output (set by the builder): zeroed
+     * in a residual, so it starts exactly at its base while every layer gets gradients. */
+    const lm_conv *out_layers[2];
+    int n_out_layers;
 };
 
 /* Create by preset name (see lm_model_presets); mosaic NULL = lm_mosaic_default. Parameters
@@ -49,8 +53,10 @@ void lm_model_free(lm_model *m);
 lm_tensor *lm_model_forward(lm_ctx *c, lm_model *m, lm_tensor *raw);
 /* The residual model `preset` + `base_preset` (both preset names): the net's parameters as
  * lm_model_create gives them, then the base's under "base." (trainable when train_base), then
- * "res_scale" (33 per-channel gates on the net's output, initialised to res_init: 0 makes
- * the model equal to the base at iteration 0). Noise level and capabilities pass through. */
+ * "res_scale" (33 per-channel gates on the net's output, initialised to res_init). The net's
+ * output layers (out_layers) start at zero, so the model equals its base at iteration 0 while
+ * the output layers' gradients (a regression of the base's error on the net's features) are
+ * non-zero from the first step. Noise level and capabilities pass through. */
 lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
                                    const lm_mosaic *mosaic, uint64_t seed, int train_base,
                                    float res_init, lm_err *err);

@@ -56,6 +56,8 @@ lm_status lm_rt_build(lm_model *m, int width, lm_err *err)
     m->forward = rt_forward;
     m->init = rt_init;
     m->conv_rows = 2; /* two 3x3 (the 1x1 convs add nothing) */
+    m->out_layers[0] = &n->head;
+    m->n_out_layers = 1;
     snprintf(m->family, sizeof m->family, "rt");
     return LM_OK;
 }

@@ -246,6 +246,8 @@ lm_status lm_srnet_build(lm_model *m, int dim, lm_err *err)
         declare_stages(p, n, heads, err))
         return err->status;
     m->forward = srnet_forward;
+    m->out_layers[0] = &n->mapping;
+    m->n_out_layers = 1;
     m->init = srnet_init;
     snprintf(m->family, sizeof m->family, "srnet");
     return LM_OK;

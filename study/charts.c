@@ -19,7 +19,7 @@
 static const char *const chart_names[] = {"accuracy_speed", "noise_psnr", "noise_ssim",
     "noise_sam", "train_loss", "train_val_psnr", "rainbow_peaks", "motion", "narrowband",
     "failure_3db", "cond_photons", "cond_saturation", "cond_led_gain", "cond_dead_pixels",
-    "cond_motion", NULL};
+    "cond_motion", "accuracy_minutes", NULL};
 
 void lm_study_pareto(const double *t, const double *a, int n, int *on)
 {
@@ -560,6 +560,53 @@ static lm_status narrowband_chart(const json_t *nb, const char *dir, lm_err *err
     return close_file(f, path, err);
 }
 
+/* minutes_<preset>.dat (training minutes, PSNR at the two levels) from each record's "curve"
+ * and accuracy_minutes.gp: accuracy against training time. No curve anywhere: no chart. */
+static lm_status minutes_chart(const lm_study_cfg *cfg, const json_t *runs, const char *dir,
+                               lm_err *err)
+{
+    int lv[2] = {lm_study_noise_index(cfg, 0), lm_study_noise_index(cfg, 10)};
+    char path[CPATH], name[128];
+    int n = (int)json_array_size(runs), any = 0;
+    for (int i = 0; i < n; i++) {
+        const json_t *rec = json_array_get(runs, i), *cv = json_object_get(rec, "curve");
+        if (!json_array_size(cv)) continue;
+        snprintf(name, sizeof name, "minutes_%s.dat", preset(rec));
+        FILE *f = open_in(dir, name, path, err);
+        if (!f) return err->status;
+        for (size_t j = 0; j < json_array_size(cv); j++) {
+            const json_t *pt = json_array_get(cv, j), *l = json_object_get(pt, "levels");
+            fprintf(f, "%.6g %.6g %.6g\n", num(pt, "minutes"),
+                    num(json_array_get(l, (size_t)lv[0]), "psnr"),
+                    num(json_array_get(l, (size_t)lv[1]), "psnr"));
+        }
+        if (close_file(f, path, err)) return err->status;
+        any = 1;
+    }
+    char gp[CPATH + 32];
+    snprintf(gp, sizeof gp, "%s/accuracy_minutes.gp", dir);
+    remove(gp);
+    if (!any) return LM_OK;
+    FILE *f = open_in(dir, "accuracy_minutes.gp", path, err);
+    if (!f) return err->status;
+    gp_head(f, "accuracy_minutes", "Held-out accuracy against training time (solid: noise "
+            "0 %, dashed: 10 %)", "minutes of training (this machine)", "PSNR (dB)");
+    fprintf(f, "set logscale x\nplot ");
+    int first = 1;
+    for (int i = 0; i < n; i++) {
+        const json_t *rec = json_array_get(runs, i);
+        if (!json_array_size(json_object_get(rec, "curve"))) continue;
+        fprintf(f, "%s\"minutes_%s.dat\" using 1:2 with linespoints lw 1.5 pt 7 lc %d title "
+                "\"%s\", \\\n     \"minutes_%s.dat\" using 1:3 with linespoints dt 2 pt 6 lc %d "
+                "notitle", first ? "" : ", \\\n     ", preset(rec), i + 1, preset(rec),
+                preset(rec), i + 1);
+        first = 0;
+    }
+    fprintf(f, "\n");
+    gp_tail(f, "accuracy_minutes");
+    return close_file(f, path, err);
+}
+
 static lm_status more_charts(const lm_study *s, const char *cdir, lm_err *err)
 {
     lm_status st = rainbow_chart(s->runs, cdir, err);
@@ -582,6 +629,7 @@ lm_status lm_charts_write(const lm_study_cfg *cfg, const lm_study *s, const char
     if (!st) st = noise_charts(cfg, s->runs, cdir, err);
     if (!st) st = curve_charts(s->runs, cfg->train.iterations, dir, cdir, err);
     if (!st) st = more_charts(s, cdir, err);
+    if (!st) st = minutes_chart(cfg, s->runs, cdir, err);
     return st;
 }
 

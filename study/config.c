@@ -29,7 +29,7 @@ void lm_study_cfg_default(lm_study_cfg *cfg)
 /* Study fields, then those passed on to the training config. */
 static const char *const study_fields[] = {"version", "presets", "data", "system", "train",
     "noise", "eval_scenes", "eval_size", "rainbow", "frame", "timing_repeats", "output",
-    "conditions", "condition_scenes", "narrowband_sweep", NULL};
+    "conditions", "condition_scenes", "narrowband_sweep", "preset_train", "drop", NULL};
 static const char *const train_fields[] = {"iterations", "seed", "patch", "synth_fraction",
                                            NULL};
 
@@ -90,8 +90,15 @@ static lm_status presets_field(lm_study_cfg *cfg, json_t *root, const char *wher
             where, LM_STUDY_MAX_PRESETS);
     for (size_t i = 0; i < json_array_size(v); i++) {
         const char *s = json_string_value(json_array_get(v, i));
-        int known = 0;
-        for (const char *const *p = lm_model_presets(); s && *p; p++) known |= !strcmp(*p, s);
+        char net[64] = "";
+        const char *plus = s ? strchr(s, '+') : NULL;
+        snprintf(net, sizeof net, "%.*s", plus ? (int)(plus - s) : 63, s ? s : "");
+        int known = s && strlen(s) < sizeof cfg->presets[0] && lm_model_preset_known(net);
+        for (int j = 0; plus && known && j <= cfg->npresets; j++)
+            if (j == cfg->npresets)
+                BAD("%s: field 'presets[%zu]': the base '%s' of '%s' must be listed before it",
+                    where, i, plus + 1, s);
+            else if (!strcmp(cfg->presets[j], plus + 1)) break;
         if (!known)
             BAD("%s: field 'presets[%zu]': %s%s%s is not a model preset (lumosaic info --list)",
                 where, i, s ? "'" : "", s ? s : "not a string", s ? "'" : "");
@@ -260,6 +267,44 @@ static lm_status train_fields_parse(lm_study_cfg *cfg, json_t *root, const char 
     return st;
 }
 
+/* preset_train {"name": {...}} (names of the presets list) and drop {after_minutes, behind_db}. */
+static lm_status extra_fields(lm_study_cfg *cfg, json_t *root, const char *w, lm_err *err)
+{
+    json_t *pt = json_object_get(root, "preset_train"), *v;
+    const char *key;
+    if (pt && !json_is_object(pt)) BAD("%s: field 'preset_train': must be an object", w);
+    json_object_foreach(pt, key, v) {
+        int listed = 0;
+        for (int j = 0; j < cfg->npresets; j++) listed |= !strcmp(cfg->presets[j], key);
+        if (!listed || !json_is_object(v))
+            BAD("%s: field 'preset_train.%s': must be an object for a listed preset", w, key);
+        lm_train_cfg probe = cfg->train;
+        json_t *t = json_deep_copy(v);
+        json_object_set_new(t, "version", json_integer(LM_TRAIN_CFG_VERSION));
+        char *text = json_dumps(t, 0);
+        json_decref(t);
+        lm_status st = text ? lm_train_cfg_parse(&probe, text, w, err) : LM_ERR_NOMEM;
+        free(text);
+        if (st) return st;
+    }
+    if (pt) cfg->preset_train = json_incref(pt);
+    json_t *d = json_object_get(root, "drop");
+    if (!d) return LM_OK;
+    json_t *a = json_object_get(d, "after_minutes"), *b = json_object_get(d, "behind_db");
+    if (!json_is_object(d) || !json_is_number(a) || !json_is_number(b) ||
+        !(json_number_value(a) > 0) || !(json_number_value(b) >= 0))
+        BAD("%s: field 'drop': must be {\"after_minutes\": M > 0, \"behind_db\": D >= 0}", w);
+    cfg->drop_minutes = (float)json_number_value(a);
+    cfg->drop_db = (float)json_number_value(b);
+    return LM_OK;
+}
+
+void lm_study_cfg_free(lm_study_cfg *cfg)
+{
+    json_decref(cfg->preset_train);
+    cfg->preset_train = NULL;
+}
+
 static lm_status study_fields_parse(lm_study_cfg *cfg, json_t *root, const char *w, lm_err *err)
 {
     lm_status st;
@@ -270,7 +315,8 @@ static lm_status study_fields_parse(lm_study_cfg *cfg, json_t *root, const char 
         (st = size_field(root, w, "frame", &cfg->frame_h, &cfg->frame_w, err)) ||
         (st = int_field(root, w, "timing_repeats", 1, 100, &cfg->timing_repeats, err)) ||
         (st = int_field(root, w, "condition_scenes", 0, 1000, &cfg->cond_scenes, err)) ||
-        (st = cond_field(cfg, root, w, err)) || (st = nb_field(cfg, root, w, err)))
+        (st = cond_field(cfg, root, w, err)) || (st = nb_field(cfg, root, w, err)) ||
+        (st = extra_fields(cfg, root, w, err)))
         return st;
     if (cfg->rainbow > 0 && cfg->rainbow < 66)
         BAD("%s: field 'rainbow': need 0 (skip) or at least 66 (the window)", w);

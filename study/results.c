@@ -136,6 +136,36 @@ static void md_main_table(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
     free(on0), free(on10);
 }
 
+/* Accuracy against training time: each run's curve (snapshots), PSNR at 0 % and 10 %. */
+static void md_curve_table(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
+{
+    int k0 = lm_study_noise_index(cfg, 0), k10 = lm_study_noise_index(cfg, 10), any = 0;
+    for (size_t i = 0; i < json_array_size(runs); i++)
+        any |= json_array_size(json_object_get(json_array_get(runs, i), "curve")) > 0;
+    if (!any) return;
+    fprintf(f, "\n## Accuracy against training time\n\nHeld-out PSNR (dB) at %g %% / %g %% noise "
+               "of the weights after the given minutes of training on this machine (snapshots "
+               "of one run whose schedule spans the %g-minute budget; a closed-form fit: its fit "
+               "time; a residual: its own training, after its base's).\n\n| model | points "
+               "(minutes: PSNR %g %% / %g %%) | note |\n|---|---|---|\n",
+            100.0 * cfg->noise[k0], 100.0 * cfg->noise[k10], (double)cfg->train.minutes,
+            100.0 * cfg->noise[k0], 100.0 * cfg->noise[k10]);
+    for (size_t i = 0; i < json_array_size(runs); i++) {
+        const json_t *r = json_array_get(runs, i), *cv = json_object_get(r, "curve");
+        fprintf(f, "| %s |", str(r, "preset"));
+        for (size_t j = 0; j < json_array_size(cv); j++) {
+            const json_t *pt = json_array_get(cv, j), *l = json_object_get(pt, "levels");
+            fprintf(f, "%s %.3g: %.2f / %.2f", j ? ";" : "", num(pt, "minutes"),
+                    num(json_array_get(l, (size_t)k0), "psnr"),
+                    num(json_array_get(l, (size_t)k10), "psnr"));
+        }
+        const json_t *d = json_object_get(r, "dropped");
+        if (d) fprintf(f, " | dropped at %g min: more than %g dB behind the best |\n",
+                       num(d, "after_minutes"), num(d, "behind_db"));
+        else fprintf(f, " | |\n");
+    }
+}
+
 static void md_detail_table(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
 {
     fprintf(f, "\n### Every noise level\n\n| model | noise %% | PSNR (dB) | SSIM | MAE | SAM (deg) |"
@@ -267,7 +297,9 @@ static void write_md(FILE *f, const lm_study_cfg *cfg, const lm_study *s, const 
     fprintf(f, "To regenerate: `lumosaic study --config %s --output %s` (it resumes: finished "
                "presets are skipped; see `lumosaic study --help`).\n\n", cfg->path, dir);
     md_held_out(f, cfg, s->held_out);
-    fprintf(f, "Seconds per frame: patch-wise inference (66 x 64 windows, stride 30 x 32) of a "
+    fprintf(f, "Seconds per frame: as `lumosaic infer` runs it (whole frame in strips for models "
+               "with a finite receptive field: linear, lmmse, rt-*; else patch-wise, 66 x 64 "
+               "windows, stride 30 x 32) on a "
                "%d x %d coded frame, the fastest of %d runs on %.0f thread(s). GMAC: multiply-adds "
                "of the conv/linear layers of one window times the windows of a frame. Metrics: "
                "means over the held-out scenes, 31 bands, noise in %% of the largest clean value. "
@@ -275,6 +307,7 @@ static void write_md(FILE *f, const lm_study_cfg *cfg, const lm_study *s, const 
             cfg->frame_w, cfg->frame_h, cfg->timing_repeats, num(r0, "threads"), cfg->rainbow,
             cfg->rainbow);
     md_main_table(f, cfg, s->runs);
+    md_curve_table(f, cfg, s->runs);
     md_detail_table(f, cfg, s->runs);
     md_failure(f, cfg, s->runs);
     md_narrowband(f, cfg, s->narrowband);
@@ -282,6 +315,7 @@ static void write_md(FILE *f, const lm_study_cfg *cfg, const lm_study *s, const 
     fprintf(f, "\n## Charts\n\n");
     static const char *const ch[][2] = {
         {"accuracy_speed", "PSNR against seconds per frame, Pareto fronts"},
+        {"accuracy_minutes", "PSNR against minutes of training"},
         {"noise_psnr", "PSNR against noise"}, {"noise_ssim", "SSIM against noise"},
         {"noise_sam", "SAM against noise"}, {"train_loss", "training loss"},
         {"train_val_psnr", "validation PSNR during training"},

@@ -10,6 +10,7 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <dirent.h>
 #include "data/cube_io.h"
 #include "data/dataset.h"
 #include "data/synth.h"
@@ -197,7 +198,9 @@ static lm_status time_frame(lm_ctx *c, const lm_infer_model *im, const lm_study_
     for (int k = 0; !st && k < cfg->timing_repeats; k++) {
         lm_cube cube;
         double t0 = omp_get_wtime();
-        st = lm_eval_reconstruct(c, im, frame, cfg->frame_h, cfg->frame_w, &to, 0, &cube, err);
+        /* as `lumosaic infer` runs it: whole frames for a finite receptive field */
+        st = lm_eval_reconstruct(c, im, frame, cfg->frame_h, cfg->frame_w, &to,
+                                 im->model->conv_rows >= 0, &cube, err);
         t[k] = omp_get_wtime() - t0;
         if (!st) lm_cube_free(&cube);
         json_array_append_new(runs, json_real(t[k]));
@@ -300,35 +303,161 @@ static lm_status measure(const lm_study_cfg *cfg, const char *rundir, const held
     return st;
 }
 
+static lm_status write_json_atomic(json_t *j, const char *path, lm_err *err);
+
+/* ---- accuracy against training time (snapshots, study.h) ------------------------------- */
+/* Held-out levels of the model in dir (a run or snapshot folder), cached in dir/eval.json. */
+static lm_status dir_levels(const lm_study_cfg *cfg, const char *dir, const held *h, int threads,
+                            json_t **levels, lm_err *err)
+{
+    char path[PATH_MAX_LEN + 16];
+    snprintf(path, sizeof path, "%s/eval.json", dir);
+    json_error_t je;
+    json_t *cached = json_load_file(path, 0, &je);
+    *levels = json_incref(json_object_get(cached, "levels"));
+    json_decref(cached);
+    if (json_is_array(*levels)) return LM_OK;
+    json_decref(*levels);
+    lm_infer_model im;
+    if (lm_infer_model_load(dir, NULL, &im, err)) return err->status;
+    lm_ctx c;
+    lm_status st = lm_ctx_init(&c, threads) ? lm_err_set(err, LM_ERR_NOMEM, "study: no memory")
+                                            : LM_OK;
+    *levels = json_array();
+    if (!st) st = eval_held(&c, &im, cfg, h, *levels, NULL, err);
+    json_t *doc = json_pack("{s:O}", "levels", *levels);
+    if (!st) st = write_json_atomic(doc, path, err);
+    json_decref(doc);
+    if (!st) lm_ctx_free(&c);
+    lm_infer_model_free(&im);
+    if (st) json_decref(*levels), *levels = NULL;
+    return st;
+}
+
+static int cmp_minutes(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Training time of a run folder in minutes: its checkpoint's, or a closed-form fit's. */
+static double run_minutes(const char *rundir)
+{
+    char p[PATH_MAX_LEN + 16];
+    snprintf(p, sizeof p, "%s/fit.json", rundir);
+    json_error_t je;
+    json_t *f = json_load_file(p, 0, &je);
+    double s = f ? json_number_value(json_object_get(f, "seconds"))
+                 : lm_train_checkpoint_seconds(rundir);
+    json_decref(f);
+    return s / 60.0;
+}
+
+/* rec["curve"] = [{"minutes", "iteration", "levels"}] from the run's snapshots (minutes of
+ * training time), plus the final model; a closed-form fit is one point at its fit time. */
+static lm_status eval_curve(const lm_study_cfg *cfg, const char *rundir, const held *h,
+                            int threads, json_t *rec, lm_err *err)
+{
+    char sdir[PATH_MAX_LEN + 16], d[PATH_MAX_LEN + 64];
+    snprintf(sdir, sizeof sdir, "%s/snapshots", rundir);
+    double mins[64];
+    int n = 0;
+    DIR *dp = opendir(sdir);
+    for (struct dirent *e; dp && (e = readdir(dp)) && n < 64;) {
+        char *end;
+        double v = strtod(e->d_name, &end);
+        if (end != e->d_name && !strcmp(end, "min")) mins[n++] = v;
+    }
+    if (dp) closedir(dp);
+    qsort(mins, (size_t)n, sizeof mins[0], cmp_minutes);
+    json_t *curve = json_array();
+    lm_status st = LM_OK;
+    for (int i = 0; i <= n && !st; i++) {
+        if (i < n) snprintf(d, sizeof d, "%s/%gmin", sdir, mins[i]);
+        else snprintf(d, sizeof d, "%s", rundir);
+        double m = i < n ? mins[i] : run_minutes(rundir); /* final: its training time */
+        if (i == n && n > 0 && m <= mins[n - 1] + 1e-6) break; /* the last snapshot is final */
+        json_t *lv = NULL;
+        if (!(st = dir_levels(cfg, d, h, threads, &lv, err)))
+            json_array_append_new(curve, json_pack("{s:f, s:o}", "minutes", m, "levels", lv));
+    }
+    if (!st) json_object_set(rec, "curve", curve);
+    json_decref(curve);
+    return st;
+}
+
 /* One run: a preset and its name (the folder under runs/), and for the narrowband sweep the
  * training synth_fraction (synth < 0: the config's) and a light measurement. */
 typedef struct run_spec {
     const char *preset, *name;
     float synth;
+    const char *base;       /* residual: the base's run name (runs/<base>), else NULL */
 } run_spec;
 
-static lm_status train_preset(const lm_study_cfg *cfg, const run_spec *rs, const char *rundir,
-                              const lm_study_opts *o, json_t *rec, lm_err *err)
+/* The preset's own training fields (preset_train) over the study's. */
+static lm_status apply_preset_train(const lm_study_cfg *cfg, const char *name, lm_train_cfg *tc,
+                                    lm_err *err)
+{
+    json_t *o = cfg->preset_train ? json_object_get(cfg->preset_train, name) : NULL;
+    if (!o) return LM_OK;
+    json_t *t = json_deep_copy(o);
+    json_object_set_new(t, "version", json_integer(LM_TRAIN_CFG_VERSION));
+    char *text = json_dumps(t, 0);
+    json_decref(t);
+    if (!text) return lm_err_set(err, LM_ERR_NOMEM, "study: out of memory");
+    lm_status st = lm_train_cfg_parse(tc, text, "preset_train", err);
+    free(text);
+    return st;
+}
+
+/* Train (or continue) one run; stop_s > 0 stops it at that much training time (the early-drop
+ * phase). A closed-form fit, or a run whose checkpoint is past stop_s, is not trained again. */
+static lm_status train_preset(const lm_study_cfg *cfg, const char *dir, const run_spec *rs,
+                              const char *rundir, const lm_study_opts *o, double stop_s,
+                              json_t *rec, lm_err *err)
 {
     lm_train_cfg tc = cfg->train;
     const char *preset = rs->name;
+    if (apply_preset_train(cfg, rs->name, &tc, err)) return err->status;
+    if (cfg->drop_minutes > 0 && tc.minutes > 0) { /* the drop check scores this snapshot */
+        size_t l = strlen(tc.snapshots);
+        snprintf(tc.snapshots + l, sizeof tc.snapshots - l, "%s%g", l ? "," : "",
+                 (double)cfg->drop_minutes);
+    }
     snprintf(tc.model, sizeof tc.model, "%s", rs->preset);
     if (rs->synth >= 0.0f) tc.synth_fraction = rs->synth;
-    if (snprintf(tc.output, sizeof tc.output, "%s", rundir) >= (int)sizeof tc.output)
+    if (snprintf(tc.output, sizeof tc.output, "%s", rundir) >= (int)sizeof tc.output ||
+        (rs->base && snprintf(tc.base, sizeof tc.base, "%s/runs/%s", dir, rs->base) >=
+                         (int)sizeof tc.base))
         return lm_err_set(err, LM_ERR_ARG, "%s: path too long", rundir);
     tc.threads = o->threads;
     char ck[PATH_MAX_LEN + 32];
     snprintf(ck, sizeof ck, "%s/model.safetensors", rundir);
     int resume = access(ck, F_OK) == 0;
+    char fitp[PATH_MAX_LEN + 32];
+    snprintf(fitp, sizeof fitp, "%s/fit.json", rundir);
+    double done_s = resume ? lm_train_checkpoint_seconds(rundir) : 0.0;
+    if (resume && (access(fitp, F_OK) == 0 || (stop_s > 0 && done_s >= stop_s - 1.0) ||
+                   (tc.minutes > 0 && done_s >= tc.minutes * 60.0 - 1.0))) {
+        fprintf(o->log, "study: %s: trained before (%.1f min), not trained again\n", preset,
+                run_minutes(rundir));
+        return LM_OK;
+    }
     lm_train_opts to = {.resume = resume ? rundir : NULL, .progress = o->progress,
-                        .progress_out = o->log};
+                        .progress_out = o->log, .stop_seconds = stop_s};
     lm_train_result res;
-    fprintf(o->log, "study: %s: %s %ld iterations into %s\n", preset,
-            resume ? "continuing to" : "training for", tc.iterations, rundir);
+    if (tc.minutes > 0)
+        fprintf(o->log, "study: %s: %s %g minutes of training%s into %s\n", preset,
+                resume ? "continuing to" : "training for", stop_s > 0 ? stop_s / 60.0 : tc.minutes,
+                stop_s > 0 ? " (early-drop check)" : "", rundir);
+    else
+        fprintf(o->log, "study: %s: %s %ld iterations into %s\n", preset,
+                resume ? "continuing to" : "training for", tc.iterations, rundir);
     if (lm_train_session(&tc, &to, &res, err)) return err->status;
-    json_t *t = json_pack("{s:I, s:f, s:b, s:o, s:o}", "iterations", (json_int_t)res.iterations_done,
-                          "seconds", res.seconds, "resumed", resume, "first_loss",
-                          jnum(res.first_loss), "final_loss", jnum(res.last_loss));
+    json_t *t = json_pack("{s:I, s:f, s:b, s:o, s:o, s:b}", "iterations",
+                          (json_int_t)res.iterations_done, "seconds", res.seconds,
+                          "resumed", resume, "first_loss", jnum(res.first_loss),
+                          "final_loss", jnum(res.last_loss), "closed_form", res.closed_form);
     json_object_set_new(t, "val", res.validated ? metrics_json(&res.val, -1) : json_null());
     json_object_set_new(rec, "train", t);
     return LM_OK;
@@ -360,33 +489,95 @@ static lm_status write_json_atomic(json_t *j, const char *path, lm_err *err)
     return LM_OK;
 }
 
+/* The record of a finished run (result.json), or NULL. */
+static lm_status load_done(const char *rundir, const run_spec *rs, json_t **out, lm_err *err)
+{
+    char respath[PATH_MAX_LEN + 16];
+    snprintf(respath, sizeof respath, "%s/result.json", rundir);
+    *out = NULL;
+    if (access(respath, F_OK) != 0) return LM_OK;
+    json_error_t je;
+    *out = json_load_file(respath, 0, &je);
+    if (!json_is_object(*out) || !json_is_string(json_object_get(*out, "preset")))
+        return json_decref(*out), *out = NULL,
+               lm_err_set(err, LM_ERR_FORMAT, "%s: not a study record (delete it to run %s "
+                          "again)", respath, rs->name);
+    return LM_OK;
+}
+
+/* Train (unless dropped), measure and record one run. drop_psnr: its clean PSNR at the early-
+ * drop check (NaN: no check). */
 static lm_status run_preset(const lm_study_cfg *cfg, const char *dir, const run_spec *rs,
-                            const held *h, const lm_study_opts *o, json_t **out, lm_err *err)
+                            const held *h, const lm_study_opts *o, int dropped, double drop_psnr,
+                            json_t **out, lm_err *err)
 {
     const char *preset = rs->name;
     char rundir[PATH_MAX_LEN], respath[PATH_MAX_LEN + 16];
     snprintf(rundir, sizeof rundir, "%s/runs/%s", dir, preset);
     snprintf(respath, sizeof respath, "%s/result.json", rundir);
-    if (access(respath, F_OK) == 0) {
-        json_error_t je;
-        *out = json_load_file(respath, 0, &je);
-        if (!json_is_object(*out) || !json_is_string(json_object_get(*out, "preset")))
-            return json_decref(*out), *out = NULL,
-                   lm_err_set(err, LM_ERR_FORMAT, "%s: not a study record (delete it to run "
-                              "%s again)", respath, preset);
-        fprintf(o->log, "study: %s: done before (%s), skipped\n", preset, respath);
-        return LM_OK;
+    if (load_done(rundir, rs, out, err) || *out) {
+        if (*out) fprintf(o->log, "study: %s: done before (%s), skipped\n", preset, respath);
+        return err->status;
     }
     char rel[128];
     snprintf(rel, sizeof rel, "runs/%s", preset);
-    json_t *rec = json_pack("{s:s, s:s}", "preset", rs->preset, "run", rel);
+    /* "preset": what tables show (the residual's full name; a sweep run: its preset) */
+    json_t *rec = json_pack("{s:s, s:s, s:s}", "preset", rs->base ? rs->name : rs->preset,
+                            "model", rs->preset, "run", rel);
+    if (rs->base) json_object_set_new(rec, "base", json_string(rs->base));
     if (rs->synth >= 0.0f)
         json_object_set_new(rec, "synth_fraction", json_real(nearbyint(rs->synth * 1e4) / 1e4));
-    lm_status st = train_preset(cfg, rs, rundir, o, rec, err);
+    if (dropped)
+        json_object_set_new(rec, "dropped", json_pack("{s:f, s:f}", "after_minutes",
+                            (double)cfg->drop_minutes, "behind_db", (double)cfg->drop_db));
+    if (drop_psnr == drop_psnr)
+        json_object_set_new(rec, "drop_check", json_pack("{s:f, s:f}", "minutes",
+                            (double)cfg->drop_minutes, "psnr", drop_psnr));
+    lm_status st = dropped ? LM_OK : train_preset(cfg, dir, rs, rundir, o, 0.0, rec, err);
+    json_object_set_new(rec, "train_minutes", json_real(run_minutes(rundir)));
     if (!st) st = measure(cfg, rundir, h, o->threads, rs->synth >= 0.0f, rec, o->log, err);
+    if (!st && cfg->train.minutes > 0) st = eval_curve(cfg, rundir, h, o->threads, rec, err);
     if (!st) st = write_json_atomic(rec, respath, err);
     if (st) json_decref(rec);
     else *out = rec;
+    return st;
+}
+
+/* Early-drop phase: every unfinished preset trained to drop_minutes, scored there (clean PSNR
+ * of the snapshot, or of the fit); dropped[i] = more than drop_db behind the best. */
+static lm_status drop_phase(const lm_study_cfg *cfg, const char *dir, const run_spec *rs, int n,
+                            const held *h, const lm_study_opts *o, int *dropped, double *psnr,
+                            lm_err *err)
+{
+    double best = -INFINITY, stop_s = cfg->drop_minutes * 60.0;
+    lm_status st = LM_OK;
+    for (int i = 0; i < n && !st; i++) {
+        char rundir[PATH_MAX_LEN], snap[PATH_MAX_LEN + 64], fitp[PATH_MAX_LEN + 16];
+        snprintf(rundir, sizeof rundir, "%s/runs/%s", dir, rs[i].name);
+        json_t *done = NULL, *rec = json_object(), *lv = NULL;
+        psnr[i] = NAN;
+        st = load_done(rundir, &rs[i], &done, err);
+        json_t *drop = done ? json_object_get(done, "dropped") : NULL;
+        if (!st && done) psnr[i] = json_number_value(json_object_get(
+                              json_object_get(done, "drop_check"), "psnr"));
+        if (!st && done) dropped[i] = drop != NULL;
+        if (!st && !done) st = train_preset(cfg, dir, &rs[i], rundir, o, stop_s, rec, err);
+        snprintf(fitp, sizeof fitp, "%s/fit.json", rundir);
+        snprintf(snap, sizeof snap, "%s/snapshots/%gmin", rundir, (double)cfg->drop_minutes);
+        int fit = access(fitp, F_OK) == 0;
+        if (!st && !done && (fit || access(snap, F_OK) == 0))
+            st = dir_levels(cfg, fit ? rundir : snap, h, o->threads, &lv, err);
+        if (lv) psnr[i] = json_number_value(json_object_get(json_array_get(lv, 0), "psnr"));
+        json_decref(lv);
+        json_decref(rec);
+        json_decref(done);
+        if (isfinite(psnr[i]) && psnr[i] > best) best = psnr[i];
+    }
+    for (int i = 0; i < n && !st; i++) {
+        if (isfinite(psnr[i])) dropped[i] = psnr[i] < best - cfg->drop_db;
+        fprintf(o->log, "study: %s at %g min: %.2f dB (best %.2f)%s\n", rs[i].name,
+                (double)cfg->drop_minutes, psnr[i], best, dropped[i] ? ": dropped" : "");
+    }
     return st;
 }
 
@@ -408,11 +599,22 @@ lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_
                 cfg->eval_w);
     else if (!st)
         fprintf(o.log, "study: evaluating on the %d scene(s) of the test split\n", h.n);
+    run_spec rs[LM_STUDY_MAX_PRESETS];
+    char net[LM_STUDY_MAX_PRESETS][64];
+    int dropped[LM_STUDY_MAX_PRESETS] = {0};
+    double drop_psnr[LM_STUDY_MAX_PRESETS];
+    for (int i = 0; i < LM_STUDY_MAX_PRESETS; i++) drop_psnr[i] = NAN;
+    for (int i = 0; i < cfg->npresets; i++) {
+        const char *p = cfg->presets[i], *plus = strchr(p, '+');
+        snprintf(net[i], sizeof net[i], "%.*s", plus ? (int)(plus - p) : 63, p);
+        rs[i] = (run_spec){net[i], p, -1.0f, plus ? plus + 1 : NULL};
+    }
+    if (!st && cfg->drop_minutes > 0 && cfg->train.minutes > cfg->drop_minutes)
+        st = drop_phase(cfg, dir, rs, cfg->npresets, &h, &o, dropped, drop_psnr, err);
     out->runs = json_array();
     for (int i = 0; !st && i < cfg->npresets; i++) {
         json_t *rec = NULL;
-        run_spec rs = {cfg->presets[i], cfg->presets[i], -1.0f};
-        st = run_preset(cfg, dir, &rs, &h, &o, &rec, err);
+        st = run_preset(cfg, dir, &rs[i], &h, &o, dropped[i], drop_psnr[i], &rec, err);
         if (!st) json_array_append_new(out->runs, rec);
     }
     if (cfg->nnb > 0) out->narrowband = json_array();
@@ -421,8 +623,8 @@ lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_
         char name[96];
         snprintf(name, sizeof name, "%s@synth%03d", cfg->nb_preset,
                  (int)lrintf(100.0f * cfg->nb_fraction[i]));
-        run_spec rs = {cfg->nb_preset, name, cfg->nb_fraction[i]};
-        st = run_preset(cfg, dir, &rs, &h, &o, &rec, err);
+        run_spec nb = {cfg->nb_preset, name, cfg->nb_fraction[i], NULL};
+        st = run_preset(cfg, dir, &nb, &h, &o, 0, NAN, &rec, err);
         if (!st) json_array_append_new(out->narrowband, rec);
     }
     held_free(&h);

@@ -48,6 +48,12 @@ typedef struct lm_study_cfg {
     int ncond;
     int cond_scenes;                 /* held-out scenes used for them (0 = all) */
     char nb_preset[64];              /* narrowband sweep preset ("" = no sweep) */
+    /* Per-preset training fields over `train` (JSON objects, by preset name; NULL = none). */
+    struct json_t *preset_train;
+    /* Early drop (train.minutes > 0): every preset first trains to drop_minutes of training
+     * time; those whose clean held-out PSNR there is more than drop_db below the best go no
+     * further (recorded as dropped); the others continue to the budget. 0 = off. */
+    float drop_minutes, drop_db;
     float nb_fraction[LM_STUDY_MAX_FRACTIONS]; /* its training synth_fraction values */
     int nnb;
     char output[LM_TRAIN_PATH_LEN];  /* default output folder ("" = none given) */
@@ -59,6 +65,9 @@ typedef struct lm_study_cfg {
  * conditions, no narrowband sweep. */
 void lm_study_cfg_default(lm_study_cfg *cfg);
 /* Load a study config. Fields (all optional but "presets" and "data"):
+ *   presets may name residuals "NET+BASE": NET trained on the study's own run of BASE (listed
+ *   earlier), e.g. "lmmse", "han-tiny+lmmse"; preset_train {"name": {training fields}};
+ *   drop {"after_minutes": M, "behind_db": D};
  *   version 1; presets [names]; data [paths, relative to the config's folder]; system;
  *   iterations; seed; patch "HxW"; synth_fraction; train {any other lm_train_cfg field
  *   except model, data, output}; noise [percent levels]; eval_scenes; eval_size "HxW";
@@ -68,6 +77,7 @@ void lm_study_cfg_default(lm_study_cfg *cfg);
  *   narrowband_sweep {"preset": name, "fractions": [synth shares 0..1]}.
  * Errors (LM_ERR_IO / LM_ERR_FORMAT / LM_ERR_ARG) are one line naming the file and the field. */
 lm_status lm_study_cfg_load(lm_study_cfg *cfg, const char *path, lm_err *err);
+void lm_study_cfg_free(lm_study_cfg *cfg);
 
 typedef struct lm_study_opts {
     int threads;     /* compute threads for training, evaluation and timing (0 = all cores) */

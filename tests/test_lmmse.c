@@ -155,11 +155,12 @@ static void test_gradients(void)
     lm_model_free(rm);
 }
 
-/* A residual with gates 0 is its base exactly; the base's parameters are frozen, named base.* */
+/* A residual starts as its base exactly (the net's output layer is zero); the base's parameters
+ * are frozen, named base.* */
 static void test_residual_starts_at_base(void)
 {
     lm_err e = {0};
-    lm_model *rm = lm_model_create_residual("rt-8", "lmmse-5", NULL, 3, 0, 0.0f, &e);
+    lm_model *rm = lm_model_create_residual("rt-8", "lmmse-5", NULL, 3, 0, 1.0f, &e);
     lm_model *b = lm_model_create("lmmse-5", NULL, 9, &e);
     CHECK_MSG(rm && b, "%s", e.msg);
     if (!rm || !b) return lm_model_free(rm), lm_model_free(b);

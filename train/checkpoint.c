@@ -52,6 +52,8 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
                                    const lm_train_cfg *cfg, lm_err *err)
 {
     char path[LM_TRAIN_PATH_LEN + 64], it[32], nb[32], step[32], seed[32], thr[16], hash[32];
+    char secs[32];
+    snprintf(secs, sizeof secs, "%.3f", opts ? opts->elapsed : 0.0);
     snprintf(it, sizeof it, "%ld", iteration);
     snprintf(nb, sizeof nb, "%ld", next_batch);
     snprintf(seed, sizeof seed, "%" PRIu64, cfg->seed);
@@ -63,16 +65,28 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
         if (moment_views(m, opt, &v, err)) return err->status;
         snprintf(step, sizeof step, "%ld", opt->step);
         const char *meta[] = {"format", CKPT_FORMAT, "step", step, "iteration", it,
-                              "next_batch", nb, "seed", seed, "threads", thr};
+                              "next_batch", nb, "seed", seed, "threads", thr, "seconds", secs};
         dir_file(path, sizeof path, dir, "optimizer.safetensors");
-        lm_status st = lm_params_save(&v, path, meta, 6, err);
+        lm_status st = lm_params_save(&v, path, meta, 7, err);
         lm_params_free(&v);
         if (st) return st;
     }
     const char *meta[] = {"format", CKPT_FORMAT, "preset", m->preset, "system", sys,
-                          "system_hash", hash, "iteration", it};
+                          "system_hash", hash, "iteration", it, "seconds", secs, "base_preset",
+                          m->base ? m->base->preset : ""};
     dir_file(path, sizeof path, dir, "model.safetensors");
-    return lm_params_save(&m->params, path, meta, 5, err);
+    return lm_params_save(&m->params, path, meta, m->base ? 7 : 6, err);
+}
+
+double lm_train_checkpoint_seconds(const char *dir)
+{
+    char path[LM_TRAIN_PATH_LEN + 64];
+    dir_file(path, sizeof path, dir, "optimizer.safetensors");
+    lm_err e = {0};
+    char *s = lm_safetensors_meta(path, "seconds", &e);
+    double v = s ? strtod(s, NULL) : 0.0;
+    free(s);
+    return v >= 0 && v < 1e9 ? v : 0.0;
 }
 
 /* Integer metadata value, required. */

@@ -56,7 +56,9 @@ static const field fields[] = {
     FLD("fit_patches", F_LONG, fit_patches, "N", "closed form: training patches (4096)"),
     FLD("base", F_STR, base, "RUN", "train as a residual on this run's model (e.g. an lmmse fit)"),
     FLD("base_trainable", F_INT, base_trainable, "0|1", "fine-tune the base with the net (0)"),
-    FLD("res_init", F_FLOAT, res_init, "F", "initial residual gates (0: starts at the base)"),
+    FLD("res_init", F_FLOAT, res_init, "F", "residual: initial gates on the net's output (1; the net's output layers start at 0)"),
+    FLD("snapshots", F_STR, snapshots, "M,M,...", "weights at these minutes of training into "
+        "<output>/snapshots/<M>min/"),
     FLD("minutes", F_FLOAT, minutes, "M", "time budget in minutes (0 = none; the schedule "
         "spans it)"),
 };
@@ -86,6 +88,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     snprintf(c->output, sizeof c->output, "runs/train");
     snprintf(c->fit, sizeof c->fit, "auto");
     c->fit_patches = 4096;
+    c->res_init = 1.0f;
 }
 
 static const field *find_field(const char *key)
@@ -380,6 +383,9 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
         BAD("'base_trainable': must be 0 or 1 (got %d)", c->base_trainable);
     if (!(c->minutes >= 0 && c->minutes <= 1e6))
         BAD("'minutes': must be in [0, 1e6] (got %g)", c->minutes);
+    for (const char *p = c->snapshots; *p; p++)
+        if (!strchr("0123456789.,", *p))
+            BAD("'snapshots': must be minutes separated by commas (got '%s')", c->snapshots);
     if (!isfinite(c->res_init)) BAD("'res_init': must be finite (got %g)", c->res_init);
     if (c->ndata == 0 && c->synth_fraction < 1)
         BAD("'data': no scenes given (add --data PATH, or set synth_fraction to 1)%s", "");
@@ -407,10 +413,11 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
         "checkpoint_interval", (json_int_t)c->checkpoint_interval,
         "log_interval", (json_int_t)c->log_interval, "output", c->output);
     if (root)
-        json_object_update_new(root, json_pack("{s:s, s:I, s:s, s:i, s:f, s:f}", "fit", c->fit,
+        json_object_update_new(root, json_pack("{s:s, s:I, s:s, s:i, s:f, s:f, s:s}", "fit", c->fit,
                                "fit_patches", (json_int_t)c->fit_patches, "base", c->base,
                                "base_trainable", c->base_trainable,
-                               "res_init", (double)c->res_init, "minutes", (double)c->minutes));
+                               "res_init", (double)c->res_init, "minutes", (double)c->minutes,
+                               "snapshots", c->snapshots));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

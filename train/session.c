@@ -162,6 +162,7 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     memset(res, 0, sizeof *res);
     res->seconds = r.seconds;
     res->validated = r.val_patches > 0;
+    res->closed_form = 1;
     res->val.psnr = r.val_psnr[0];
     return LM_OK;
 }

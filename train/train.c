@@ -36,6 +36,8 @@ typedef struct loop {
     int tty;
     long total;                   /* iterations of the schedule (cfg->iterations, or resolved
                                    * from the time budget) */
+    double seconds0;              /* training seconds before this invocation (resume) */
+    double snap_done;             /* last snapshot mark written or found (minutes) */
 } loop;
 
 static double now_s(void)
@@ -371,16 +373,19 @@ static lm_status begin(loop *L, long *start, lm_err *err)
     return open_log(L, 1, *start, err);
 }
 
-/* Time budget of a fresh run: at 3 % and 50 % of the budget, the schedule's length becomes the
- * iterations that fit in it at the speed measured so far (at most cfg->iterations), and
- * config.json records it, so a resume or a rerun with --iterations continues the same schedule. */
+/* Seconds of training so far, over every invocation (resume restores the checkpoint's). */
+static double elapsed(const loop *L) { return L->seconds0 + (now_s() - L->t0); }
+
+/* Time budget: at 3 % and 50 % of it (training time over all invocations), the schedule's
+ * length becomes the iterations that fit in the budget at this invocation's speed (at most
+ * cfg->iterations); config.json records it, so a rerun with --iterations repeats the schedule. */
 static void resolve_budget(loop *L, long done, double *next_mark, long *end)
 {
     const lm_train_cfg *cfg = L->cfg;
-    double el = now_s() - L->t0, budget = cfg->minutes * 60.0;
-    if (budget <= 0 || L->opts->resume || el < *next_mark || done - L->it0 < 5) return;
+    double el = elapsed(L), budget = cfg->minutes * 60.0, own = now_s() - L->t0;
+    if (budget <= 0 || el < *next_mark || done - L->it0 < 5 || !(own > 0)) return;
     *next_mark = *next_mark < 0.5 * budget ? 0.5 * budget : INFINITY;
-    long fit = done + (long)((budget - el) / (el / (double)(done - L->it0)));
+    long fit = done + (long)((budget - el) / (own / (double)(done - L->it0)));
     if (fit > cfg->iterations) fit = cfg->iterations;
     if (fit <= done) fit = done + 1;
     L->total = fit;
@@ -393,6 +398,32 @@ static void resolve_budget(loop *L, long done, double *next_mark, long *end)
     lm_err e2;
     lm_err_clear(&e2);
     lm_train_cfg_save(&rc, path, &e2); /* best effort: the checkpoint is what resume needs */
+}
+
+/* Snapshots: the weights at each mark of cfg->snapshots (minutes of training time), into
+ * <output>/snapshots/<M>min/ (written once; a resumed run skips those on disk). */
+static lm_status snapshots(loop *L, long it, lm_err *err)
+{
+    const lm_train_cfg *cfg = L->cfg;
+    char list[sizeof cfg->snapshots], *save = NULL;
+    snprintf(list, sizeof list, "%s", cfg->snapshots);
+    double el = elapsed(L);
+    for (char *t = strtok_r(list, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
+        double mark = strtod(t, NULL);
+        if (!(el >= mark * 60.0) || mark <= L->snap_done) continue;
+        char dir[LM_TRAIN_PATH_LEN + 64];
+        snprintf(dir, sizeof dir, "%s/snapshots/%gmin", cfg->output, mark);
+        struct stat sb;
+        if (stat(dir, &sb) != 0) {
+            lm_train_opts o2 = *L->opts;
+            o2.elapsed = el;
+            if (lm_train_make_dir(dir, err) ||
+                lm_train_save_checkpoint(dir, L->model, NULL, it, 0, &o2, cfg, err))
+                return err->status;
+        }
+        L->snap_done = mark;
+    }
+    return LM_OK;
 }
 
 static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err)
@@ -414,8 +445,10 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
         res->last_loss = loss;
         res->iterations_done = it + 1;
         resolve_budget(L, it + 1, &mark, &end);
-        int out_of_time = budget > 0 && now_s() - L->t0 >= budget;
-        if (out_of_time) end = it + 1;
+        double el = elapsed(L);
+        int out_of_time = budget > 0 && el >= budget;
+        int stop_now = L->opts->stop_seconds > 0 && el >= L->opts->stop_seconds;
+        if (out_of_time || stop_now) end = it + 1;
         int last = it + 1 == end;
         int val = (cfg->val_interval > 0 && (it + 1) % cfg->val_interval == 0) ||
                   it + 1 == L->total || out_of_time;
@@ -427,12 +460,16 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
         }
         log_row(L, it + 1, loss, lr, val ? &res->val : NULL);
         progress(L, it + 1, loss, lr, last);
+        if (snapshots(L, it + 1, err)) return err->status;
         if ((cfg->checkpoint_interval > 0 && (it + 1) % cfg->checkpoint_interval == 0) || last) {
+            lm_train_opts o2 = *L->opts;
+            o2.elapsed = elapsed(L);
             if (lm_train_save_checkpoint(cfg->output, L->model, &L->opt, it + 1,
-                                         (it + 1) * cfg->accum_steps, L->opts, cfg, err))
+                                         (it + 1) * cfg->accum_steps, &o2, cfg, err))
                 return err->status;
             L->saved = it + 1;
         }
+        res->budget_spent = out_of_time;
     }
     return LM_OK;
 }
@@ -459,6 +496,7 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
     res->iterations_done = start;
     L.it0 = start;
     L.saved = opts->resume ? start : -1;
+    L.seconds0 = opts->resume ? lm_train_checkpoint_seconds(opts->resume) : 0.0;
     L.t0 = L.last_print = now_s();
     if (!st) st = run_loop(&L, start, res, err);
     res->seconds = now_s() - L.t0;

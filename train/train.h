@@ -64,9 +64,13 @@ typedef struct lm_train_cfg {
     long fit_patches;               /* closed form: training patches accumulated (4096) */
     char base[LM_TRAIN_PATH_LEN];   /* residual on this trained run's model ("" = none) */
     int base_trainable;             /* 1: the base is fine-tuned with the net */
-    float res_init;                 /* initial residual gates (0: the model starts at the base) */
+    float res_init;                 /* initial residual gates (1); the net's output layers start
+                                     * at 0, so the model starts at the base */
     float minutes;                  /* time budget (0 = none): the schedule spans it, the run
-                                     * stops with a checkpoint when it is spent */
+                                     * stops with a checkpoint when it is spent (training time
+                                     * over every invocation: resume continues the clock) */
+    char snapshots[128];            /* "5,15,30": weights at these minutes of training time into
+                                     * <output>/snapshots/<M>min/ ("" = none) */
 } lm_train_cfg;
 
 /* Paper defaults (system.md §7) with output "runs/train". */
@@ -125,6 +129,12 @@ typedef struct lm_train_opts {
     FILE *progress_out;        /* NULL = stderr */
     const char *system_path;   /* recorded in checkpoints ("" = bundled default) */
     uint64_t system_hash;      /* FNV-1a of the system file (0 = unknown) */
+    double stop_seconds;       /* stop (with a checkpoint) once training time over all
+                                * invocations reaches this; 0 = no such stop. Unlike
+                                * cfg.minutes it does not shape the schedule (the study stops
+                                * runs early with it) */
+    double elapsed;            /* set by the loop: training seconds so far, recorded in
+                                * checkpoints ("seconds") */
 } lm_train_opts;
 
 typedef struct lm_train_result {
@@ -134,6 +144,8 @@ typedef struct lm_train_result {
     lm_metrics val;            /* last validation (zeros if none) */
     int validated;
     double seconds;
+    int closed_form;           /* fitted in closed form (lmmse): no iterations, val.psnr only */
+    int budget_spent;          /* stopped because cfg.minutes of training time were spent */
 } lm_train_result;
 
 /* Train `model` (created by the caller from cfg->model with the run's mosaic) on `src`.
@@ -164,6 +176,8 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
                                    const lm_train_cfg *cfg, lm_err *err);
 lm_status lm_train_load_checkpoint(const char *dir, lm_model *m, lm_adam *opt, long *iteration,
                                    long *next_batch, uint64_t *seed, lm_err *err);
+/* Training seconds recorded in a run folder's optimizer checkpoint (0 if none). */
+double lm_train_checkpoint_seconds(const char *dir);
 /* mkdir -p. */
 lm_status lm_train_make_dir(const char *path, lm_err *err);
 /* FNV-1a 64 of a file's bytes (0 if unreadable). */
