@@ -29,7 +29,9 @@ const float lm_lmmse_sigmas[LM_LMMSE_LEVELS] = {0.0f,  0.0025f, 0.005f, 0.01f, 0
 typedef struct lmmse_net {
     lm_tensor *w;              /* L x P x 33 x K x K */
     lm_tensor *b;              /* L x P x 33 */
-    int K, P;
+    lm_conv feat;              /* D > 0: features 1 -> D, K x K (random at init) */
+    lm_tensor *rw;             /* D > 0: readout L x P x 33 x D */
+    int K, P, D;
     int lo_y, hi_y, lo_x, hi_x; /* tile offsets the windows reach (lo <= 0 <= hi) */
 } lmmse_net;
 
@@ -87,6 +89,38 @@ static void tile_kernel(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm_ten
     *cb = lm_reshape(c, lm_transpose(c, b, 0, 1), 1, s1);
 }
 
+/* The random-feature branch (D > 0) on the phase-padded raw frame rp (the padded phase planes
+ * shuffled back): h = relu(features(window)) at every pixel, then per phase a readout D -> 33
+ * (a grouped 1x1 conv at tile resolution), back to B x 33 x H x W. */
+static lm_tensor *feature_branch(lm_ctx *c, const lm_model *m, const lmmse_net *n,
+                                 lm_tensor *up, float s, int H, int W)
+{
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, P = n->P, D = n->D, O = LM_MODEL_OUT_CHANNELS;
+    const int r = n->K / 2;
+    lm_tensor *rp = lm_pixel_shuffle(c, up, ty, tx);
+    lm_tensor *h = lm_relu(c, lm_conv_forward(c, &n->feat, rp)); /* (H + 2 pad - 2r) rows */
+    h = lm_slice(c, lm_slice(c, h, 2, -ty * n->lo_y - r, H), 3, -tx * n->lo_x - r, W);
+    lm_tensor *hu = lm_pixel_unshuffle(c, lm_contiguous(c, h), ty, tx); /* channel d P + p */
+    if (!hu) return NULL;
+    const int B = hu->shape[0], th = hu->shape[2], tw = hu->shape[3];
+    int s5[5] = {B, D, P, th, tw}, pm[5] = {0, 2, 1, 3, 4}, s4[4] = {B, P * D, th, tw};
+    hu = lm_reshape(c, lm_permute(c, lm_reshape(c, hu, 5, s5), pm), 4, s4); /* p D + d */
+    int i;
+    float t;
+    level_pair(s, &i, &t);
+    int rs[4] = {P * O, D, 1, 1};
+    lm_tensor *rw = lm_reshape(c, lm_slice(c, n->rw, 0, i, 1), 4, rs);
+    if (t > 0.0f) {
+        lm_tensor *r1 = lm_reshape(c, lm_slice(c, n->rw, 0, i + 1, 1), 4, rs);
+        rw = lm_add(c, lm_affine(c, rw, 1.0f - t, 0.0f), lm_affine(c, r1, t, 0.0f));
+    }
+    lm_conv2d_opts go = {1, 1, 0, 0, 1, 1, P};
+    lm_tensor *y = lm_conv2d(c, hu, rw, NULL, &go);                /* channel p 33 + c */
+    int y5[5] = {B, P, O, th, tw}, y4[4] = {B, O * P, th, tw};
+    y = lm_reshape(c, lm_permute(c, lm_reshape(c, y, 5, y5), pm), 4, y4); /* c P + p */
+    return lm_pixel_shuffle(c, y, ty, tx);
+}
+
 /* Items [b0, b0 + nb) of raw with one noise level. */
 static lm_tensor *run_group(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw, float s)
 {
@@ -100,7 +134,9 @@ static lm_tensor *run_group(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw
     lm_pad_mode mode = (h > n->hi_y && h > -n->lo_y && wd > n->hi_x && wd > -n->lo_x)
                            ? LM_PAD_REFLECT : LM_PAD_ZERO; /* reflect needs pad < size */
     u = lm_pad2d(c, u, -n->lo_y, n->hi_y, -n->lo_x, n->hi_x, mode);
-    return lm_pixel_shuffle(c, lm_conv2d(c, u, cw, cb, NULL), ty, tx);
+    lm_tensor *y = lm_pixel_shuffle(c, lm_conv2d(c, u, cw, cb, NULL), ty, tx);
+    if (n->D == 0) return y;
+    return lm_add(c, y, feature_branch(c, m, n, u, s, raw->shape[2], raw->shape[3]));
 }
 
 static lm_tensor *lmmse_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
@@ -138,6 +174,12 @@ static void lmmse_init(lm_model *m, lm_rng *r)
     float bound = 1.0f / (float)n->K;
     lm_init_uniform(n->w, r, bound);
     lm_init_uniform(n->b, r, bound);
+    if (n->D == 0) return;
+    /* random features: N(0, 1/K^2) weights (unit gain on a window of comparable values),
+     * N(0, 0.1^2) biases (measured with bench_closed_form); readout default-initialised */
+    lm_init_normal(n->feat.w, r, 1.0f / (float)n->K);
+    lm_init_normal(n->feat.b, r, 0.1f);
+    lm_init_uniform(n->rw, r, 1.0f / sqrtf((float)n->D));
 }
 
 static void lmmse_free(lm_model *m)
@@ -146,7 +188,7 @@ static void lmmse_free(lm_model *m)
     m->impl = NULL;
 }
 
-lm_status lm_lmmse_build(lm_model *m, int K, lm_err *err)
+lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
 {
     lmmse_net *n = calloc(1, sizeof *n);
     m->impl = n;
@@ -156,7 +198,9 @@ lm_status lm_lmmse_build(lm_model *m, int K, lm_err *err)
         return lm_err_set(err, LM_ERR_ARG, "lmmse: window %d must be odd, 1..31", K);
     const int ty = m->mosaic.ty, tx = m->mosaic.tx, r = K / 2;
     n->K = K;
+    n->D = D;
     n->P = ty * tx;
+    if (D < 0 || D > 4096) return lm_err_set(err, LM_ERR_ARG, "lmmse: %d features (0..4096)", D);
     if (n->P > LM_MOSAIC_MAX_CH)
         return lm_err_set(err, LM_ERR_ARG, "lmmse: %d x %d tile has too many phases", ty, tx);
     n->lo_y = floor_div(-r, ty);
@@ -167,6 +211,11 @@ lm_status lm_lmmse_build(lm_model *m, int K, lm_err *err)
     int bs[3] = {LM_LMMSE_LEVELS, n->P, LM_MODEL_OUT_CHANNELS};
     if (!(n->w = lm_params_add(&m->params, "filters.weight", 5, ws, 1, err)) ||
         !(n->b = lm_params_add(&m->params, "filters.bias", 3, bs, 1, err)))
+        return err->status;
+    int rws[4] = {LM_LMMSE_LEVELS, n->P, LM_MODEL_OUT_CHANNELS, D};
+    lm_conv_spec fs = {1, D, K, K, 1, 0, 0, 1, 1};
+    if (D > 0 && (lm_conv_declare(&m->params, &n->feat, "features", fs, 1, err) ||
+                  !(n->rw = lm_params_add(&m->params, "readout.weight", 4, rws, 1, err))))
         return err->status;
     m->forward = lmmse_forward;
     m->init = lmmse_init;
@@ -181,6 +230,22 @@ int lm_lmmse_window(const lm_model *m)
     return m && !strcmp(m->family, "lmmse") ? ((const lmmse_net *)m->impl)->K : 0;
 }
 
+int lm_lmmse_features(const lm_model *m)
+{
+    return m && !strcmp(m->family, "lmmse") ? ((const lmmse_net *)m->impl)->D : 0;
+}
+
+lm_tensor *lm_lmmse_feature_maps(lm_ctx *c, const lm_model *m, lm_tensor *raw)
+{
+    const lmmse_net *n = lm_lmmse_features(m) ? m->impl : NULL;
+    if (!n) {
+        lm_ctx_fail(c, LM_ERR_ARG, "lmmse: model has no random features");
+        return NULL;
+    }
+    lm_conv2d_opts o = {1, 1, n->K / 2, n->K / 2, 1, 1, 1};
+    return lm_relu(c, lm_conv2d(c, raw, n->feat.w, n->feat.b, &o));
+}
+
 lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *coef, lm_err *err)
 {
     const int K = lm_lmmse_window(m);
@@ -190,12 +255,14 @@ lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *c
     if (level < 0 || level >= LM_LMMSE_LEVELS || phase < 0 || phase >= n->P)
         return lm_err_set(err, LM_ERR_ARG, "lmmse: level %d / phase %d out of range", level,
                           phase);
-    const int O = LM_MODEL_OUT_CHANNELS, F = K * K;
+    const int O = LM_MODEL_OUT_CHANNELS, F = K * K, D = n->D;
     float *w = n->w->data + ((size_t)level * n->P + phase) * O * F;
     float *b = n->b->data + ((size_t)level * n->P + phase) * O;
+    float *rw = D ? n->rw->data + ((size_t)level * n->P + phase) * O * D : NULL;
     for (int c = 0; c < O; c++) {
         for (int f = 0; f < F; f++) w[(size_t)c * F + f] = (float)coef[(size_t)f * O + c];
-        b[c] = (float)coef[(size_t)F * O + c];
+        for (int d = 0; d < D; d++) rw[(size_t)c * D + d] = (float)coef[(size_t)(F + d) * O + c];
+        b[c] = (float)coef[(size_t)(F + D) * O + c];
     }
     return LM_OK;
 }

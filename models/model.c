@@ -13,7 +13,8 @@ typedef struct preset {
 
 static const preset presets[] = {
     {"linear", "linear", {0, 0, 0, 0}, 0},
-    {"lmmse", "lmmse", {0, 0, 0, 0}, 11},
+    {"lmmse", "lmmse", {0, 0, 0, 0}, 0},
+    {"lmmse-rf", "lmmse", {0, 0, 0, 0}, 256},
     {"han-tiny", "han", {2, 2, 16, 4}, 0},
     {"han-g3b2c32", "han", {3, 2, 32, 8}, 0},
     {"han-small", "han", {4, 6, 64, 16}, 0},
@@ -52,25 +53,38 @@ static void unknown_preset(const char *name, lm_err *err)
         strncat(list, presets[i].name, sizeof list - strlen(list) - 3);
         if (i + 1 < NPRESETS) strcat(list, ", ");
     }
-    lm_err_set(err, LM_ERR_ARG, "unknown model '%s' (presets: %s, lmmse-K)", name, list);
+    lm_err_set(err, LM_ERR_ARG, "unknown model '%s' (presets: %s, lmmse-K, lmmse-K-rfD)", name, list);
 }
 
-/* "lmmse-K": the lmmse window K (odd, 1..31), else 0. */
-static int lmmse_k(const char *name)
+/* "lmmse-K" or "lmmse-K-rfD": the lmmse window K (odd, 1..31), else 0; *D the random
+ * features (0..4096). */
+static int lmmse_k(const char *name, int *D)
 {
+    *D = 0;
     if (strncmp(name, "lmmse-", 6)) return 0;
     char *end;
-    long k = strtol(name + 6, &end, 10);
+    long k = strtol(name + 6, &end, 10), d = 0;
+    if (end != name + 6 && !strncmp(end, "-rf", 3)) {
+        char *e2;
+        d = strtol(end + 3, &e2, 10);
+        if (e2 == end + 3 || d < 1 || d > 4096) return 0;
+        end = e2;
+    }
+    *D = (int)d;
     return *end || end == name + 6 || k < 1 || k > 31 || k % 2 == 0 ? 0 : (int)k;
 }
 
-int lm_model_preset_known(const char *name) { return find_preset(name) || lmmse_k(name); }
+int lm_model_preset_known(const char *name)
+{
+    int D;
+    return find_preset(name) || lmmse_k(name, &D);
+}
 
 /* Declare the preset's parameters into m (not finalized, not initialised). */
 static lm_status build(lm_model *m, const char *name, lm_err *err)
 {
     const preset *ps = find_preset(name);
-    int K = lmmse_k(name);
+    int D = 0, K = lmmse_k(name, &D);
     if (!ps && !K) return unknown_preset(name, err), err->status;
     snprintf(m->preset, sizeof m->preset, "%s", name);
     m->out_channels = LM_MODEL_OUT_CHANNELS;
@@ -78,14 +92,14 @@ static lm_status build(lm_model *m, const char *name, lm_err *err)
     m->conv_rows = -1;
     m->noise_sigma = -1.0f;
     m->noise_given = -1.0f;
-    if (K) return lm_lmmse_build(m, K, err);
+    if (K) return lm_lmmse_build(m, K, D, err);
     if (!strcmp(ps->family, "han")) return lm_han_build(m, ps->han, err);
     if (!strcmp(ps->family, "mcan")) return lm_mcan_build(m, ps->width, err);
     if (!strcmp(ps->family, "srnet")) return lm_srnet_build(m, ps->width, err);
     if (!strcmp(ps->family, "linear")) return lm_linear_build(m, err);
     if (!strncmp(ps->family, "mst", 3)) return lm_mst_build(m, ps->width, ps->family[3] != 0, err);
     if (!strcmp(ps->family, "rt")) return lm_rt_build(m, ps->width, err);
-    if (!strcmp(ps->family, "lmmse")) return lm_lmmse_build(m, ps->width, err);
+    if (!strcmp(ps->family, "lmmse")) return lm_lmmse_build(m, 11, ps->width, err);
     return lm_err_set(err, LM_ERR_ARG, "model %s: unknown family %s", name, ps->family);
 }
 

@@ -84,14 +84,21 @@ lm_status lm_mst_reconstruct(lm_model *m, const float *in, int H, int W, float *
                              int nthreads, lm_err *err);
 /* Closed-form linear floor (models/lmmse.c): per tile phase a K x K raw window -> 33
  * channels, one filter set per noise level of lm_lmmse_sigmas (absolute noise sd of the input),
- * interpolated between levels. Presets "lmmse" (K = 11) and "lmmse-K" (odd K). */
+ * interpolated between levels. Presets "lmmse" (K = 11), "lmmse-K" (odd K), "lmmse-rf" (K = 11
+ * plus 256 random ReLU features). */
 #define LM_LMMSE_LEVELS 10
 extern const float lm_lmmse_sigmas[LM_LMMSE_LEVELS];
-lm_status lm_lmmse_build(lm_model *m, int K, lm_err *err);
+lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err);
 /* K of an lmmse model, 0 for any other model. */
 int lm_lmmse_window(const lm_model *m);
-/* Set the filter of (level, phase) from coef[(K*K + 1) x 33] (row f = window position
- * u * K + v, last row = bias), as the fit produces it. */
+/* D > 0 ("lmmse-rf"): also D random ReLU features of the window (a K x K conv 1 -> D, ReLU),
+ * read out per phase and level (readout.weight L x P x 33 x D): a nonlinear model whose readout
+ * is still fitted in closed form (random-features ridge regression). 0 for plain lmmse. */
+int lm_lmmse_features(const lm_model *m);
+/* The feature maps relu(features(raw)) (B x D x H x W, zero-padded borders), for the fit. */
+lm_tensor *lm_lmmse_feature_maps(lm_ctx *c, const lm_model *m, lm_tensor *raw);
+/* Set the filter of (level, phase) from coef[(K*K + D + 1) x 33] (rows: window position
+ * u * K + v, then the D features, last the bias), as the fit produces it. */
 lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *coef, lm_err *err);
 /* Real-time: demosaic + raw, two 3x3 convs at `width`, 1x1 head (models/rt.c). */
 lm_status lm_rt_build(lm_model *m, int width, lm_err *err);

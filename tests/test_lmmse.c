@@ -31,6 +31,10 @@ static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y
     const lm_param *bp = lm_params_find(&m->params, "filters.bias");
     const int K = lm_lmmse_window(m), r = K / 2, ty = m->mosaic.ty, tx = m->mosaic.tx;
     const int P = ty * tx, p = (Y % ty) * tx + X % tx;
+    const int D = lm_lmmse_features(m);
+    const lm_param *fw = D ? lm_params_find(&m->params, "features.weight") : NULL;
+    const lm_param *fb = D ? lm_params_find(&m->params, "features.bias") : NULL;
+    const lm_param *rw = D ? lm_params_find(&m->params, "readout.weight") : NULL;
     double acc = 0;
     for (int lv = l; lv <= l + 1; lv++) {
         double a = lv == l ? 1 - t : t;
@@ -40,6 +44,14 @@ static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y
         for (int u = 0; u < K; u++)
             for (int v = 0; v < K; v++)
                 s += w[u * K + v] * raw[reflect_raw(Y - r + u, H, ty) * W + reflect_raw(X - r + v, W, tx)];
+        for (int d = 0; d < D; d++) { /* random feature d at (Y, X), read out */
+            double h = fb->t.data[d];
+            for (int u = 0; u < K; u++)
+                for (int v = 0; v < K; v++)
+                    h += fw->t.data[((size_t)d * K + u) * K + v] *
+                         raw[reflect_raw(Y - r + u, H, ty) * W + reflect_raw(X - r + v, W, tx)];
+            s += (h > 0 ? h : 0) * rw->t.data[(((size_t)lv * P + p) * O + c) * D + d];
+        }
         acc += a * s;
     }
     return acc;
@@ -84,6 +96,8 @@ static void test_forward_matches_direct_loop(void)
     float s = 0.5f * (lm_lmmse_sigmas[4] + lm_lmmse_sigmas[5]);
     check_forward("lmmse-5", 12, 16, s, 4, 0.5);
     check_forward("lmmse-3", 9, 12, 10.0f, LM_LMMSE_LEVELS - 2, 1.0); /* clamped at the top */
+    check_forward("lmmse-5-rf6", 12, 16, 0.0f, 0, 0.0);               /* random features */
+    check_forward("lmmse-3-rf4", 9, 12, s, 4, 0.5);
 }
 
 static void test_counts_and_capabilities(void)
@@ -114,7 +128,10 @@ static lm_tensor *model_fn(lm_ctx *c, lm_tensor *const *in, int nin, void *u)
     return lm_model_forward(c, ((gc_user *)u)->m, in[0]);
 }
 
-static void gradcheck(lm_model *m, const float *sig)
+/* kinks: the model has ReLUs (random features), so a central difference may straddle a kink
+ * somewhere in the summed output and show the mean of two slopes: at most 10 % of the
+ * elements may miss (as test_models allows); else all must pass. */
+static void gradcheck(lm_model *m, const float *sig, int kinks)
 {
     lm_ctx c;
     lm_ctx_init(&c, 2);
@@ -134,7 +151,16 @@ static void gradcheck(lm_model *m, const float *sig)
     o.atol = 2e-3;
     o.rtol = 2e-2;
     gc_user u = {m};
-    CHECK_GRAD(&c, model_fn, in, (np < 7 ? np : 7) + 1, &u, &o);
+    if (!kinks) {
+        CHECK_GRAD(&c, model_fn, in, (np < 7 ? np : 7) + 1, &u, &o);
+    } else {
+        lm_gradcheck_result res;
+        lm_status st = lm_gradcheck(&c, model_fn, in, (np < 7 ? np : 7) + 1, &u, &o, &res);
+        CHECK_MSG((st == LM_OK || st == LM_ERR_NUMERIC) && res.checked > 100 &&
+                  res.failed * 10 <= res.checked, "%ld of %ld gradient elements off (%s)",
+                  res.failed, res.checked, c.msg);
+        lm_ctx_clear_error(&c);
+    }
     lm_ctx_free(&c);
 }
 
@@ -146,12 +172,16 @@ static void test_gradients(void)
     if (!m) return;
     /* three items, two of them sharing a level, one between levels */
     const float sig[3] = {0.0f, 0.0f, 0.5f * (lm_lmmse_sigmas[2] + lm_lmmse_sigmas[3])};
-    gradcheck(m, sig);
+    gradcheck(m, sig, 0);
     lm_model_free(m);
     /* a residual net (linear) on an lmmse base, the base trainable, gates non-zero */
+    m = lm_model_create("lmmse-3-rf4", NULL, 7, &e);
+    CHECK_MSG(m != NULL, "%s", e.msg);
+    if (m) gradcheck(m, sig, 1);
+    lm_model_free(m);
     lm_model *rm = lm_model_create_residual("linear", "lmmse-3", NULL, 7, 1, 0.5f, &e);
     CHECK_MSG(rm != NULL, "%s", e.msg);
-    if (rm) gradcheck(rm, sig);
+    if (rm) gradcheck(rm, sig, 0);
     lm_model_free(rm);
 }
 
@@ -192,7 +222,7 @@ static void test_residual_starts_at_base(void)
 
 /* The fit minimises the squared error on the patches it saw: on those interior pixels the
  * fitted model beats the same model with any one filter coefficient nudged. */
-static void test_fit_is_least_squares(void)
+static void fit_least_squares(const char *preset)
 {
     char sysp[1024], cave[1024];
     lm_err e = {0};
@@ -203,7 +233,7 @@ static void test_fit_is_least_squares(void)
               lm_system_load(sysp, &sys, &e) == LM_OK, "%s", e.msg);
     lm_mosaic mo;
     CHECK(lm_mosaic_from_system(&sys, &mo, &e) == LM_OK);
-    lm_model *m = lm_model_create("lmmse-5", &mo, 1, &e);
+    lm_model *m = lm_model_create(preset, &mo, 1, &e);
     const char *paths[1] = {cave};
     lm_dataset_cfg dc;
     lm_dataset_default_cfg(&dc);
@@ -245,13 +275,19 @@ static void test_fit_is_least_squares(void)
         else base = sse;
         w->t.data[coef] = keep;
     }
-    CHECK_MSG(base > 0 && base < nudged[0] && base < nudged[1], "fit SSE %.9g, nudged %.9g / %.9g",
-              base, nudged[0], nudged[1]);
+    CHECK_MSG(base > 0 && base < nudged[0] && base < nudged[1], "%s: fit SSE %.9g, nudged %.9g / "
+              "%.9g", preset, base, nudged[0], nudged[1]);
     free(raw), free(tgt);
     lm_ctx_free(&c);
     lm_dataset_close(d);
     lm_model_free(m);
     lm_system_free(&sys);
+}
+
+static void test_fit_is_least_squares(void)
+{
+    fit_least_squares("lmmse-5");
+    fit_least_squares("lmmse-5-rf6"); /* random features: the readout is still least squares */
 }
 
 int main(void)

@@ -10,9 +10,13 @@
  * The ridge lambda (relative to the mean window second moment) is chosen per noise level on the
  * validation split's statistics (its squared error is a quadratic form in W, computed exactly
  * on channels 1..31, the metric's bands); without a validation split it is fixed and said so.
+ * With random features (lmmse-rf, D > 0) the features of noisy inputs are nonlinear in the
+ * noise, so the statistics are accumulated again, with sampled noise, at five of the levels
+ * (0, 0.005, 0.02, 0.05, 0.15), and the levels between are interpolated linearly.
  * What it is not: the model (models/lmmse.c) or SGD training (train.c). */
 #include "train/fit_lmmse.h"
 #include "data/dataset.h"
+#include "tensor/rng.h"
 #include <cblas.h>
 #include <math.h>
 #include <stdlib.h>
@@ -32,10 +36,11 @@ typedef struct stats {     /* one phase */
 } stats;
 
 typedef struct fitter {
-    int K, F1, P, ty, tx, ph, pw;
+    int K, D, F1, P, ty, tx, ph, pw;
     stats *tr, *va;
     double *X, *Y;          /* gather buffers: rows x F1, rows x 33 */
     long cap;
+    const float *feat;      /* D > 0: feature maps of the batch, nb x D x ph x pw */
 } fitter;
 
 static double now(void)
@@ -49,7 +54,8 @@ static lm_status fitter_init(fitter *f, const lm_model *m, int ph, int pw, int b
 {
     memset(f, 0, sizeof *f);
     f->K = lm_lmmse_window(m);
-    f->F1 = f->K * f->K + 1;
+    f->D = lm_lmmse_features(m);
+    f->F1 = f->K * f->K + f->D + 1;
     f->ty = m->mosaic.ty, f->tx = m->mosaic.tx, f->P = f->ty * f->tx;
     f->ph = ph, f->pw = pw;
     if (ph < f->K + f->ty || pw < f->K + f->tx)
@@ -95,6 +101,8 @@ static long gather(fitter *f, int p, const float *raw, const float *tgt, int nb)
                 for (int u = 0; u < f->K; u++)
                     for (int v = 0; v < f->K; v++)
                         xr[u * f->K + v] = rb[(size_t)(y - r + u) * pw + (x - r + v)];
+                const float *fb = f->feat + (size_t)b * f->D * plane + (size_t)y * pw + x;
+                for (int d = 0; d < f->D; d++) xr[f->K * f->K + d] = fb[d * plane];
                 xr[f->F1 - 1] = 1.0;
                 for (int c = 0; c < O; c++) f->Y[n * O + c] = tb[c * plane + (size_t)y * pw + x];
             }
@@ -116,13 +124,11 @@ static void accumulate(fitter *f, stats *st, const float *raw, const float *tgt,
     }
 }
 
-/* Solve (A + add D) W = B by Cholesky (A's upper triangle); W is F1 x 33. Returns 0 if the
- * matrix is not positive definite. */
-static int solve(const fitter *f, const stats *s, double add, double *W, double *L)
+int lm_ridge_solve(const double *A, const double *B, int n, int m, double add, double *W,
+                   double *L)
 {
-    const int n = f->F1;
     for (int a = 0; a < n; a++)
-        for (int b = a; b < n; b++) L[b * n + a] = s->A[a * n + b] + (a == b && a < n - 1 ? add : 0);
+        for (int b = a; b < n; b++) L[b * n + a] = A[a * n + b] + (a == b && a < n - 1 ? add : 0);
     for (int j = 0; j < n; j++) { /* lower Cholesky in place */
         double d = L[j * n + j];
         for (int k = 0; k < j; k++) d -= L[j * n + k] * L[j * n + k];
@@ -135,20 +141,25 @@ static int solve(const fitter *f, const stats *s, double add, double *W, double 
             L[i * n + j] = v / d;
         }
     }
-    memcpy(W, s->B, sizeof(double) * n * O);
-    for (int c = 0; c < O; c++) {
+    memcpy(W, B, sizeof(double) * n * m);
+    for (int c = 0; c < m; c++) {
         for (int i = 0; i < n; i++) { /* forward */
-            double v = W[i * O + c];
-            for (int k = 0; k < i; k++) v -= L[i * n + k] * W[k * O + c];
-            W[i * O + c] = v / L[i * n + i];
+            double v = W[i * m + c];
+            for (int k = 0; k < i; k++) v -= L[i * n + k] * W[k * m + c];
+            W[i * m + c] = v / L[i * n + i];
         }
         for (int i = n - 1; i >= 0; i--) { /* backward with L^T */
-            double v = W[i * O + c];
-            for (int k = i + 1; k < n; k++) v -= L[k * n + i] * W[k * O + c];
-            W[i * O + c] = v / L[i * n + i];
+            double v = W[i * m + c];
+            for (int k = i + 1; k < n; k++) v -= L[k * n + i] * W[k * m + c];
+            W[i * m + c] = v / L[i * n + i];
         }
     }
     return 1;
+}
+
+static int solve(const fitter *f, const stats *s, double add, double *W, double *L)
+{
+    return lm_ridge_solve(s->A, s->B, f->F1, O, add, W, L);
 }
 
 /* Squared error of W on the validation statistics at noise sd s, channels 1..31. */
@@ -181,9 +192,11 @@ static double window_scale(const fitter *f, const stats *s)
     return t / (f->F1 - 1) / (s->n > 0 ? s->n : 1);
 }
 
-/* Fit every level: ridge by validation (or the default), filters into the model. */
-static lm_status fit_levels(fitter *f, lm_model *m, int have_val, lm_lmmse_fit_report *rep,
-                            lm_err *err)
+/* Fit every level (D = 0: all from the clean statistics; D > 0: only `level`, whose noise
+ * the statistics already hold, with s = 0 in the analytic term), ridge by validation (or the
+ * default), filters into the model; coef (P x F1 x 33) keeps them when non-NULL. */
+static lm_status fit_levels(fitter *f, lm_model *m, int have_val, int level, double *coef,
+                            lm_lmmse_fit_report *rep, lm_err *err)
 {
     double *W = malloc(sizeof(double) * f->F1 * O), *L = malloc(sizeof(double) * f->F1 * f->F1);
     if (!W || !L) return free(W), free(L), lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: out of memory");
@@ -191,7 +204,8 @@ static lm_status fit_levels(fitter *f, lm_model *m, int have_val, lm_lmmse_fit_r
     long nval = 0;
     for (int p = 0; p < f->P; p++) nval += f->va[p].n;
     for (int l = 0; l < LM_LMMSE_LEVELS && !st; l++) {
-        const double s = lm_lmmse_sigmas[l];
+        if (level >= 0 && l != level) continue;
+        const double s = level >= 0 ? 0.0 : lm_lmmse_sigmas[l];
         int best = -1;
         double best_sse = INFINITY;
         for (int g = 0; have_val && g < NRIDGE; g++) {
@@ -213,9 +227,111 @@ static lm_status fit_levels(fitter *f, lm_model *m, int have_val, lm_lmmse_fit_r
                 st = lm_err_set(err, LM_ERR_NUMERIC, "lmmse fit: phase %d, noise %g: normal "
                                 "equations not positive definite (too few samples?)", p, s);
             else st = lm_lmmse_set_filter(m, l, p, W, err);
+            if (coef) memcpy(coef + (size_t)p * f->F1 * O, W, sizeof(double) * f->F1 * O);
         }
     }
     free(W), free(L);
+    return st;
+}
+
+/* Feature maps of nb raw patches into buf (D > 0). */
+static lm_status features(fitter *f, lm_model *m, lm_ctx *c, const float *raw, int nb, float *buf,
+                          lm_err *err)
+{
+    lm_ctx_reset(c);
+    lm_tensor *x = lm_tensor_from(c, 4, (int[]){nb, 1, f->ph, f->pw}, (float *)raw);
+    lm_tensor *h = lm_lmmse_feature_maps(c, m, x);
+    if (!h || lm_tensor_read(c, h, buf)) {
+        lm_err_set(err, lm_ctx_status(c), "lmmse fit: %s", lm_ctx_message(c));
+        lm_ctx_clear_error(c);
+        return err->status;
+    }
+    f->feat = buf;
+    return LM_OK;
+}
+
+/* Gaussian noise of sd s added to nb patches (sampled: the features are nonlinear). */
+static void add_noise(float *raw, size_t n, double s, lm_rng *r)
+{
+    for (size_t i = 0; s > 0 && i < n; i++) raw[i] += (float)s * lm_rng_normal(r);
+}
+
+static void stats_clear(fitter *f)
+{
+    for (int p = 0; p < f->P; p++) {
+        stats *s[2] = {&f->tr[p], &f->va[p]};
+        for (int k = 0; k < 2; k++) {
+            memset(s[k]->A, 0, sizeof(double) * f->F1 * f->F1);
+            memset(s[k]->B, 0, sizeof(double) * f->F1 * O);
+            memset(s[k]->yy, 0, sizeof s[k]->yy);
+            s[k]->n = 0;
+        }
+    }
+}
+
+/* One pass over the training and validation patches at noise sd s (sampled). */
+static lm_status accumulate_all(fitter *f, lm_model *m, lm_ctx *c, lm_dataset *d, long patches,
+                                int batch, double s, uint64_t seed, float *raw, float *tgt,
+                                float *fbuf, lm_err *err)
+{
+    lm_rng r;
+    lm_rng_seed(&r, seed);
+    const size_t plane = (size_t)f->ph * f->pw;
+    long nbatches = (patches + batch - 1) / batch;
+    lm_status st = LM_OK;
+    for (long k = 0; k < nbatches && !st; k++) {
+        int nb = (int)(k + 1 < nbatches ? batch : patches - k * batch);
+        if ((st = lm_dataset_batch(d, k, batch, raw, tgt, err))) break;
+        add_noise(raw, nb * plane, s, &r);
+        if (f->D && (st = features(f, m, c, raw, nb, fbuf, err))) break;
+        accumulate(f, f->tr, raw, tgt, nb);
+    }
+    int nv = lm_dataset_eval_count(d, LM_SPLIT_VAL);
+    for (int i = 0; i < nv && !st; i++) {
+        if ((st = lm_dataset_eval_sample(d, LM_SPLIT_VAL, i, raw, tgt, err))) break;
+        add_noise(raw, plane, s, &r);
+        if (f->D && (st = features(f, m, c, raw, 1, fbuf, err))) break;
+        accumulate(f, f->va, raw, tgt, 1);
+    }
+    return st;
+}
+
+/* D > 0: levels fitted with sampled noise; the others interpolated linearly in sd between
+ * them (what inference between fitted levels does anyway). */
+static const int rf_levels[] = {0, 2, 4, 6, 9};
+#define N_RF_LEVELS (int)(sizeof rf_levels / sizeof rf_levels[0])
+
+static lm_status fit_features(fitter *f, lm_model *m, lm_dataset *d, long patches, int batch,
+                              float *raw, float *tgt, lm_lmmse_fit_report *rep, lm_err *err)
+{
+    lm_ctx c;
+    if (lm_ctx_init(&c, 0)) return lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: no context");
+    const size_t per = (size_t)f->P * f->F1 * O;
+    float *fbuf = malloc(sizeof(float) * (size_t)batch * f->D * f->ph * f->pw);
+    double *coef = malloc(sizeof(double) * per * N_RF_LEVELS);
+    lm_status st = fbuf && coef ? LM_OK : lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: no memory");
+    int nv = lm_dataset_eval_count(d, LM_SPLIT_VAL);
+    for (int q = 0; q < N_RF_LEVELS && !st; q++) {
+        const int l = rf_levels[q];
+        stats_clear(f);
+        st = accumulate_all(f, m, &c, d, patches, batch, lm_lmmse_sigmas[l], 0x5eed0000u + l,
+                            raw, tgt, fbuf, err);
+        if (!st) st = fit_levels(f, m, nv > 0, l, coef + per * q, rep, err);
+    }
+    double *w = st ? NULL : malloc(sizeof(double) * f->F1 * O);
+    for (int q = 0; w && q + 1 < N_RF_LEVELS && !st; q++)
+        for (int l = rf_levels[q] + 1; l < rf_levels[q + 1] && !st; l++) {
+            double s0 = lm_lmmse_sigmas[rf_levels[q]], s1 = lm_lmmse_sigmas[rf_levels[q + 1]];
+            double t = (lm_lmmse_sigmas[l] - s0) / (s1 - s0);
+            rep->ridge[l] = NAN, rep->val_psnr[l] = NAN;
+            for (int p = 0; p < f->P && !st; p++) {
+                const double *a = coef + per * q + (size_t)p * f->F1 * O, *b = a + per;
+                for (int k = 0; k < f->F1 * O; k++) w[k] = (1 - t) * a[k] + t * b[k];
+                st = lm_lmmse_set_filter(m, l, p, w, err);
+            }
+        }
+    free(w), free(fbuf), free(coef);
+    lm_ctx_free(&c);
     return st;
 }
 
@@ -234,19 +350,16 @@ lm_status lm_lmmse_fit(lm_model *m, lm_dataset *d, int ph, int pw, long patches,
     float *raw = malloc(sizeof(float) * batch * ph * pw);
     float *tgt = malloc(sizeof(float) * batch * O * ph * pw);
     if (!st && (!raw || !tgt)) st = lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: out of memory");
-    long nbatches = (patches + batch - 1) / batch;
-    for (long k = 0; k < nbatches && !st; k++) {
-        int nb = (int)(k + 1 < nbatches ? batch : patches - k * batch);
-        if (!(st = lm_dataset_batch(d, k, batch, raw, tgt, err))) accumulate(&f, f.tr, raw, tgt, nb);
-    }
     int nv = lm_dataset_eval_count(d, LM_SPLIT_VAL);
-    for (int i = 0; i < nv && !st; i++)
-        if (!(st = lm_dataset_eval_sample(d, LM_SPLIT_VAL, i, raw, tgt, err)))
-            accumulate(&f, f.va, raw, tgt, 1);
+    if (!st && f.D > 0) {
+        st = fit_features(&f, m, d, patches, batch, raw, tgt, rep, err);
+    } else if (!st) {
+        st = accumulate_all(&f, m, NULL, d, patches, batch, 0.0, 0, raw, tgt, NULL, err);
+        if (!st) st = fit_levels(&f, m, nv > 0, -1, NULL, rep, err);
+    }
     rep->patches = patches;
     rep->val_patches = nv;
     for (int p = 0; p < f.P; p++) rep->rows += f.tr[p].n;
-    if (!st) st = fit_levels(&f, m, nv > 0, rep, err);
     rep->seconds = now() - t0;
     fitter_free(&f);
     free(raw), free(tgt);

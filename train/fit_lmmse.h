@@ -2,7 +2,8 @@
  * every tile phase's K x K raw window -> 33 channels, accumulated in double over clean training
  * patches of the loader, solved by Cholesky for every noise level of the family with the noise
  * added analytically (s^2 on the window diagonal) and a ridge chosen on the validation split.
- * What it is not: SGD (train.c) or the model itself. */
+ * With random ReLU features (lmmse-rf) the readout is fitted the same way, on features of
+ * noisy samples at five levels. What it is not: SGD (train.c) or the model itself. */
 #ifndef LM_FIT_LMMSE_H
 #define LM_FIT_LMMSE_H
 #include "models/model.h"
@@ -16,6 +17,12 @@ typedef struct lm_lmmse_fit_report {
                                        * the level's sd); NaN without a validation split */
     double seconds;
 } lm_lmmse_fit_report;
+
+/* Solve (A + add D) W = B by Cholesky, D = identity except its last diagonal entry (the bias
+ * row is not regularised). A: n x n, upper triangle read (row-major); B, W: n x m; L: n x n
+ * scratch. Returns 0 when the matrix is not positive definite. */
+int lm_ridge_solve(const double *A, const double *B, int n, int m, double add, double *W,
+                   double *L);
 
 typedef struct lm_dataset lm_dataset;
 /* Fit m (an lmmse model) from `patches` training patches of d (batches 0.. of `batch`; d must
