@@ -48,6 +48,8 @@ typedef struct ne_frame {
     float box_max;    /* largest 2 x 2 same-phase mean */
     float score_lo, score_scale; /* score bin = (score - score_lo) * score_scale */
     float r_scale;    /* |r| is binned as |r| * r_scale (1 / frame range) */
+    int floor_on;     /* the frame is clipped at its minimum (a sensor or file floor) */
+    float floor_mean; /* then windows touching the floor, or darker than this, are left out */
 } ne_frame;
 
 /* One interior row y (x = tile_w .. width - tile_w - 1, n values): the residual r of each 3 x 3
@@ -75,6 +77,11 @@ static void ne_row(const ne_frame *f, int y, float *r, int *sb)
         float bin = (score - lo) * scale;
         bin = bin > 0 ? bin : 0;
         sb[i] = (int)(bin < top ? bin : top);
+        if (f->floor_on) { /* clipped noise is not Gaussian: keep such windows out */
+            float mn = fminf(fminf(fminf(a00, a01), fminf(a02, a10)),
+                             fminf(fminf(a11, a12), fminf(fminf(a20, a21), a22)));
+            if (mn <= f->lo || mean < f->floor_mean) sb[i] = -1;
+        }
     }
 }
 
@@ -121,11 +128,13 @@ static long ne_scan(ne_frame *f)
 static long ne_score_hist(const ne_frame *f, float *r, int *sb, long *hist)
 {
     const int n = f->width - 2 * f->tw;
+    long used = 0;
     for (int y = f->th; y < f->height - f->th; y++) {
         ne_row(f, y, r, sb);
-        for (int i = 0; i < n; i++) hist[sb[i]]++;
+        for (int i = 0; i < n; i++)
+            if (sb[i] >= 0) hist[sb[i]]++, used++;
     }
-    return (long)n * (f->height - 2 * f->th);
+    return used;
 }
 
 /* Last score bin of each shell but the last: shell j holds the darkest 2^(j-4) of n (whole
@@ -150,6 +159,7 @@ static void ne_residual_hist(const ne_frame *f, const int *last_bin, float *r, i
     for (int y = f->th; y < f->height - f->th; y++) {
         ne_row(f, y, r, sb);
         for (int i = 0; i < n; i++) {
+            if (sb[i] < 0) continue;
             int j = 0;
             for (int k = 0; k < NE_SHELLS - 1; k++) j += sb[i] > last_bin[k];
             int rb = ne_r_bin(fabsf(r[i]) * rs);
@@ -230,22 +240,56 @@ static float ne_peak(const ne_frame *f, float sigma)
     return f->box_max - sigma;
 }
 
-/* sigma and peak of a checked, scanned frame; scratch holds the histograms. */
-static void ne_estimate(ne_frame *f, void *scratch, lm_noise_info *out)
+/* A clip floor: at least 1 in 1000 pixels (and 16) exactly at the frame's minimum. */
+static int ne_has_floor(const ne_frame *f)
 {
+    long n = (long)f->height * f->width, at = 0;
+    for (long i = 0; i < n; i++) at += f->raw[i] == f->lo;
+    return at >= 16 && at * 1000 >= n;
+}
+
+/* One estimate with the frame's current exclusion; returns sigma (fraction and n set). */
+static float ne_once(ne_frame *f, void *scratch, size_t bytes, lm_noise_info *out, long *n_used)
+{
+    memset(scratch, 0, bytes);
     ne_hist *shell = scratch, *pool = shell + NE_SHELLS;
     long *score_hist = (long *)(pool + 1);
     float *r = (float *)(score_hist + NE_SCORE_BINS);
     int *sb = (int *)(r + f->width);
+    long n = ne_score_hist(f, r, sb, score_hist);
+    *n_used = n;
+    if (n < NE_MIN_SAMPLES && f->floor_on) return -1.0f;
+    int last_bin[NE_SHELLS - 1];
+    ne_thresholds(score_hist, n, last_bin);
+    ne_residual_hist(f, last_bin, r, sb, shell);
+    return (float)sqrt(ne_pool(shell, n, pool, &out->fraction));
+}
+
+/* sigma and peak of a checked, scanned frame; scratch holds the histograms. A frame clipped at
+ * its minimum (a 16-bit PNG of a noisy frame: negatives are 0) reads low near the floor, where
+ * the noise is cut: such frames are estimated again without the windows that touch the floor or
+ * whose mean is below 1.5 sigma of the previous estimate, until it settles (at most 4 rounds). */
+static void ne_estimate(ne_frame *f, void *scratch, size_t bytes, lm_noise_info *out)
+{
     float range = f->hi - f->lo;
     f->score_lo = f->lo;
     f->score_scale = NE_SCORE_BINS / range;
     f->r_scale = 1.0f / range;
-    long n = ne_score_hist(f, r, sb, score_hist);
-    int last_bin[NE_SHELLS - 1];
-    ne_thresholds(score_hist, n, last_bin);
-    ne_residual_hist(f, last_bin, r, sb, shell);
-    float sigma = (float)sqrt(ne_pool(shell, n, pool, &out->fraction));
+    long n;
+    float sigma = ne_once(f, scratch, bytes, out, &n);
+    f->floor_on = ne_has_floor(f);
+    for (int round = 0; f->floor_on && round < 4; round++) {
+        f->floor_mean = f->lo + 1.5f * sigma;
+        lm_noise_info keep = *out;
+        float s2 = ne_once(f, scratch, bytes, out, &n);
+        if (s2 < 0) { /* too few windows left: keep the last estimate */
+            *out = keep;
+            break;
+        }
+        int settled = fabsf(s2 - sigma) <= 0.01f * sigma;
+        sigma = s2;
+        if (settled) break;
+    }
     out->sigma = sigma;
     out->peak = ne_peak(f, sigma);
 }
@@ -270,7 +314,7 @@ static lm_status ne_run(const float *raw, int height, int width, int tile_h, int
                    (size_t)width * (sizeof(float) + sizeof(int));
     void *scratch = calloc(1, bytes);
     if (!scratch) return lm_err_set(err, LM_ERR_NOMEM, "noise: out of memory (%zu bytes)", bytes);
-    ne_estimate(&f, scratch, out);
+    ne_estimate(&f, scratch, bytes, out);
     free(scratch);
     return LM_OK;
 }
