@@ -1,36 +1,347 @@
-/* noise_est.c — provisional estimator: per phase, median |4c - n - s - e - w| / 0.6745 /
- * sqrt(20) on the phase plane; the smallest over phases. */
+/* noise_est.c — blind Gaussian noise estimate of a raw mosaic frame (see noise_est.h).
+ * What it is: three passes over the frame — a scan (finite check, min/max, largest 2 x 2
+ * same-phase mean), a histogram of the texture score of every interior pixel (fixes the score
+ * thresholds of the nested darkest sets), and the residual pass that files each |r| into a
+ * log-spaced histogram of its shell — then the sequential pooling of shells on the histograms.
+ * What it is not: a per-pixel noise map, or multi-threaded (one 640 x 480 frame takes ~4 ms).
+ *
+ * Constants: the block size, score weight, shell sizes, trimming, test level and peak rules were
+ * chosen by measurement on frames simulated from the 27 CAVE scenes of $LM_SHARED_DIR/data (see
+ * tests/test_noise_est.c --report); these two are derived:
+ *  - NE_RSE: relative standard deviation of a variance estimate from n residuals is
+ *    NE_RSE / sqrt(n). For the mean of r^2 over a contiguous region of the Laplacian residual
+ *    field it is sqrt(2 * sum of squared correlations) = sqrt(2 * (1 + 2 (4/6)^2 + 2 (1/6)^2)^2)
+ *    = 2.75 (neighbouring residuals share pixels: correlation -2/3 at lag 1, 1/6 at lag 2).
+ *  - NE_TRIM_M2 = E[Z^2 | |Z| < c] with P(|Z| < c) = NE_TRIM = 0.9, c = 1.6448536:
+ *    1 - 2 c phi(c) / 0.9 = 0.6230173, so the trimmed moment is unbiased for Gaussian noise. */
 #include "data/noise_est.h"
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 
-static int cmpf(const void *a, const void *b)
+#define NE_SHELLS 5          /* darkest 1/16, then shells up to 1/8, 1/4, 1/2, all */
+#define NE_SCORE_BINS 16384  /* texture-score histogram over [frame min, frame max] */
+#define NE_OCT_BINS 32       /* |r| histogram: bins per octave (mantissa's top 5 bits) */
+#define NE_OCTAVES 40        /* |r| / frame range in [2^-36, 2^4); below goes to bin 0 */
+#define NE_RBINS (1 + NE_OCT_BINS * NE_OCTAVES)
+#define NE_MIN_SAMPLES 512   /* the first pool holds at least this many residuals */
+#define NE_GRAD_WEIGHT 2.0f  /* texture score = mean + 2 (|gx| + |gy|) */
+#define NE_TRIM 0.9
+#define NE_TRIM_M2 0.6230173
+#define NE_RSE 2.75
+#define NE_Z 2.0             /* a shell joins the pool unless 2 standard errors above it */
+#define NE_PEAK_SWITCH 0.02f /* sigma / max below this: peak from the raw maximum */
+#define NE_NARROW 3.0f       /* max - largest 2 x 2 mean above 3 sigma: a narrow maximum, */
+#define NE_NARROW_MAX 0.06f  /* trusted only while sigma < 6 % of the frame maximum */
+
+typedef struct ne_hist {
+    long n;
+    long count[NE_RBINS];
+    double sum[NE_RBINS]; /* sum of r^2 of the residuals in each bin */
+} ne_hist;
+
+typedef struct ne_frame {
+    const float *raw;
+    int height, width, th, tw;
+    float lo, hi;     /* frame min and max */
+    float box_max;    /* largest 2 x 2 same-phase mean */
+    float score_lo, score_scale; /* score bin = (score - score_lo) * score_scale */
+    float r_scale;    /* |r| is binned as |r| * r_scale (1 / frame range) */
+    int floor_on;     /* the frame is clipped at its minimum (a sensor or file floor) */
+    float floor_mean; /* then windows touching the floor, or darker than this, are left out */
+} ne_frame;
+
+/* One interior row y (x = tile_w .. width - tile_w - 1, n values): the residual r of each 3 x 3
+ * same-phase window (the Laplacian-like mask / 6: std sigma for white noise) and the score bin
+ * of its texture predictor, window mean + 2 (|Sobel x| + |Sobel y|) / 8. Mean and Sobel masks
+ * are orthogonal to the residual's, hence independent of its noise. Writes r[n], sb[n]. */
+static void ne_row(const ne_frame *f, int y, float *r, int *sb)
 {
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
+    const float *c = f->raw + (long)y * f->width + f->tw;
+    const long sy = (long)f->th * f->width, sx = f->tw;
+    const int n = f->width - 2 * f->tw;
+    const float lo = f->score_lo, scale = f->score_scale, top = NE_SCORE_BINS - 1;
+#pragma omp simd
+    for (int i = 0; i < n; i++) {
+        const float *q = c + i;
+        float a00 = q[-sy - sx], a01 = q[-sy], a02 = q[-sy + sx];
+        float a10 = q[-sx], a11 = q[0], a12 = q[sx];
+        float a20 = q[sy - sx], a21 = q[sy], a22 = q[sy + sx];
+        float t = a00 - 2 * a01 + a02, m = a10 - 2 * a11 + a12, b = a20 - 2 * a21 + a22;
+        r[i] = (t - 2 * m + b) * (1.0f / 6);
+        float mean = (a00 + a01 + a02 + a10 + a11 + a12 + a20 + a21 + a22) * (1.0f / 9);
+        float gx = (a02 - a00) + 2 * (a12 - a10) + (a22 - a20);
+        float gy = (a20 - a00) + 2 * (a21 - a01) + (a22 - a02);
+        float score = mean + NE_GRAD_WEIGHT * 0.125f * (fabsf(gx) + fabsf(gy));
+        float bin = (score - lo) * scale;
+        bin = bin > 0 ? bin : 0;
+        sb[i] = (int)(bin < top ? bin : top);
+        if (f->floor_on) { /* clipped noise is not Gaussian: keep such windows out */
+            float mn = fminf(fminf(fminf(a00, a01), fminf(a02, a10)),
+                             fminf(fminf(a11, a12), fminf(fminf(a20, a21), a22)));
+            if (mn <= f->lo || mean < f->floor_mean) sb[i] = -1;
+        }
+    }
 }
 
-float lm_noise_estimate(const float *raw, int H, int W, int th, int tw)
+/* Log-spaced bin of |r| * r_scale: octave from the float exponent, 32 steps from the mantissa's
+ * top bits; below 2^-36 is bin 0, from 2^4 up the last bin. */
+static inline int ne_r_bin(float v)
 {
-    if (!raw || th < 1 || tw < 1 || H % th || W % tw || H / th < 3 || W / tw < 3) return -1.0f;
-    const int h = H / th, w = W / tw;
-    float *r = malloc(sizeof(float) * (size_t)(h - 2) * (w - 2));
-    if (!r) return -1.0f;
-    float best = INFINITY;
-    for (int i = 0; i < th; i++)
-        for (int j = 0; j < tw; j++) {
-            size_t n = 0;
-            for (int y = 1; y < h - 1; y++)
-                for (int x = 1; x < w - 1; x++) {
-#define P(yy, xx) raw[(size_t)((yy) * th + i) * W + (xx) * tw + j]
-                    float v = 4 * P(y, x) - P(y - 1, x) - P(y + 1, x) - P(y, x - 1) - P(y, x + 1);
-#undef P
-                    r[n++] = fabsf(v);
-                }
-            qsort(r, n, sizeof *r, cmpf);
-            float s = r[n / 2] / 0.6745f / sqrtf(20.0f);
-            if (s < best) best = s;
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    int oct = (int)((bits >> 23) & 0xff) - (127 - 36);
+    int bin = 1 + oct * NE_OCT_BINS + (int)((bits >> 18) & (NE_OCT_BINS - 1));
+    return oct < 0 ? 0 : oct >= NE_OCTAVES ? NE_RBINS - 1 : bin;
+}
+
+/* Pass 1: min, max and the largest 2 x 2 same-phase mean (mean of (y, x), (y, x + tile_w),
+ * (y + tile_h, x), (y + tile_h, x + tile_w)). Returns the index of the first non-finite value,
+ * or -1 (then f->lo, hi, box_max are set). */
+static long ne_scan(ne_frame *f)
+{
+    const float *p = f->raw;
+    const long sy = (long)f->th * f->width;
+    float lo = p[0], hi = p[0], box = -INFINITY;
+    for (int y = 0; y < f->height; y++) {
+        const float *row = p + (long)y * f->width;
+        float nan_probe = 0;
+#pragma omp simd reduction(min : lo) reduction(max : hi) reduction(+ : nan_probe)
+        for (int x = 0; x < f->width; x++) {
+            lo = fminf(lo, row[x]), hi = fmaxf(hi, row[x]);
+            nan_probe += row[x] * 0.0f; /* NaN if any value is NaN or inf */
         }
-    free(r);
-    return best;
+        if (nan_probe != 0 || nan_probe != nan_probe)
+            for (int x = 0; x < f->width; x++)
+                if (!isfinite(row[x])) return (long)y * f->width + x;
+        if (y + f->th >= f->height) continue;
+#pragma omp simd reduction(max : box)
+        for (int x = 0; x < f->width - f->tw; x++)
+            box = fmaxf(box, 0.25f * (row[x] + row[x + f->tw] + row[x + sy] + row[x + sy + f->tw]));
+    }
+    f->lo = lo, f->hi = hi, f->box_max = box;
+    return -1;
+}
+
+/* Pass 2: histogram of the score bins of the interior pixels. Returns their count. */
+static long ne_score_hist(const ne_frame *f, float *r, int *sb, long *hist)
+{
+    const int n = f->width - 2 * f->tw;
+    long used = 0;
+    for (int y = f->th; y < f->height - f->th; y++) {
+        ne_row(f, y, r, sb);
+        for (int i = 0; i < n; i++)
+            if (sb[i] >= 0) hist[sb[i]]++, used++;
+    }
+    return used;
+}
+
+/* Last score bin of each shell but the last: shell j holds the darkest 2^(j-4) of n (whole
+ * bins, so a shell may hold more, and a later one nothing). */
+static void ne_thresholds(const long *hist, long n, int *last_bin)
+{
+    long cum = 0;
+    int b = 0;
+    for (int j = 0; j < NE_SHELLS - 1; j++) {
+        double want = ldexp((double)n, j - (NE_SHELLS - 1));
+        while (b < NE_SCORE_BINS - 1 && cum + hist[b] < want) cum += hist[b++];
+        last_bin[j] = b;
+    }
+}
+
+/* Pass 3: file every residual into the |r| histogram of its shell. */
+static void ne_residual_hist(const ne_frame *f, const int *last_bin, float *r, int *sb,
+                             ne_hist *shell)
+{
+    const int n = f->width - 2 * f->tw;
+    const float rs = f->r_scale;
+    for (int y = f->th; y < f->height - f->th; y++) {
+        ne_row(f, y, r, sb);
+        for (int i = 0; i < n; i++) {
+            if (sb[i] < 0) continue;
+            int j = 0;
+            for (int k = 0; k < NE_SHELLS - 1; k++) j += sb[i] > last_bin[k];
+            int rb = ne_r_bin(fabsf(r[i]) * rs);
+            shell[j].count[rb]++;
+            shell[j].sum[rb] += (double)r[i] * r[i];
+        }
+    }
+    for (int j = 0; j < NE_SHELLS; j++)
+        for (int b = 0; b < NE_RBINS; b++) shell[j].n += shell[j].count[b];
+}
+
+static void ne_hist_add(ne_hist *to, const ne_hist *h)
+{
+    to->n += h->n;
+    for (int b = 0; b < NE_RBINS; b++) to->count[b] += h->count[b], to->sum[b] += h->sum[b];
+}
+
+/* sigma^2 from the smallest NE_TRIM of the |r| in h (a partial last bin counts pro rata). */
+static double ne_trimmed_var(const ne_hist *h)
+{
+    double keep = NE_TRIM * h->n, cum = 0, s = 0;
+    for (int b = 0; b < NE_RBINS && cum < keep; b++) {
+        if (!h->count[b]) continue;
+        double take = fmin((double)h->count[b], keep - cum);
+        s += h->sum[b] * (take / h->count[b]);
+        cum += take;
+    }
+    return keep > 0 ? s / keep / NE_TRIM_M2 : 0.0;
+}
+
+/* Pool the darkest shells (at least NE_MIN_SAMPLES residuals), then add each next shell while
+ * its variance is within NE_Z standard errors of the pool's. Returns sigma^2. */
+static double ne_pool(const ne_hist *shell, long n, ne_hist *pool, float *fraction)
+{
+    memset(pool, 0, sizeof *pool);
+    int j = 0;
+    while (j < NE_SHELLS && pool->n < NE_MIN_SAMPLES) ne_hist_add(pool, &shell[j++]);
+    double s = ne_trimmed_var(pool);
+    for (; j < NE_SHELLS; j++) {
+        if (!shell[j].n) continue;
+        double tol = NE_Z * NE_RSE * sqrt(1.0 / pool->n + 1.0 / shell[j].n);
+        if (ne_trimmed_var(&shell[j]) > s * (1 + tol)) break;
+        ne_hist_add(pool, &shell[j]);
+        s = ne_trimmed_var(pool);
+    }
+    *fraction = n > 0 ? (float)((double)pool->n / n) : 0.0f;
+    return s;
+}
+
+static lm_status ne_check(const float *raw, int height, int width, int tile_h, int tile_w,
+                          const lm_noise_info *out, lm_err *err)
+{
+    if (!raw || !out) return lm_err_set(err, LM_ERR_ARG, "noise: NULL frame or result");
+    if (tile_h < 1 || tile_w < 1)
+        return lm_err_set(err, LM_ERR_ARG, "noise: tile %d x %d must be at least 1 x 1", tile_h,
+                          tile_w);
+    if (height <= 0 || width <= 0 || height % tile_h || width % tile_w)
+        return lm_err_set(err, LM_ERR_SHAPE,
+                          "noise: frame %d x %d is not a positive multiple of the %d x %d tile",
+                          height, width, tile_h, tile_w);
+    if (height / tile_h < 3 || width / tile_w < 3)
+        return lm_err_set(err, LM_ERR_SHAPE,
+                          "noise: frame %d x %d too small: each tile phase needs 3 x 3 pixels "
+                          "(at least %d x %d)", height, width, 3 * tile_h, 3 * tile_w);
+    return LM_OK;
+}
+
+/* Robust maximum of the clean frame. Low noise (sigma <= 2 % of the frame maximum), or a
+ * maximum more than 3 sigma above every 2 x 2 mean while sigma < 6 % of it (a narrow highlight,
+ * which smoothing would lose): the frame maximum minus 2 sigma. Otherwise (a bright plateau,
+ * whose raw maximum is the largest of many noisy values): the largest 2 x 2 same-phase mean
+ * minus sigma (the typical excess of the largest of many such means, sd sigma / 2, over their
+ * clean value on the CAVE frames; more for very large plateaus at high noise). */
+static float ne_peak(const ne_frame *f, float sigma)
+{
+    int narrow = f->hi - f->box_max > NE_NARROW * sigma && sigma < NE_NARROW_MAX * f->hi;
+    if (sigma <= NE_PEAK_SWITCH * f->hi || narrow) return f->hi - 2 * sigma;
+    return f->box_max - sigma;
+}
+
+/* A clip floor: at least 1 in 1000 pixels (and 16) exactly at the frame's minimum. */
+static int ne_has_floor(const ne_frame *f)
+{
+    long n = (long)f->height * f->width, at = 0;
+    for (long i = 0; i < n; i++) at += f->raw[i] == f->lo;
+    return at >= 16 && at * 1000 >= n;
+}
+
+/* One estimate with the frame's current exclusion; returns sigma (fraction and n set). */
+static float ne_once(ne_frame *f, void *scratch, size_t bytes, lm_noise_info *out, long *n_used)
+{
+    memset(scratch, 0, bytes);
+    ne_hist *shell = scratch, *pool = shell + NE_SHELLS;
+    long *score_hist = (long *)(pool + 1);
+    float *r = (float *)(score_hist + NE_SCORE_BINS);
+    int *sb = (int *)(r + f->width);
+    long n = ne_score_hist(f, r, sb, score_hist);
+    *n_used = n;
+    if (n < NE_MIN_SAMPLES && f->floor_on) return -1.0f;
+    int last_bin[NE_SHELLS - 1];
+    ne_thresholds(score_hist, n, last_bin);
+    ne_residual_hist(f, last_bin, r, sb, shell);
+    return (float)sqrt(ne_pool(shell, n, pool, &out->fraction));
+}
+
+/* sigma and peak of a checked, scanned frame; scratch holds the histograms. A frame clipped at
+ * its minimum (a 16-bit PNG of a noisy frame: negatives are 0) reads low near the floor, where
+ * the noise is cut: such frames are estimated again without the windows that touch the floor or
+ * whose mean is below 1.5 sigma of the previous estimate, until it settles (at most 4 rounds). */
+static void ne_estimate(ne_frame *f, void *scratch, size_t bytes, lm_noise_info *out)
+{
+    float range = f->hi - f->lo;
+    f->score_lo = f->lo;
+    f->score_scale = NE_SCORE_BINS / range;
+    f->r_scale = 1.0f / range;
+    long n;
+    float sigma = ne_once(f, scratch, bytes, out, &n);
+    f->floor_on = ne_has_floor(f);
+    for (int round = 0; f->floor_on && round < 4; round++) {
+        f->floor_mean = f->lo + 1.5f * sigma;
+        lm_noise_info keep = *out;
+        float s2 = ne_once(f, scratch, bytes, out, &n);
+        if (s2 < 0) { /* too few windows left: keep the last estimate */
+            *out = keep;
+            break;
+        }
+        int settled = fabsf(s2 - sigma) <= 0.01f * sigma;
+        sigma = s2;
+        if (settled) break;
+    }
+    out->sigma = sigma;
+    out->peak = ne_peak(f, sigma);
+}
+
+/* Checks, scan and estimate: sigma, peak and fraction (level left 0). */
+static lm_status ne_run(const float *raw, int height, int width, int tile_h, int tile_w,
+                        lm_noise_info *out, lm_err *err)
+{
+    lm_status s = ne_check(raw, height, width, tile_h, tile_w, out, err);
+    if (s != LM_OK) return s;
+    memset(out, 0, sizeof *out);
+    ne_frame f = {.raw = raw, .height = height, .width = width, .th = tile_h, .tw = tile_w};
+    long bad = ne_scan(&f);
+    if (bad >= 0)
+        return lm_err_set(err, LM_ERR_NUMERIC, "noise: non-finite value at (x=%ld, y=%ld)",
+                          bad % width, bad / width);
+    if (!(f.hi > f.lo)) { /* a constant frame: no noise, the peak is its value */
+        out->peak = f.hi, out->fraction = 1.0f;
+        return LM_OK;
+    }
+    size_t bytes = (NE_SHELLS + 1) * sizeof(ne_hist) + NE_SCORE_BINS * sizeof(long) +
+                   (size_t)width * (sizeof(float) + sizeof(int));
+    void *scratch = calloc(1, bytes);
+    if (!scratch) return lm_err_set(err, LM_ERR_NOMEM, "noise: out of memory (%zu bytes)", bytes);
+    ne_estimate(&f, scratch, bytes, out);
+    free(scratch);
+    return LM_OK;
+}
+
+lm_status lm_noise_analyze(const float *raw, int height, int width, int tile_h, int tile_w,
+                           lm_noise_info *out, lm_err *err)
+{
+    lm_status s = ne_run(raw, height, width, tile_h, tile_w, out, err);
+    if (s != LM_OK) return s;
+    if (!(out->peak > 0))
+        return lm_err_set(err, LM_ERR_NUMERIC,
+                          "noise: no positive signal (robust peak %g), level undefined",
+                          (double)out->peak);
+    out->level = out->sigma / out->peak;
+    return LM_OK;
+}
+
+float lm_noise_estimate(const float *raw, int height, int width, int tile_h, int tile_w)
+{
+    lm_noise_info info;
+    lm_status s = ne_run(raw, height, width, tile_h, tile_w, &info, NULL);
+    return s == LM_OK ? info.sigma : (float)s;
+}
+
+float lm_noise_level(const float *raw, int height, int width, int tile_h, int tile_w)
+{
+    lm_noise_info info;
+    lm_status s = lm_noise_analyze(raw, height, width, tile_h, tile_w, &info, NULL);
+    return s == LM_OK ? info.level : (float)s;
 }
