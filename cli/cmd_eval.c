@@ -62,6 +62,9 @@ static void help(void)
            "  --device D       where the network runs: cpu or opencl (default: env LM_DEVICE,\n"
            "                   else cpu); the weights are copied to the device once;\n"
            "                   MST++ models run on the CPU only\n"
+           "  --clip           clip the noisy frame to [0, 1] (full scale) as a sensor or a\n"
+           "                   16-bit PNG frame holds it (default: off, negatives kept)\n"
+           "  --bits N         quantise the frame to N bits (16: a PNG frame; default 0 = off)\n"
            "  --noise-oracle   models that read the noise level (lmmse, residuals on it) get\n"
            "                   the simulated level instead of estimating it from the frame\n"
            "  --help           this text\n", LM_EVAL_MAX_NOISE, LM_EVAL_MAX_MOTION);
@@ -76,7 +79,8 @@ typedef struct eval_opts {
     double speed[LM_EVAL_MAX_MOTION];
     int nmotion;
     long long seed, threads, rainbow, batch;
-    int noise_oracle;
+    int noise_oracle, clip;
+    long long bits;
 } eval_opts;
 
 static const char *const split_names[] = {"test", "val", "train", "all", NULL};
@@ -132,7 +136,9 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
         (r = lm_cli_value(c, "--noise", &noise)) ||
         (r = lm_cli_value(c, "--motion", &motion)) ||
-        (r = lm_cli_flag(c, "--noise-oracle", &o->noise_oracle))) {
+        (r = lm_cli_flag(c, "--noise-oracle", &o->noise_oracle)) ||
+        (r = lm_cli_flag(c, "--clip", &o->clip)) ||
+        (r = lm_cli_int(c, "--bits", 0, 24, &o->bits))) {
         if (r < 0) return 2;
         if (noise && parse_noise(c, noise, o)) return 2;
         if (motion && parse_motion(c, motion, o)) return 2;
@@ -475,6 +481,8 @@ static int run(eval_run *r)
     lm_err_clear(&e);
     if (lm_infer_model_load(r->o->model, r->o->system, &r->im, &e)) return fail(r->c, &e);
     r->im.noise_oracle = r->o->noise_oracle;
+    r->im.sensor_clip = r->o->clip;
+    r->im.sensor_bits = (int)r->o->bits;
     int rc = list_scenes(r, &e);
     if (rc) return rc;
     if (r->o->output && lm_cli_stage_dir(r->c, r->o->output, r->tmp, sizeof r->tmp)) {

@@ -579,9 +579,11 @@ static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, float *
     if (st == LM_OK) st = sample_cube(d, &p, split, &c31, err);
     if (st == LM_OK) st = lm_cube_mirror41(&c31, &c41, err);
     if (st == LM_OK) st = lm_forward_clean(d->cfg.sys, &c41, 0, 0, raw, NULL, 1, err);
-    if (st == LM_OK && p.info.noise_k > 0.0f) {
+    if (st == LM_OK && (p.info.noise_k > 0.0f || d->cfg.sensor_clip || d->cfg.sensor_bits)) {
         lm_noise_opts no = {0};
         no.gauss_k = p.info.noise_k;
+        no.clip = d->cfg.sensor_clip;
+        no.bits = d->cfg.sensor_bits;
         st = lm_forward_noise(raw, d->cfg.patch_h, d->cfg.patch_w, &no, &p.noise_rng, 1, err);
     }
     if (st == LM_OK) st = lm_cube_target33(&c41, &t33, err);

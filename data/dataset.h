@@ -44,6 +44,9 @@ typedef struct lm_dataset_cfg {
                                  * that one sample without being cached */
     int val_patches;            /* fixed validation/test samples per split (default 64) */
     float val_noise;            /* noise level k of validation/test samples (default 0) */
+    int sensor_clip;            /* 1: after the noise, clip to [0, 1] (the full scale), as a
+                                 * sensor or a 16-bit PNG frame holds values (default 0) */
+    int sensor_bits;            /* quantise to this many bits (0 = off, 16 = PNG) */
     float synth_narrowband;     /* share of synthetic samples that are narrowband textureless
                                  * patches; the rest are procedural scenes (default 0.5) */
 } lm_dataset_cfg;

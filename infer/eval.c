@@ -127,6 +127,8 @@ static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *tr
     lm_noise_opts no;
     memset(&no, 0, sizeof no);
     no.gauss_k = k;
+    no.clip = im->sensor_clip;
+    no.bits = im->sensor_bits;
     float clean_max = 0.0f;
     const size_t npx = (size_t)truth->height * truth->width;
     lm_status st = LM_OK;

@@ -16,6 +16,8 @@ typedef struct lm_infer_model {
     char weights[1024];   /* the .safetensors file loaded */
     char system_path[1024];
     int noise_oracle;     /* eval only: give noise-reading models the simulated level */
+    int sensor_clip, sensor_bits; /* eval only: simulated frames clipped to [0, 1] / quantised
+                                   * after the noise, as a 16-bit PNG holds them */
 } lm_infer_model;
 
 /* Load path (a folder holding model.safetensors, or a .safetensors file). system_override

@@ -243,7 +243,7 @@ static void fit_least_squares(const char *preset)
     CHECK_MSG(m && d, "%s", e.msg);
     lm_lmmse_fit_report rep;
     const int NP = 48, B = 16;
-    CHECK_MSG(lm_lmmse_fit(m, d, 24, 32, NP, B, &rep, &e) == LM_OK, "%s", e.msg);
+    CHECK_MSG(lm_lmmse_fit(m, d, 24, 32, NP, B, NULL, &rep, &e) == LM_OK, "%s", e.msg);
     CHECK(rep.patches == NP && rep.rows == (long)NP * (24 - 4) * (32 - 4));
     /* ridge without validation is the small default: nudging must not help, clean level */
     float *raw = malloc(sizeof(float) * NP * 24 * 32), *tgt = malloc(sizeof(float) * NP * O * 24 * 32);

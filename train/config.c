@@ -57,6 +57,9 @@ static const field fields[] = {
     FLD("base", F_STR, base, "RUN", "train as a residual on this run's model (e.g. an lmmse fit)"),
     FLD("base_trainable", F_INT, base_trainable, "0|1", "fine-tune the base with the net (0)"),
     FLD("res_init", F_FLOAT, res_init, "F", "residual: initial gates on the net's output (1; the net's output layers start at 0)"),
+    FLD("sensor_clip", F_INT, sensor_clip, "0|1", "clip noisy samples to [0, 1] as a 16-bit "
+        "PNG frame holds them (0)"),
+    FLD("sensor_bits", F_INT, sensor_bits, "N", "quantise samples to N bits (0 = off; 16 = PNG)"),
     FLD("snapshots", F_STR, snapshots, "M,M,...", "weights at these minutes of training into "
         "<output>/snapshots/<M>min/"),
     FLD("minutes", F_FLOAT, minutes, "M", "time budget in minutes (0 = none; the schedule "
@@ -386,6 +389,10 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     for (const char *p = c->snapshots; *p; p++)
         if (!strchr("0123456789.,", *p))
             BAD("'snapshots': must be minutes separated by commas (got '%s')", c->snapshots);
+    if (c->sensor_clip != 0 && c->sensor_clip != 1)
+        BAD("'sensor_clip': must be 0 or 1 (got %d)", c->sensor_clip);
+    if (c->sensor_bits < 0 || c->sensor_bits > 24)
+        BAD("'sensor_bits': must be 0..24 (got %d)", c->sensor_bits);
     if (!isfinite(c->res_init)) BAD("'res_init': must be finite (got %g)", c->res_init);
     if (c->ndata == 0 && c->synth_fraction < 1)
         BAD("'data': no scenes given (add --data PATH, or set synth_fraction to 1)%s", "");
@@ -413,11 +420,12 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
         "checkpoint_interval", (json_int_t)c->checkpoint_interval,
         "log_interval", (json_int_t)c->log_interval, "output", c->output);
     if (root)
-        json_object_update_new(root, json_pack("{s:s, s:I, s:s, s:i, s:f, s:f, s:s}", "fit", c->fit,
+        json_object_update_new(root, json_pack("{s:s, s:I, s:s, s:i, s:f, s:f, s:s, s:i, s:i}", "fit", c->fit,
                                "fit_patches", (json_int_t)c->fit_patches, "base", c->base,
                                "base_trainable", c->base_trainable,
                                "res_init", (double)c->res_init, "minutes", (double)c->minutes,
-                               "snapshots", c->snapshots));
+                               "snapshots", c->snapshots, "sensor_clip", c->sensor_clip,
+                               "sensor_bits", c->sensor_bits));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

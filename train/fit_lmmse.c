@@ -41,6 +41,7 @@ typedef struct fitter {
     double *X, *Y;          /* gather buffers: rows x F1, rows x 33 */
     long cap;
     const float *feat;      /* D > 0: feature maps of the batch, nb x D x ph x pw */
+    int clip, bits;         /* sensor: applied after sampled noise */
 } fitter;
 
 static double now(void)
@@ -250,10 +251,17 @@ static lm_status features(fitter *f, lm_model *m, lm_ctx *c, const float *raw, i
     return LM_OK;
 }
 
-/* Gaussian noise of sd s added to nb patches (sampled: the features are nonlinear). */
-static void add_noise(float *raw, size_t n, double s, lm_rng *r)
+/* Gaussian noise of sd s added to n values (sampled: the features are nonlinear), then the
+ * sensor's clipping to [0, 1] and quantisation. */
+static void add_noise(const fitter *f, float *raw, size_t n, double s, lm_rng *r)
 {
-    for (size_t i = 0; s > 0 && i < n; i++) raw[i] += (float)s * lm_rng_normal(r);
+    const float L = f->bits ? (float)((1u << f->bits) - 1) : 0.0f;
+    for (size_t i = 0; i < n; i++) {
+        float v = raw[i] + (s > 0 ? (float)s * lm_rng_normal(r) : 0.0f);
+        if (f->clip || L > 0) v = v < 0 ? 0 : v > 1 ? 1 : v;
+        if (L > 0) v = rintf(v * L) / L;
+        raw[i] = v;
+    }
 }
 
 static void stats_clear(fitter *f)
@@ -282,14 +290,14 @@ static lm_status accumulate_all(fitter *f, lm_model *m, lm_ctx *c, lm_dataset *d
     for (long k = 0; k < nbatches && !st; k++) {
         int nb = (int)(k + 1 < nbatches ? batch : patches - k * batch);
         if ((st = lm_dataset_batch(d, k, batch, raw, tgt, err))) break;
-        add_noise(raw, nb * plane, s, &r);
+        add_noise(f, raw, nb * plane, s, &r);
         if (f->D && (st = features(f, m, c, raw, nb, fbuf, err))) break;
         accumulate(f, f->tr, raw, tgt, nb);
     }
     int nv = lm_dataset_eval_count(d, LM_SPLIT_VAL);
     for (int i = 0; i < nv && !st; i++) {
         if ((st = lm_dataset_eval_sample(d, LM_SPLIT_VAL, i, raw, tgt, err))) break;
-        add_noise(raw, plane, s, &r);
+        add_noise(f, raw, plane, s, &r);
         if (f->D && (st = features(f, m, c, raw, 1, fbuf, err))) break;
         accumulate(f, f->va, raw, tgt, 1);
     }
@@ -307,7 +315,7 @@ static lm_status fit_features(fitter *f, lm_model *m, lm_dataset *d, long patche
     lm_ctx c;
     if (lm_ctx_init(&c, 0)) return lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: no context");
     const size_t per = (size_t)f->P * f->F1 * O;
-    float *fbuf = malloc(sizeof(float) * (size_t)batch * f->D * f->ph * f->pw);
+    float *fbuf = malloc(sizeof(float) * ((size_t)batch * f->D * f->ph * f->pw + 1));
     double *coef = malloc(sizeof(double) * per * N_RF_LEVELS);
     lm_status st = fbuf && coef ? LM_OK : lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: no memory");
     int nv = lm_dataset_eval_count(d, LM_SPLIT_VAL);
@@ -336,7 +344,7 @@ static lm_status fit_features(fitter *f, lm_model *m, lm_dataset *d, long patche
 }
 
 lm_status lm_lmmse_fit(lm_model *m, lm_dataset *d, int ph, int pw, long patches, int batch,
-                       lm_lmmse_fit_report *rep, lm_err *err)
+                       const lm_noise_opts *sensor, lm_lmmse_fit_report *rep, lm_err *err)
 {
     memset(rep, 0, sizeof *rep);
     if (!lm_lmmse_window(m))
@@ -351,7 +359,8 @@ lm_status lm_lmmse_fit(lm_model *m, lm_dataset *d, int ph, int pw, long patches,
     float *tgt = malloc(sizeof(float) * batch * O * ph * pw);
     if (!st && (!raw || !tgt)) st = lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: out of memory");
     int nv = lm_dataset_eval_count(d, LM_SPLIT_VAL);
-    if (!st && f.D > 0) {
+    if (sensor) f.clip = sensor->clip, f.bits = sensor->bits;
+    if (!st && (f.D > 0 || f.clip || f.bits)) {
         st = fit_features(&f, m, d, patches, batch, raw, tgt, rep, err);
     } else if (!st) {
         st = accumulate_all(&f, m, NULL, d, patches, batch, 0.0, 0, raw, tgt, NULL, err);

@@ -7,6 +7,7 @@
 #ifndef LM_FIT_LMMSE_H
 #define LM_FIT_LMMSE_H
 #include "models/model.h"
+#include "data/forward.h"
 
 typedef struct lm_lmmse_fit_report {
     long patches, val_patches;   /* training / validation patches read */
@@ -28,7 +29,10 @@ typedef struct lm_dataset lm_dataset;
 /* Fit m (an lmmse model) from `patches` training patches of d (batches 0.. of `batch`; d must
  * be opened without noise: the fit adds it analytically) of size ph x pw, and d's validation
  * samples. Writes every level's filters into m. */
+/* sensor: clip (to [0, 1]) and bits applied after the noise (NULL or zeros = none); with
+ * either, or with random features, the noise is sampled at five levels (the others
+ * interpolated), since the analytic term no longer holds. */
 lm_status lm_lmmse_fit(lm_model *m, lm_dataset *d, int ph, int pw, long patches, int batch,
-                       lm_lmmse_fit_report *rep, lm_err *err);
+                       const lm_noise_opts *sensor, lm_lmmse_fit_report *rep, lm_err *err);
 
 #endif

@@ -47,7 +47,12 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.workers = cfg->workers;
     dc.val_patches = cfg->val_patches;
     dc.val_noise = cfg->val_noise;
-    if (clean) dc.noise_min = dc.noise_max = dc.val_noise = 0.0f; /* the fit adds noise itself */
+    dc.sensor_clip = cfg->sensor_clip;
+    dc.sensor_bits = cfg->sensor_bits;
+    if (clean) { /* the fit adds noise, clipping and quantisation itself */
+        dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
+        dc.sensor_clip = dc.sensor_bits = 0;
+    }
     return lm_dataset_open(&dc, err);
 }
 
@@ -145,8 +150,11 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     char path[LM_TRAIN_PATH_LEN + 16];
     snprintf(path, sizeof path, "%s/config.json", cfg->output);
     lm_status st = lm_train_make_dir(cfg->output, err);
-    if (!st) st = lm_lmmse_fit(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches, cfg->batch, &r,
-                               err);
+    lm_noise_opts sensor = {0};
+    sensor.clip = cfg->sensor_clip;
+    sensor.bits = cfg->sensor_bits;
+    if (!st) st = lm_lmmse_fit(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches, cfg->batch,
+                               &sensor, &r, err);
     if (!st) st = lm_train_cfg_save(cfg, path, err);
     if (!st) st = lm_train_save_checkpoint(cfg->output, m, NULL, 0, 0, opts, cfg, err);
     if (!st) st = write_fit_report(cfg, &r, lm_lmmse_window(m), err);

@@ -69,6 +69,9 @@ typedef struct lm_train_cfg {
     float minutes;                  /* time budget (0 = none): the schedule spans it, the run
                                      * stops with a checkpoint when it is spent (training time
                                      * over every invocation: resume continues the clock) */
+    int sensor_clip;                /* 1: samples clipped to [0, 1] after the noise, as a 16-bit
+                                     * PNG frame holds them (0) */
+    int sensor_bits;                /* quantisation of the samples (0 = off; 16 = PNG) */
     char snapshots[128];            /* "5,15,30": weights at these minutes of training time into
                                      * <output>/snapshots/<M>min/ ("" = none) */
 } lm_train_cfg;
