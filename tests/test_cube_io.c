@@ -5,6 +5,7 @@
  * CAVE samples are checked against a minimal PNG decoder of this file. */
 #define _GNU_SOURCE
 #include "tests/check.h"
+#include "tests/shared_dir.h"
 #include "tests/fixture.h"
 #include "data/cube_io.h"
 #include "data/image.h"
@@ -157,21 +158,6 @@ static int png_read_grey16(const char *path, int *w, int *h, uint16_t **out)
 
 /* ---- CAVE ------------------------------------------------------------------------------ */
 
-/* $LM_SHARED_DIR, else ../shared next to the repository (found from this file's path). */
-static const char *shared_dir(void)
-{
-    static char buf[1024];
-    const char *env = getenv("LM_SHARED_DIR");
-    if (env) return env;
-    snprintf(buf, sizeof buf, "%s", __FILE__);
-    for (int k = 0; k < 2; k++) {
-        char *s = strrchr(buf, '/');
-        if (s) *s = 0;
-        else snprintf(buf, sizeof buf, "..");
-    }
-    strncat(buf, "/../shared", sizeof buf - strlen(buf) - 1);
-    return buf;
-}
 
 static void test_cave_real_scene(void)
 {

@@ -10,6 +10,7 @@
  * $LM_SHARED_DIR/data/cave (and cave-256 for the real split). */
 #define _GNU_SOURCE
 #include "tests/check.h"
+#include "tests/shared_dir.h"
 #include "data/cube_io.h"
 #include "data/dataset.h"
 #include "data/forward.h"
@@ -29,20 +30,6 @@ static lm_err g_err;
 #define POS_H 30
 #define POS_W 40
 
-static const char *shared_dir(void)
-{
-    static char buf[1024];
-    const char *env = getenv("LM_SHARED_DIR");
-    if (env) return env;
-    snprintf(buf, sizeof buf, "%s", __FILE__);
-    for (int k = 0; k < 2; k++) {
-        char *s = strrchr(buf, '/');
-        if (s) *s = 0;
-        else snprintf(buf, sizeof buf, "..");
-    }
-    strncat(buf, "/../shared", sizeof buf - strlen(buf) - 1);
-    return buf;
-}
 
 /* The position fixture: band 0 = (y+1)/1000, band 1 = (x+1)/1000, others vary with b, y, x. */
 static float pos_value(int b, int y, int x)

@@ -17,6 +17,7 @@
 #include <string.h>
 #include <time.h>
 #include "tests/check.h"
+#include "tests/shared_dir.h"
 #include "data/cube_io.h"
 #include "data/forward.h"
 #include "data/noise_est.h"
@@ -28,20 +29,6 @@ static int g_ok;
 #define TH (g_sys.tile_rows) /* the default system's 3 x 4 tile */
 #define TW (g_sys.tile_cols)
 
-static const char *shared_dir(void)
-{
-    static char buf[1024];
-    const char *env = getenv("LM_SHARED_DIR");
-    if (env) return env;
-    snprintf(buf, sizeof buf, "%s", __FILE__);
-    for (int k = 0; k < 2; k++) {
-        char *s = strrchr(buf, '/');
-        if (s) *s = 0;
-        else snprintf(buf, sizeof buf, "..");
-    }
-    strncat(buf, "/../shared", sizeof buf - strlen(buf) - 1);
-    return buf;
-}
 
 /* A CAVE scene's noise-free coded frame (default system), cropped at the top-left to the tile
  * grid. Returns NULL (and reports) on failure. */
