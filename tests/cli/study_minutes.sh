@@ -1,0 +1,92 @@
+#!/usr/bin/env bash
+# study_minutes.sh — `lumosaic study` with a time budget (issue 13) on balloons_crop100: an
+# lmmse-5 fit, linear and rt-8 as a residual on it, 0.3 minutes of training each with snapshots
+# at 0.1 / 0.2 and an early-drop check at 0.15 minutes. Checks: every trained run has snapshot
+# folders and a curve of at least two points (minutes increasing, each with a PSNR per noise
+# level), the fit has one point at its fit time, every record has its drop check, the residual
+# record names its base and its checkpoint carries the base's weights, results.md has the
+# accuracy-against-training-time table, the accuracy_minutes chart exists; a second run skips
+# everything; `train --minutes` records its training time and resume continues the clock.
+# usage: study_minutes.sh LUMOSAIC MAKE_CUBE
+source "$(dirname "$0")/lib.sh"
+S=$T/s
+cat > "$T/m.json" <<JSON
+{
+  "version": 1,
+  "presets": ["lmmse-5", "linear", "rt-8+lmmse-5"],
+  "data": ["$CAVE"],
+  "iterations": 100000,
+  "seed": 1,
+  "patch": [33, 32],
+  "train": {"batch": 2, "accum_steps": 1, "lr": 0.002, "val_interval": 50, "val_patches": 2,
+            "checkpoint_interval": 100, "log_interval": 50, "minutes": 0.3,
+            "snapshots": "0.1,0.2", "fit_patches": 64},
+  "preset_train": {"linear": {"lr": 0.005}},
+  "drop": {"after_minutes": 0.15, "behind_db": 30},
+  "noise": [0, 10],
+  "eval_scenes": 2,
+  "eval_size": "96x96",
+  "rainbow": 0,
+  "frame": "120x160",
+  "timing_repeats": 1
+}
+JSON
+"$LM" study --config "$T/m.json" --output "$S" --threads 2 --quiet > "$T/out" 2> "$T/err"
+check "study run: $(tail -3 "$T/err")" [ $? -eq 0 ]
+for r in linear rt-8+lmmse-5; do
+  check "$r: snapshot 0.1" [ -s "$S/runs/$r/snapshots/0.1min/model.safetensors" ]
+  check "$r: drop-check snapshot" [ -s "$S/runs/$r/snapshots/0.15min/model.safetensors" ]
+done
+check "lmmse-5 fitted" [ -s "$S/runs/lmmse-5/fit.json" ]
+python3 - "$S/results.json" <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))
+runs = {r["preset"]: r for r in j["runs"]}
+assert set(runs) == {"lmmse-5", "linear", "rt-8+lmmse-5"}, set(runs)
+for name, r in runs.items():
+    c = r["curve"]
+    assert "drop_check" in r and "dropped" not in r, (name, r.get("drop_check"))
+    for p in c:
+        assert len(p["levels"]) == 2 and all(l["psnr"] > 5 for l in p["levels"]), p
+    m = [p["minutes"] for p in c]
+    assert m == sorted(m), m
+    if name == "lmmse-5":
+        assert len(c) == 1 and 0 < m[0] < 1, c
+    else:
+        assert len(c) >= 2 and m[0] == 0.1 and m[-1] <= 0.31, (name, m)
+assert runs["rt-8+lmmse-5"]["base"] == "lmmse-5"
+PY
+check "curves, drop checks, base" [ $? -eq 0 ]
+python3 - "$S/runs/rt-8+lmmse-5/model.safetensors" <<'PY'
+import json, struct, sys
+f = open(sys.argv[1], "rb")
+n = struct.unpack("<Q", f.read(8))[0]
+h = json.loads(f.read(n))
+assert "base.filters.weight" in h and h["__metadata__"]["base_preset"] == "lmmse-5", list(h)[:5]
+PY
+check "residual checkpoint carries its base" [ $? -eq 0 ]
+check "results.md: training-time table" grep -q "Accuracy against training time" "$S/results.md"
+check "accuracy_minutes chart" [ -s "$S/charts/accuracy_minutes.png" ]
+"$LM" study --config "$T/m.json" --output "$S" --threads 2 --quiet > /dev/null 2> "$T/err2"
+check "rerun skips all" [ "$(grep -c 'done before' "$T/err2")" -eq 3 ]
+
+# train --minutes: the clock is in the checkpoint and resume continues it
+"$LM" train --model linear --data "$CAVE" --patch 33x32 --batch 2 --accum-steps 1 \
+  --iterations 100000 --minutes 0.05 --val-interval 0 --checkpoint-interval 0 --workers 0 \
+  --output "$T/tm" --quiet > /dev/null 2> "$T/err3"
+check "train --minutes: $(tail -1 "$T/err3")" [ $? -eq 0 ]
+secs() { python3 - "$1" <<'PY'
+import json, struct, sys
+f = open(sys.argv[1], "rb"); n = struct.unpack("<Q", f.read(8))[0]
+print(json.loads(f.read(n))["__metadata__"]["seconds"])
+PY
+}
+s1=$(secs "$T/tm/optimizer.safetensors")
+check "stopped near the budget ($s1 s)" python3 -c "import sys; sys.exit(not 2.9 <= $s1 <= 30)"
+check "config records the resolved iterations" python3 -c "
+import json; c = json.load(open('$T/tm/config.json')); assert c['iterations'] < 100000, c['iterations']"
+"$LM" train --resume "$T/tm" --minutes 0.1 --quiet > /dev/null 2> "$T/err4"
+check "resume: $(tail -1 "$T/err4")" [ $? -eq 0 ]
+s2=$(secs "$T/tm/optimizer.safetensors")
+check "resume continues the clock ($s1 -> $s2 s)" python3 -c "import sys; sys.exit(not $s2 > $s1)"
+finish
