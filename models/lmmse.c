@@ -114,8 +114,10 @@ static lm_tensor *feature_branch(lm_ctx *c, const lm_model *m, const lmmse_net *
         lm_tensor *r1 = lm_reshape(c, lm_slice(c, n->rw, 0, i + 1, 1), 4, rs);
         rw = lm_add(c, lm_affine(c, rw, 1.0f - t, 0.0f), lm_affine(c, r1, t, 0.0f));
     }
-    lm_conv2d_opts go = {1, 1, 0, 0, 1, 1, P};
-    lm_tensor *y = lm_conv2d(c, hu, rw, NULL, &go);                /* channel p 33 + c */
+    lm_conv ro = {.w = rw, .o = {1, 1, 0, 0, 1, 1, P}, .cin = P * D, .cout = P * O, .kh = 1,
+                  .kw = 1}; /* through lm_conv_forward: profiles count it */
+    if (rw) rw->name = "readout.weight";
+    lm_tensor *y = lm_conv_forward(c, &ro, hu);                     /* channel p 33 + c */
     int y5[5] = {B, P, O, th, tw}, y4[4] = {B, O * P, th, tw};
     y = lm_reshape(c, lm_permute(c, lm_reshape(c, y, 5, y5), pm), 4, y4); /* c P + p */
     return lm_pixel_shuffle(c, y, ty, tx);
@@ -134,7 +136,10 @@ static lm_tensor *run_group(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw
     lm_pad_mode mode = (h > n->hi_y && h > -n->lo_y && wd > n->hi_x && wd > -n->lo_x)
                            ? LM_PAD_REFLECT : LM_PAD_ZERO; /* reflect needs pad < size */
     u = lm_pad2d(c, u, -n->lo_y, n->hi_y, -n->lo_x, n->hi_x, mode);
-    lm_tensor *y = lm_pixel_shuffle(c, lm_conv2d(c, u, cw, cb, NULL), ty, tx);
+    lm_conv tk = {.w = cw, .b = cb, .cin = n->P, .kh = n->hi_y - n->lo_y + 1,
+                  .kw = n->hi_x - n->lo_x + 1}; /* through lm_conv_forward: profiles count it */
+    if (cw) cw->name = "filters.weight";
+    lm_tensor *y = lm_pixel_shuffle(c, lm_conv_forward(c, &tk, u), ty, tx);
     if (n->D == 0) return y;
     return lm_add(c, y, feature_branch(c, m, n, u, s, raw->shape[2], raw->shape[3]));
 }

@@ -55,7 +55,10 @@ lm_status lm_model_profile(lm_model *m, int B, int H, int W, lm_profile *out, lm
     lm_ctx_set_grad(&c, 0);
     lm_layer_observe(&c, observe, out);
     lm_tensor *raw = lm_tensor_zeros(&c, 4, (int[]){B, m->in_channels > 0 ? m->in_channels : 1, H, W});
+    float sig = m->noise_sigma; /* the cost does not depend on the noise level */
+    if (m->noise_input && !(sig >= 0.0f) && !m->noise_sigma_items) m->noise_sigma = 0.0f;
     lm_tensor *y = lm_model_forward(&c, m, raw);
+    m->noise_sigma = sig;
     lm_layer_observe(NULL, NULL, NULL);
     lm_status st = LM_OK;
     if (!y) {
