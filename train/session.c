@@ -116,9 +116,11 @@ static lm_status write_fit_report(const lm_train_cfg *cfg, const lm_lmmse_fit_re
 {
     json_t *lv = json_array();
     for (int l = 0; l < LM_LMMSE_LEVELS; l++)
-        json_array_append_new(lv, json_pack("{s:f, s:f, s:o}", "sigma", (double)lm_lmmse_sigmas[l],
-                              "ridge", r->ridge[l], "val_psnr", isfinite(r->val_psnr[l])
-                              ? json_real(r->val_psnr[l]) : json_null()));
+        json_array_append_new(lv, json_pack("{s:f, s:o, s:o, s:b}", "sigma",
+                              (double)lm_lmmse_sigmas[l], "ridge", isfinite(r->ridge[l])
+                              ? json_real(r->ridge[l]) : json_null(), "val_psnr",
+                              isfinite(r->val_psnr[l]) ? json_real(r->val_psnr[l]) : json_null(),
+                              "interpolated", !isfinite(r->ridge[l])));
     json_t *root = json_pack("{s:s, s:i, s:I, s:I, s:I, s:f, s:b, s:o}", "model", cfg->model,
                              "window", K, "patches", (json_int_t)r->patches,
                              "val_patches", (json_int_t)r->val_patches, "rows", (json_int_t)r->rows,
