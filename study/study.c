@@ -410,6 +410,23 @@ static lm_status apply_preset_train(const lm_study_cfg *cfg, const char *name, l
     return st;
 }
 
+/* A time-budgeted run whose checkpoint reached the end of its (resolved) schedule. */
+static int schedule_done(const char *rundir)
+{
+    char p[PATH_MAX_LEN + 32];
+    snprintf(p, sizeof p, "%s/config.json", rundir);
+    json_error_t je;
+    json_t *c = json_load_file(p, 0, &je);
+    long total = (long)json_integer_value(json_object_get(c, "iterations"));
+    json_decref(c);
+    snprintf(p, sizeof p, "%s/model.safetensors", rundir);
+    lm_err e = {0};
+    char *it = lm_safetensors_meta(p, "iteration", &e);
+    long done = it ? atol(it) : -1;
+    free(it);
+    return total > 0 && done >= total;
+}
+
 /* Train (or continue) one run; stop_s > 0 stops it at that much training time (the early-drop
  * phase). A closed-form fit, or a run whose checkpoint is past stop_s, is not trained again. */
 static lm_status train_preset(const lm_study_cfg *cfg, const char *dir, const run_spec *rs,
@@ -438,7 +455,8 @@ static lm_status train_preset(const lm_study_cfg *cfg, const char *dir, const ru
     snprintf(fitp, sizeof fitp, "%s/fit.json", rundir);
     double done_s = resume ? lm_train_checkpoint_seconds(rundir) : 0.0;
     if (resume && (access(fitp, F_OK) == 0 || (stop_s > 0 && done_s >= stop_s - 1.0) ||
-                   (tc.minutes > 0 && done_s >= tc.minutes * 60.0 - 1.0))) {
+                   (tc.minutes > 0 && (done_s >= tc.minutes * 60.0 - 1.0 ||
+                                       schedule_done(rundir))))) {
         fprintf(o->log, "study: %s: trained before (%.1f min), not trained again\n", preset,
                 run_minutes(rundir));
         return LM_OK;

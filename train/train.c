@@ -37,6 +37,7 @@ typedef struct loop {
     long total;                   /* iterations of the schedule (cfg->iterations, or resolved
                                    * from the time budget) */
     double seconds0;              /* training seconds before this invocation (resume) */
+    double t_first;               /* when this invocation's first iteration ended (0: not yet) */
     double snap_done;             /* last snapshot mark written or found (minutes) */
 } loop;
 
@@ -378,14 +379,21 @@ static double elapsed(const loop *L) { return L->seconds0 + (now_s() - L->t0); }
 
 /* Time budget: at 3 % and 50 % of it (training time over all invocations), the schedule's
  * length becomes the iterations that fit in the budget at this invocation's speed (at most
- * cfg->iterations); config.json records it, so a rerun with --iterations repeats the schedule. */
+ * cfg->iterations); config.json records it, so a rerun with --iterations repeats the schedule.
+ * The speed is measured from the end of this invocation's first iteration (start-up, first
+ * batches and a resume's loading excluded) over at least 20 iterations and 5 seconds: a
+ * resumed run passes the marks at once, and its first few iterations say little. */
 static void resolve_budget(loop *L, long done, double *next_mark, long *end)
 {
     const lm_train_cfg *cfg = L->cfg;
-    double el = elapsed(L), budget = cfg->minutes * 60.0, own = now_s() - L->t0;
-    if (budget <= 0 || el < *next_mark || done - L->it0 < 5 || !(own > 0)) return;
-    *next_mark = *next_mark < 0.5 * budget ? 0.5 * budget : INFINITY;
-    long fit = done + (long)((budget - el) / (own / (double)(done - L->it0)));
+    double el = elapsed(L), budget = cfg->minutes * 60.0, t = now_s();
+    if (budget <= 0) return;
+    if (L->t_first == 0.0) L->t_first = t;
+    double own = t - L->t_first;
+    long n = done - L->it0 - 1;
+    if (el < *next_mark || n < 20 || own < 5.0) return;
+    *next_mark = el < 0.5 * budget ? 0.5 * budget : INFINITY;
+    long fit = done + (long)((budget - el) / (own / (double)n));
     if (fit > cfg->iterations) fit = cfg->iterations;
     if (fit <= done) fit = done + 1;
     L->total = fit;
