@@ -381,7 +381,8 @@ static double elapsed(const loop *L) { return L->seconds0 + (now_s() - L->t0); }
  * length becomes the iterations that fit in the budget at this invocation's speed (at most
  * cfg->iterations); config.json records it, so a rerun with --iterations repeats the schedule.
  * The speed is measured from the end of this invocation's first iteration (start-up, first
- * batches and a resume's loading excluded) over at least 20 iterations and 5 seconds: a
+ * batches and a resume's loading excluded) over at least 20 iterations and 5 seconds (a tenth
+ * of the budget when that is shorter): a
  * resumed run passes the marks at once, and its first few iterations say little. */
 static void resolve_budget(loop *L, long done, double *next_mark, long *end)
 {
@@ -391,7 +392,7 @@ static void resolve_budget(loop *L, long done, double *next_mark, long *end)
     if (L->t_first == 0.0) L->t_first = t;
     double own = t - L->t_first;
     long n = done - L->it0 - 1;
-    if (el < *next_mark || n < 20 || own < 5.0) return;
+    if (el < *next_mark || n < 20 || own < fmin(5.0, 0.1 * budget)) return;
     *next_mark = el < 0.5 * budget ? 0.5 * budget : INFINITY;
     long fit = done + (long)((budget - el) / (own / (double)n));
     if (fit > cfg->iterations) fit = cfg->iterations;
