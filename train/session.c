@@ -90,13 +90,19 @@ static lm_model *create_model(const lm_train_cfg *cfg, const lm_mosaic *mo, uint
     if (!cfg->base[0]) return lm_model_create(cfg->model, mo, cfg->seed, err);
     char file[LM_TRAIN_PATH_LEN + 32];
     weights_path(cfg->base, file, sizeof file);
-    char *bp = lm_safetensors_meta(file, "preset", err);
-    char *bh = bp ? lm_safetensors_meta(file, "system_hash", err) : NULL;
+    lm_err e2 = {0};
+    char *bp = lm_safetensors_meta(file, "preset", &e2);
+    char *bh = bp ? lm_safetensors_meta(file, "system_hash", &e2) : NULL;
+    char *bb = bp ? lm_safetensors_meta(file, "base_preset", &e2) : NULL;
     char want[32];
     snprintf(want, sizeof want, "%016llx", (unsigned long long)sys_hash);
     lm_model *m = NULL;
-    if (!bp && !err->status)
-        lm_err_set(err, LM_ERR_FORMAT, "base %s: not a Lumosaic model (no preset)", file);
+    if (!bp) /* a bad base is bad input (exit 2), whatever the reader's status */
+        lm_err_set(err, LM_ERR_ARG, "base %s: %s", file, e2.status ? e2.msg
+                   : "not a Lumosaic model (no preset)");
+    else if (bb && bb[0])
+        lm_err_set(err, LM_ERR_ARG, "base %s: is itself a residual (%s on %s); give a plain "
+                   "model as the base", file, bp, bb);
     else if (bp && bh && sys_hash && strcmp(bh, want))
         lm_err_set(err, LM_ERR_ARG, "base %s: trained for another system description", file);
     else if (bp && (m = lm_model_create_residual(cfg->model, bp, mo, cfg->seed,
@@ -107,6 +113,7 @@ static lm_model *create_model(const lm_train_cfg *cfg, const lm_mosaic *mo, uint
     }
     free(bp);
     free(bh);
+    free(bb);
     return m;
 }
 

@@ -6,7 +6,8 @@
 # level), the fit has one point at its fit time, every record has its drop check, the residual
 # record names its base and its checkpoint carries the base's weights, results.md has the
 # accuracy-against-training-time table, the accuracy_minutes chart exists; a second run skips
-# everything; `train --minutes` records its training time and resume continues the clock.
+# everything; `train --minutes` records its training time and resume continues the clock; a
+# missing base or a residual given as a base is refused (one line, exit 2, nothing written).
 # usage: study_minutes.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 S=$T/s
@@ -85,8 +86,24 @@ s1=$(secs "$T/tm/optimizer.safetensors")
 check "stopped near the budget ($s1 s)" python3 -c "import sys; sys.exit(not 2.9 <= $s1 <= 30)"
 check "config records the resolved iterations" python3 -c "
 import json; c = json.load(open('$T/tm/config.json')); assert c['iterations'] < 100000, c['iterations']"
-"$LM" train --resume "$T/tm" --minutes 0.1 --quiet > /dev/null 2> "$T/err4"
+# interrupted (--stop-after) and resumed: the clock goes on to the budget
+"$LM" train --model linear --data "$CAVE" --patch 33x32 --batch 2 --accum-steps 1 \
+  --iterations 100000 --minutes 0.1 --val-interval 0 --checkpoint-interval 0 --workers 0 \
+  --stop-after 20 --output "$T/tr" --quiet > /dev/null 2> "$T/err4"
+check "interrupted run: $(tail -1 "$T/err4")" [ $? -eq 0 ]
+s1=$(secs "$T/tr/optimizer.safetensors")
+"$LM" train --resume "$T/tr" --quiet > /dev/null 2> "$T/err4"
 check "resume: $(tail -1 "$T/err4")" [ $? -eq 0 ]
-s2=$(secs "$T/tm/optimizer.safetensors")
-check "resume continues the clock ($s1 -> $s2 s)" python3 -c "import sys; sys.exit(not $s2 > $s1)"
+s2=$(secs "$T/tr/optimizer.safetensors")
+check "resume continues the clock to the budget ($s1 -> $s2 s)" \
+  python3 -c "import sys; sys.exit(not ($s1 < 3 and 5.5 <= $s2 <= 40))"
+
+# a bad base: one line, exit 2, no run folder
+"$LM" train --model rt-8 --base "$T/none" --data "$CAVE" --output "$T/b1" 2> "$T/e5"
+check "missing base: exit 2" [ $? -eq 2 ]
+check "missing base: one line" [ "$(wc -l < "$T/e5")" -eq 1 ]
+check "missing base: no run folder" [ ! -e "$T/b1" ]
+"$LM" train --model linear --base "$S/runs/rt-8+lmmse-5" --data "$CAVE" --output "$T/b2" 2> "$T/e6"
+check "residual as a base: exit 2" [ $? -eq 2 ]
+check "residual as a base: says so" grep -q "itself a residual" "$T/e6"
 finish
