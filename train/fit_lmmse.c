@@ -125,8 +125,11 @@ static void accumulate(fitter *f, stats *st, const float *raw, const float *tgt,
     }
 }
 
-int lm_ridge_solve(const double *A, const double *B, int n, int m, double add, double *W,
-                   double *L)
+/* Solve (A + add D) W = B by Cholesky, D = identity except its last diagonal entry (the bias
+ * row is not regularised). A: n x n, upper triangle read (row-major); B, W: n x m; L: n x n
+ * scratch. Returns 0 when the matrix is not positive definite. */
+static int ridge_solve(const double *A, const double *B, int n, int m, double add, double *W,
+                       double *L)
 {
     for (int a = 0; a < n; a++)
         for (int b = a; b < n; b++) L[b * n + a] = A[a * n + b] + (a == b && a < n - 1 ? add : 0);
@@ -160,7 +163,7 @@ int lm_ridge_solve(const double *A, const double *B, int n, int m, double add, d
 
 static int solve(const fitter *f, const stats *s, double add, double *W, double *L)
 {
-    return lm_ridge_solve(s->A, s->B, f->F1, O, add, W, L);
+    return ridge_solve(s->A, s->B, f->F1, O, add, W, L);
 }
 
 /* Squared error of W on the validation statistics at noise sd s, channels 1..31. */

@@ -19,12 +19,6 @@ typedef struct lm_lmmse_fit_report {
     double seconds;
 } lm_lmmse_fit_report;
 
-/* Solve (A + add D) W = B by Cholesky, D = identity except its last diagonal entry (the bias
- * row is not regularised). A: n x n, upper triangle read (row-major); B, W: n x m; L: n x n
- * scratch. Returns 0 when the matrix is not positive definite. */
-int lm_ridge_solve(const double *A, const double *B, int n, int m, double add, double *W,
-                   double *L);
-
 typedef struct lm_dataset lm_dataset;
 /* Fit m (an lmmse model) from `patches` training patches of d (batches 0.. of `batch`; d must
  * be opened without noise: the fit adds it analytically) of size ph x pw, and d's validation
