@@ -295,8 +295,15 @@ static void ne_estimate(ne_frame *f, void *scratch, size_t bytes, lm_noise_info 
 }
 
 /* Checks, scan and estimate: sigma, peak and fraction (level left 0). */
+size_t lm_noise_scratch_bytes(int width)
+{
+    return (NE_SHELLS + 1) * sizeof(ne_hist) + NE_SCORE_BINS * sizeof(long) +
+           (size_t)(width > 0 ? width : 0) * (sizeof(float) + sizeof(int));
+}
+
+/* scratch: lm_noise_scratch_bytes(width) bytes of the caller's, or NULL (allocated here). */
 static lm_status ne_run(const float *raw, int height, int width, int tile_h, int tile_w,
-                        lm_noise_info *out, lm_err *err)
+                        void *scratch, lm_noise_info *out, lm_err *err)
 {
     lm_status s = ne_check(raw, height, width, tile_h, tile_w, out, err);
     if (s != LM_OK) return s;
@@ -310,19 +317,19 @@ static lm_status ne_run(const float *raw, int height, int width, int tile_h, int
         out->peak = f.hi, out->fraction = 1.0f;
         return LM_OK;
     }
-    size_t bytes = (NE_SHELLS + 1) * sizeof(ne_hist) + NE_SCORE_BINS * sizeof(long) +
-                   (size_t)width * (sizeof(float) + sizeof(int));
-    void *scratch = calloc(1, bytes);
-    if (!scratch) return lm_err_set(err, LM_ERR_NOMEM, "noise: out of memory (%zu bytes)", bytes);
-    ne_estimate(&f, scratch, bytes, out);
-    free(scratch);
+    size_t bytes = lm_noise_scratch_bytes(width);
+    void *own = scratch ? NULL : calloc(1, bytes);
+    if (!scratch && !own)
+        return lm_err_set(err, LM_ERR_NOMEM, "noise: out of memory (%zu bytes)", bytes);
+    ne_estimate(&f, scratch ? scratch : own, bytes, out);
+    free(own);
     return LM_OK;
 }
 
 lm_status lm_noise_analyze(const float *raw, int height, int width, int tile_h, int tile_w,
                            lm_noise_info *out, lm_err *err)
 {
-    lm_status s = ne_run(raw, height, width, tile_h, tile_w, out, err);
+    lm_status s = ne_run(raw, height, width, tile_h, tile_w, NULL, out, err);
     if (s != LM_OK) return s;
     if (!(out->peak > 0))
         return lm_err_set(err, LM_ERR_NUMERIC,
@@ -335,7 +342,15 @@ lm_status lm_noise_analyze(const float *raw, int height, int width, int tile_h, 
 float lm_noise_estimate(const float *raw, int height, int width, int tile_h, int tile_w)
 {
     lm_noise_info info;
-    lm_status s = ne_run(raw, height, width, tile_h, tile_w, &info, NULL);
+    lm_status s = ne_run(raw, height, width, tile_h, tile_w, NULL, &info, NULL);
+    return s == LM_OK ? info.sigma : (float)s;
+}
+
+float lm_noise_estimate_scratch(const float *raw, int height, int width, int tile_h, int tile_w,
+                                void *scratch)
+{
+    lm_noise_info info;
+    lm_status s = ne_run(raw, height, width, tile_h, tile_w, scratch, &info, NULL);
     return s == LM_OK ? info.sigma : (float)s;
 }
 

@@ -32,6 +32,7 @@
  * of the darkest flat regions. Nor a denoiser. */
 #ifndef LM_NOISE_EST_H
 #define LM_NOISE_EST_H
+#include <stddef.h>
 #include "tensor/status.h"
 
 typedef struct lm_noise_info {
@@ -52,6 +53,11 @@ lm_status lm_noise_analyze(const float *raw, int height, int width, int tile_h, 
 /* Standard deviation of the additive white Gaussian noise in the frame's units (>= 0), or, on
  * failure, the negative lm_status of lm_noise_analyze as a float (e.g. -1 = LM_ERR_SHAPE). */
 float lm_noise_estimate(const float *raw, int height, int width, int tile_h, int tile_w);
+/* The same with the caller's scratch of lm_noise_scratch_bytes(width) bytes (no allocation: a
+ * training loop estimating every patch of every step). */
+size_t lm_noise_scratch_bytes(int width);
+float lm_noise_estimate_scratch(const float *raw, int height, int width, int tile_h, int tile_w,
+                                void *scratch);
 /* The level k = sigma / peak (>= 0), or the negative lm_status on failure (including
  * LM_ERR_NUMERIC for a frame with no positive signal). */
 float lm_noise_level(const float *raw, int height, int width, int tile_h, int tile_w);

@@ -144,6 +144,13 @@ static void test_pure_noise_sizes(void)
             CHECK_MSG(fabs(s1 / 0.02 - 1) < tol[s], "tile %dx%d, %dx%d: sigma %g, want 0.02", th,
                       tw, h, w, s1);
             CHECK(s1 == s2);
+            /* the caller's scratch, dirty from another frame, gives the same number */
+            size_t nb = lm_noise_scratch_bytes(w);
+            unsigned char *scr = malloc(nb);
+            memset(scr, 0xA5, nb);
+            CHECK(lm_noise_estimate_scratch(a, h, w, th, tw, scr) == s1);
+            CHECK(lm_noise_estimate_scratch(a, h, w, th, tw, scr) == s1);
+            free(scr);
             free(a);
         }
 }

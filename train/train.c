@@ -29,6 +29,7 @@ typedef struct loop {
     int np;                       /* 0 on the CPU: no swapping, the path is unchanged */
     float *raw, *target, *pred;   /* one batch, host */
     float *sigma;                 /* per item: the input's estimated noise sd (noise_input) */
+    void *noise_scratch;          /* the estimator's scratch (noise_input), allocated once */
     FILE *log;
     long it0;                     /* iteration this invocation started at */
     long saved;                   /* iteration of the checkpoint on disk (-1: none yet) */
@@ -87,7 +88,8 @@ static void set_noise(loop *L, int B)
     if (!m->noise_input) return;
     const int H = L->cfg->patch_h, W = L->cfg->patch_w;
     for (int b = 0; b < B; b++) {
-        float s = lm_noise_estimate(L->raw + (size_t)b * H * W, H, W, m->mosaic.ty, m->mosaic.tx);
+        float s = lm_noise_estimate_scratch(L->raw + (size_t)b * H * W, H, W, m->mosaic.ty,
+                                            m->mosaic.tx, L->noise_scratch);
         L->sigma[b] = s > 0.0f ? s : 0.0f;
     }
     m->noise_sigma_items = L->sigma;
@@ -327,7 +329,8 @@ static lm_status setup(loop *L, lm_err *err)
     L->target = malloc(bn * LM_MODEL_OUT_CHANNELS * sizeof(float));
     L->pred = malloc(bn * LM_MODEL_OUT_CHANNELS * sizeof(float));
     L->sigma = malloc((size_t)cfg->batch * sizeof(float));
-    if (!L->raw || !L->target || !L->pred || !L->sigma)
+    L->noise_scratch = malloc(lm_noise_scratch_bytes(cfg->patch_w));
+    if (!L->raw || !L->target || !L->pred || !L->sigma || !L->noise_scratch)
         return lm_err_set(err, LM_ERR_NOMEM, "train: out of memory for batch %d of %dx%d",
                           cfg->batch, cfg->patch_h, cfg->patch_w);
     lm_adam_cfg ac;
@@ -343,6 +346,7 @@ static void teardown(loop *L)
     free(L->target);
     free(L->pred);
     free(L->sigma);
+    free(L->noise_scratch);
     L->model->noise_sigma_items = NULL;
     lm_adam_free(&L->opt);
     lm_ctx_free(&L->ctx); /* before its backend */
