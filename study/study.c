@@ -582,9 +582,10 @@ static lm_status drop_phase(const lm_study_cfg *cfg, const char *dir, const run_
         if (!st && !done) st = train_preset(cfg, dir, &rs[i], rundir, o, stop_s, rec, err);
         snprintf(fitp, sizeof fitp, "%s/fit.json", rundir);
         snprintf(snap, sizeof snap, "%s/snapshots/%gmin", rundir, (double)cfg->drop_minutes);
-        int fit = access(fitp, F_OK) == 0;
-        if (!st && !done && (fit || access(snap, F_OK) == 0))
-            st = dir_levels(cfg, fit ? rundir : snap, h, o->threads, &lv, err);
+        /* the fit; the snapshot; or a schedule that ended before the check: the final model */
+        int fit = access(fitp, F_OK) == 0, has_snap = access(snap, F_OK) == 0;
+        if (!st && !done && (fit || has_snap || schedule_done(rundir)))
+            st = dir_levels(cfg, has_snap ? snap : rundir, h, o->threads, &lv, err);
         if (lv) psnr[i] = json_number_value(json_object_get(json_array_get(lv, 0), "psnr"));
         json_decref(lv);
         json_decref(rec);

@@ -40,6 +40,9 @@ typedef struct loop {
     double seconds0;              /* training seconds before this invocation (resume) */
     double t_first;               /* when this invocation's first iteration ended (0: not yet) */
     double snap_done;             /* last snapshot mark written or found (minutes) */
+    long next_it;                 /* time budget: re-resolve at this iteration too (0: none) */
+    long it_res;                  /* time budget: iteration and time of the first resolution */
+    double t_res;
 } loop;
 
 static double now_s(void)
@@ -381,12 +384,15 @@ static lm_status begin(loop *L, long *start, lm_err *err)
 /* Seconds of training so far, over every invocation (resume restores the checkpoint's). */
 static double elapsed(const loop *L) { return L->seconds0 + (now_s() - L->t0); }
 
-/* Time budget: at 3 % and 50 % of it (training time over all invocations), the schedule's
- * length becomes the iterations that fit in the budget at this invocation's speed (at most
- * cfg->iterations); config.json records it, so a rerun with --iterations repeats the schedule.
- * The speed is measured from the end of this invocation's first iteration (start-up, first
- * batches and a resume's loading excluded) over at least 20 iterations and 5 seconds (a tenth
- * of the budget when that is shorter): a
+/* Time budget: at 3 % and 50 % of it (training time over all invocations), and half-way
+ * through each resolved schedule while more than a tenth of the budget is left, the schedule's
+ * length becomes the iterations that fit in the rest of the budget at the speed measured since
+ * the previous resolution (at most cfg->iterations); config.json records it, so a rerun with
+ * --iterations repeats the schedule. The iteration marks follow a machine whose speed changes
+ * (a busy start, another process leaving): one early estimate would end the schedule long
+ * before the budget, or cut it short. The first speed is measured from the end of this
+ * invocation's first iteration (start-up, first batches and a resume's loading excluded) over
+ * at least 20 iterations and 5 seconds (a tenth of the budget when that is shorter): a
  * resumed run passes the marks at once, and its first few iterations say little. */
 static void resolve_budget(loop *L, long done, double *next_mark, long *end)
 {
@@ -396,11 +402,18 @@ static void resolve_budget(loop *L, long done, double *next_mark, long *end)
     if (L->t_first == 0.0) L->t_first = t;
     double own = t - L->t_first;
     long n = done - L->it0 - 1;
-    if (el < *next_mark || n < 20 || own < fmin(5.0, 0.1 * budget)) return;
-    *next_mark = el < 0.5 * budget ? 0.5 * budget : INFINITY;
-    long fit = done + (long)((budget - el) / (own / (double)n));
+    int by_it = L->next_it > 0 && done >= L->next_it;
+    if ((el < *next_mark && !by_it) || n < 20 || own < fmin(5.0, 0.1 * budget)) return;
+    double per_it = own / (double)n;
+    if (L->it_res > 0 && done - L->it_res >= 20 && t > L->t_res)
+        per_it = (t - L->t_res) / (double)(done - L->it_res);
+    long fit = done + (long)((budget - el) / per_it);
     if (fit > cfg->iterations) fit = cfg->iterations;
     if (fit <= done) fit = done + 1;
+    if (el >= *next_mark) *next_mark = el < 0.5 * budget ? 0.5 * budget : INFINITY;
+    L->next_it = budget - el > 0.1 * budget ? done + (fit - done) / 2 : 0;
+    L->it_res = done;
+    L->t_res = t;
     L->total = fit;
     L->opt.cfg.total_steps = fit;
     if (*end > fit || L->opts->stop_after <= 0) *end = fit;
