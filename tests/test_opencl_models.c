@@ -124,14 +124,18 @@ static void compare_params(const lm_model *m, const run_out *g, const run_out *c
     CHECK(all.n > 0);
 }
 
-static void check_model(const char *preset, int B, int H, int W)
+/* base: NULL, or a residual of preset on this base; models that read the noise level get
+ * sigma (between two of lmmse's levels, so the filters blend). */
+static void check_model_on(const char *preset, const char *base, int B, int H, int W)
 {
     lm_mosaic mo;
     test_mosaic(&mo);
     lm_err e = {0};
-    lm_model *m = lm_model_create(preset, &mo, 7, &e);
+    lm_model *m = base ? lm_model_create_residual(preset, base, &mo, 7, 0, 1.0f, &e)
+                       : lm_model_create(preset, &mo, 7, &e);
     CHECK_MSG(m != NULL, "%s: %s", preset, e.msg);
     if (!m) return;
+    m->noise_sigma = 0.03f;
     lm_param *g1 = lm_params_find(&m->params, "la.gamma");
     lm_param *g2 = lm_params_find(&m->params, "csa.gamma");
     if (g1) g1->t.data[0] = 0.3f;
@@ -163,8 +167,16 @@ static void check_model(const char *preset, int B, int H, int W)
     lm_model_free(m);
 }
 
+static void check_model(const char *preset, int B, int H, int W)
+{
+    check_model_on(preset, NULL, B, H, W);
+}
+
 static void test_models(void)
 {
+    check_model("lmmse", 2, 18, 24);
+    check_model("lmmse-5-rf6", 2, 12, 16);
+    check_model_on("rt-8", "lmmse-5", 2, 12, 16);
     check_model("linear", 2, 12, 16);
     check_model("han-tiny", 2, 12, 16);
     check_model("mcan-tiny", 2, 12, 16);
