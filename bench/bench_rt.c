@@ -8,14 +8,16 @@
  * Two timings per model: "forward" = lm_whole_forward into a reused 31-band buffer (a video
  * loop reuses its output), "infer" = lm_whole_infer (allocates and frees the cube each call).
  * Repeats are interleaved over models and the two calls (A, B, A, B, ...) since this VM loses
- * CPU to its host at times; min and median are printed, fps from both. Not a test. */
+ * CPU to its host at times; min and median are printed, fps from both. Then lmmse's two
+ * forward paths on the whole frame at once, interleaved: the direct filters (no gradients,
+ * what inference runs) and the tile-unit conv (what gradients flow through). Not a test. */
 #include "infer/whole.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include "bench/bench_util.h"
 
 #define MAXREP 64
-static const char *models[] = {"linear", "rt-8", "rt-16"};
+static const char *models[] = {"linear", "rt-8", "rt-16", "lmmse"};
 #define NM (int)(sizeof models / sizeof models[0])
 
 int main(int argc, char **argv)
@@ -65,6 +67,27 @@ int main(int argc, char **argv)
                lm_params_count(&m[i]->params, 0), 1e3 * a, 1e3 * b, 1 / a, 1 / b, 1e3 * d, 1e3 * f,
                1 / f);
     }
+    /* lmmse: direct path (grad off) against the tile-unit conv (grad on, params trainable) */
+    lm_model *lm = m[NM - 1];
+    lm->noise_sigma = 0.02f; /* between two levels: the filters blend */
+    double td[MAXREP], tt[MAXREP];
+    for (int k = -1; k < reps; k++)
+        for (int g = 0; g < 2; g++) {
+            lm_ctx_reset(&c);
+            lm_ctx_set_grad(&c, g);
+            lm_tensor *x = lm_tensor_from(&c, 4, (int[]){1, 1, H, W}, frame);
+            double t0 = bench_now();
+            lm_tensor *y = lm_model_forward(&c, lm, x);
+            double t1 = bench_now();
+            if (!y) return fprintf(stderr, "%s\n", lm_ctx_message(&c)), 1;
+            if (k >= 0) (g ? tt : td)[k] = t1 - t0;
+        }
+    lm_ctx_reset(&c);
+    lm_ctx_set_grad(&c, 1);
+    printf("lmmse whole frame at once: direct %.2f / %.2f ms (min / med), tile-unit conv %.2f / "
+           "%.2f ms, ratio %.2f / %.2f\n", 1e3 * bench_min(td, reps), 1e3 * bench_median(td, reps),
+           1e3 * bench_min(tt, reps), 1e3 * bench_median(tt, reps),
+           bench_min(tt, reps) / bench_min(td, reps), bench_median(tt, reps) / bench_median(td, reps));
     for (int i = 0; i < NM; i++) lm_model_free(m[i]);
     free(frame);
     free(out);

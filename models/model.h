@@ -86,7 +86,7 @@ lm_status lm_mst_reconstruct(lm_model *m, const float *in, int H, int W, float *
  * channels, one filter set per noise level of lm_lmmse_sigmas (absolute noise sd of the input),
  * interpolated between levels. Presets "lmmse" (K = 11), "lmmse-K" (odd K), "lmmse-rf" (K = 11
  * plus 256 random ReLU features). */
-#define LM_LMMSE_LEVELS 10
+#define LM_LMMSE_LEVELS 12
 extern const float lm_lmmse_sigmas[LM_LMMSE_LEVELS];
 lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err);
 /* K of an lmmse model, 0 for any other model. */

@@ -57,7 +57,9 @@ static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y
     return acc;
 }
 
-static void check_forward(const char *preset, int H, int W, float sigma, int l, double t)
+/* grad 1: the tile-unit conv gradients flow through; 0: the direct no-gradient path */
+static void check_forward_mode(const char *preset, int H, int W, float sigma, int l, double t,
+                               int grad)
 {
     lm_mosaic mo;
     test_mosaic(&mo);
@@ -71,6 +73,7 @@ static void check_forward(const char *preset, int H, int W, float sigma, int l, 
     lm_rng_seed(&r, 4);
     lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){1, 1, H, W}, &r, 0.0f, 1.0f);
     m->noise_sigma = sigma;
+    lm_ctx_set_grad(&c, grad);
     lm_tensor *y = lm_model_forward(&c, m, x);
     CHECK_MSG(y && y->shape[1] == O && y->shape[2] == H && y->shape[3] == W, "%s", c.msg);
     double worst = 0;
@@ -81,10 +84,44 @@ static void check_forward(const char *preset, int H, int W, float sigma, int l, 
                                 y->data[((size_t)ch * H + Y) * W + X]);
                 worst = d > worst ? d : worst;
             }
-    CHECK_MSG(worst < 2e-5, "%s sigma %g: forward differs from the direct loop by %g", preset,
-              sigma, worst);
+    CHECK_MSG(worst < 2e-5, "%s sigma %g grad %d: forward differs from the direct loop by %g",
+              preset, sigma, grad, worst);
     lm_ctx_free(&c);
     lm_model_free(m);
+}
+
+static void check_forward(const char *preset, int H, int W, float sigma, int l, double t)
+{
+    check_forward_mode(preset, H, W, sigma, l, t, 1);
+    check_forward_mode(preset, H, W, sigma, l, t, 0);
+}
+
+/* The direct path (no gradients) against the tile-unit conv on a batch whose items have their
+ * own noise levels, on frames large enough to reflect and too small (zero padding). */
+static void test_direct_matches_tile_path(void)
+{
+    const int sizes[3][2] = {{24, 32}, {6, 8}, {30, 20}};
+    for (int k = 0; k < 3; k++) {
+        const int H = sizes[k][0], W = sizes[k][1];
+        lm_err e = {0};
+        lm_model *m = lm_model_create("lmmse", NULL, 11, &e);
+        CHECK_MSG(m != NULL, "%s", e.msg);
+        if (!m) return;
+        lm_ctx c;
+        lm_ctx_init(&c, 2);
+        lm_rng r;
+        lm_rng_seed(&r, 7 + k);
+        lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){3, 1, H, W}, &r, 0.0f, 1.0f);
+        const float sig[3] = {0.0f, 0.04f, 0.04f};
+        m->noise_sigma_items = sig;
+        lm_tensor *yt = lm_contiguous(&c, lm_model_forward(&c, m, x));
+        lm_ctx_set_grad(&c, 0);
+        lm_tensor *yd = lm_model_forward(&c, m, x);
+        CHECK_MSG(yt && yd, "%s", c.msg);
+        if (yt && yd) CHECK_ARRAY_CLOSE(yd->data, yt->data, lm_tensor_numel(yt), 1e-5, 1e-5);
+        lm_ctx_free(&c);
+        lm_model_free(m);
+    }
 }
 
 static void test_forward_matches_direct_loop(void)
@@ -212,6 +249,7 @@ static void test_residual_starts_at_base(void)
     lm_rng_seed(&r, 5);
     lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){2, 1, 12, 16}, &r, 0.0f, 1.0f);
     rm->noise_sigma = b->noise_sigma = 0.02f;
+    lm_ctx_set_grad(&c, 0); /* one path for both (the frozen base and b) */
     lm_tensor *y1 = lm_model_forward(&c, rm, x), *y2 = lm_model_forward(&c, b, x);
     CHECK_MSG(y1 && y2, "%s", c.msg);
     if (y1 && y2) CHECK_ARRAY_CLOSE(y1->data, y2->data, lm_tensor_numel(y2), 0.0, 0.0);
@@ -243,8 +281,17 @@ static void fit_least_squares(const char *preset)
     CHECK_MSG(m && d, "%s", e.msg);
     lm_lmmse_fit_report rep;
     const int NP = 48, B = 16;
-    CHECK_MSG(lm_lmmse_fit(m, d, 24, 32, NP, B, NULL, &rep, &e) == LM_OK, "%s", e.msg);
+    CHECK_MSG(lm_lmmse_fit(m, d, 24, 32, NP, B, -1.0, NULL, &rep, &e) == LM_OK, "%s", e.msg);
     CHECK(rep.patches == NP && rep.rows == (long)NP * (24 - 4) * (32 - 4));
+    /* no validation split: the statistics mix real and synthetic patches as sampled */
+    int nsyn = 0;
+    for (long i = 0; i < NP; i++) {
+        lm_dataset_sample_info in;
+        CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &in, &e) == LM_OK);
+        nsyn += in.kind != LM_SAMPLE_SCENE;
+    }
+    CHECK_MSG(nsyn > 0 && nsyn < NP && fabs(rep.synth_weight[0] - (double)nsyn / NP) < 1e-12,
+              "%s: synthetic share %g, sampled %d of %d", preset, rep.synth_weight[0], nsyn, NP);
     /* ridge without validation is the small default: nudging must not help, clean level */
     float *raw = malloc(sizeof(float) * NP * 24 * 32), *tgt = malloc(sizeof(float) * NP * O * 24 * 32);
     for (int k = 0; k < NP / B; k++)
@@ -293,6 +340,7 @@ static void test_fit_is_least_squares(void)
 int main(void)
 {
     RUN(test_forward_matches_direct_loop);
+    RUN(test_direct_matches_tile_path);
     RUN(test_counts_and_capabilities);
     RUN(test_gradients);
     RUN(test_residual_starts_at_base);

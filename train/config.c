@@ -54,6 +54,8 @@ static const field fields[] = {
     FLD("output", F_STR, output, "DIR", "run folder (checkpoints, log.csv)"),
     FLD("fit", F_STR, fit, "M", "auto | closed | sgd (auto: closed form for lmmse presets)"),
     FLD("fit_patches", F_LONG, fit_patches, "N", "closed form: training patches (4096)"),
+    FLD("fit_synth", F_FLOAT, fit_synth, "F", "closed form: synthetic share of the statistics, "
+        "0..1 (-1: chosen on the validation split)"),
     FLD("base", F_STR, base, "RUN", "train as a residual on this run's model (e.g. an lmmse fit)"),
     FLD("base_trainable", F_INT, base_trainable, "0|1", "fine-tune the base with the net (0)"),
     FLD("res_init", F_FLOAT, res_init, "F", "residual: initial gates on the net's output (1; the net's output layers start at 0)"),
@@ -91,6 +93,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     snprintf(c->output, sizeof c->output, "runs/train");
     snprintf(c->fit, sizeof c->fit, "auto");
     c->fit_patches = 4096;
+    c->fit_synth = -1.0f;
     c->res_init = 1.0f;
 }
 
@@ -382,6 +385,9 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     if (strcmp(c->fit, "auto") && strcmp(c->fit, "closed") && strcmp(c->fit, "sgd"))
         BAD("'fit': must be auto, closed or sgd (got '%s')", c->fit);
     if (c->fit_patches < 1) BAD("'fit_patches': must be >= 1 (got %ld)", c->fit_patches);
+    if (!(c->fit_synth == -1.0f || (c->fit_synth >= 0.0f && c->fit_synth <= 1.0f)))
+        BAD("'fit_synth': must be -1 (chosen on validation) or in [0, 1] (got %g)",
+            (double)c->fit_synth);
     if (c->base_trainable != 0 && c->base_trainable != 1)
         BAD("'base_trainable': must be 0 or 1 (got %d)", c->base_trainable);
     if (!(c->minutes >= 0 && c->minutes <= 1e6))
@@ -420,8 +426,9 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
         "checkpoint_interval", (json_int_t)c->checkpoint_interval,
         "log_interval", (json_int_t)c->log_interval, "output", c->output);
     if (root)
-        json_object_update_new(root, json_pack("{s:s, s:I, s:s, s:i, s:f, s:f, s:s, s:i, s:i}", "fit", c->fit,
-                               "fit_patches", (json_int_t)c->fit_patches, "base", c->base,
+        json_object_update_new(root, json_pack("{s:s, s:I, s:f, s:s, s:i, s:f, s:f, s:s, s:i, s:i}", "fit", c->fit,
+                               "fit_patches", (json_int_t)c->fit_patches,
+                               "fit_synth", (double)c->fit_synth, "base", c->base,
                                "base_trainable", c->base_trainable,
                                "res_init", (double)c->res_init, "minutes", (double)c->minutes,
                                "snapshots", c->snapshots, "sensor_clip", c->sensor_clip,

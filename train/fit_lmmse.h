@@ -3,7 +3,7 @@
  * patches of the loader, solved by Cholesky for every noise level of the family with the noise
  * added analytically (s^2 on the window diagonal) and a ridge chosen on the validation split.
  * With random ReLU features (lmmse-rf) the readout is fitted the same way, on features of
- * noisy samples at five levels. What it is not: SGD (train.c) or the model itself. */
+ * noisy samples at six levels. What it is not: SGD (train.c) or the model itself. */
 #ifndef LM_FIT_LMMSE_H
 #define LM_FIT_LMMSE_H
 #include "models/model.h"
@@ -14,6 +14,8 @@ typedef struct lm_lmmse_fit_report {
     long rows;                   /* training pixels (rows of the normal equations), all phases */
     double ridge[LM_LMMSE_LEVELS];    /* chosen ridge per level, relative to the mean window
                                        * second moment (the default when no validation) */
+    double synth_weight[LM_LMMSE_LEVELS]; /* chosen share of synthetic patches in the
+                                           * statistics (NaN: an interpolated level) */
     double val_psnr[LM_LMMSE_LEVELS]; /* validation PSNR (31 bands, interior pixels, noise at
                                        * the level's sd); NaN without a validation split */
     double seconds;
@@ -24,9 +26,11 @@ typedef struct lm_dataset lm_dataset;
  * be opened without noise: the fit adds it analytically) of size ph x pw, and d's validation
  * samples. Writes every level's filters into m. */
 /* sensor: clip (to [0, 1]) and bits applied after the noise (NULL or zeros = none); with
- * either, or with random features, the noise is sampled at five levels (the others
+ * either, or with random features, the noise is sampled at six levels (the others
  * interpolated), since the analytic term no longer holds. */
+/* synth: the synthetic patches' share of the statistics (< 0: chosen on the validation split,
+ * or as sampled without one). */
 lm_status lm_lmmse_fit(lm_model *m, lm_dataset *d, int ph, int pw, long patches, int batch,
-                       const lm_noise_opts *sensor, lm_lmmse_fit_report *rep, lm_err *err);
+                       double synth, const lm_noise_opts *sensor, lm_lmmse_fit_report *rep, lm_err *err);
 
 #endif

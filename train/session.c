@@ -123,9 +123,11 @@ static lm_status write_fit_report(const lm_train_cfg *cfg, const lm_lmmse_fit_re
 {
     json_t *lv = json_array();
     for (int l = 0; l < LM_LMMSE_LEVELS; l++)
-        json_array_append_new(lv, json_pack("{s:f, s:o, s:o, s:b}", "sigma",
+        json_array_append_new(lv, json_pack("{s:f, s:o, s:o, s:o, s:b}", "sigma",
                               (double)lm_lmmse_sigmas[l], "ridge", isfinite(r->ridge[l])
-                              ? json_real(r->ridge[l]) : json_null(), "val_psnr",
+                              ? json_real(r->ridge[l]) : json_null(), "synth_weight",
+                              isfinite(r->synth_weight[l]) ? json_real(r->synth_weight[l])
+                              : json_null(), "val_psnr",
                               isfinite(r->val_psnr[l]) ? json_real(r->val_psnr[l]) : json_null(),
                               "interpolated", !isfinite(r->ridge[l])));
     json_t *root = json_pack("{s:s, s:i, s:I, s:I, s:I, s:f, s:b, s:o}", "model", cfg->model,
@@ -163,6 +165,7 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     sensor.clip = cfg->sensor_clip;
     sensor.bits = cfg->sensor_bits;
     if (!st) st = lm_lmmse_fit(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches, cfg->batch,
+                               cfg->fit_synth,
                                &sensor, &r, err);
     if (!st) st = lm_train_cfg_save(cfg, path, err);
     if (!st) st = lm_train_save_checkpoint(cfg->output, m, NULL, 0, 0, opts, cfg, err);
@@ -172,9 +175,11 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
         fprintf(out, "train: %s fitted in closed form in %.1f s (%ld patches, %ld pixels; %ld "
                 "validation patches)\n", cfg->model, r.seconds, r.patches, r.rows, r.val_patches);
         for (int l = 0; l < LM_LMMSE_LEVELS; l++)
-            fprintf(out, "  noise sd %-7g ridge %-6g validation PSNR %.2f dB\n",
-                    (double)lm_lmmse_sigmas[l], r.ridge[l], r.val_psnr[l]);
-        if (!r.val_patches) fprintf(out, "  (no validation split: ridge fixed)\n");
+            fprintf(out, "  noise sd %-7g ridge %-6g synthetic share %-5.2g validation PSNR "
+                    "%.2f dB\n", (double)lm_lmmse_sigmas[l], r.ridge[l], r.synth_weight[l],
+                    r.val_psnr[l]);
+        if (!r.val_patches)
+            fprintf(out, "  (no validation split: ridge fixed, synthetic share as sampled)\n");
     }
     memset(res, 0, sizeof *res);
     res->seconds = r.seconds;

@@ -62,6 +62,8 @@ typedef struct lm_train_cfg {
      * "closed"; "sgd" (Adam from the default initialisation) */
     char fit[16];
     long fit_patches;               /* closed form: training patches accumulated (4096) */
+    float fit_synth;                /* closed form: synthetic share of the statistics (-1: chosen
+                                     * on the validation split) */
     char base[LM_TRAIN_PATH_LEN];   /* residual on this trained run's model ("" = none) */
     int base_trainable;             /* 1: the base is fine-tuned with the net */
     float res_init;                 /* initial residual gates (1); the net's output layers start
