@@ -294,6 +294,19 @@ static void write_md(FILE *f, const lm_study_cfg *cfg, const lm_study *s, const 
                "seed %llu.\n\n", cfg->path, t->iterations, t->patch_h, t->patch_w, t->batch,
             t->accum_steps, (double)t->lr, t->schedule, (double)t->synth_fraction,
             (double)t->noise_min, (double)t->noise_max, (unsigned long long)t->seed);
+    if (cfg->preset_train && json_object_size(cfg->preset_train)) {
+        fprintf(f, "Per-preset training fields over these (`preset_train`):");
+        const char *name;
+        json_t *o;
+        int first = 1;
+        json_object_foreach(cfg->preset_train, name, o) {
+            char *text = json_dumps(o, JSON_COMPACT | JSON_SORT_KEYS | JSON_REAL_PRECISION(6));
+            fprintf(f, "%s %s `%s`", first ? "" : ";", name, text ? text : "?");
+            free(text);
+            first = 0;
+        }
+        fprintf(f, ".\n\n");
+    }
     fprintf(f, "To regenerate: `lumosaic study --config %s --output %s` (it resumes: finished "
                "presets are skipped; see `lumosaic study --help`).\n\n", cfg->path, dir);
     md_held_out(f, cfg, s->held_out);
