@@ -174,6 +174,8 @@ static void check_model(const char *preset, int B, int H, int W)
 
 static void test_models(void)
 {
+    check_model("rt-8", 2, 12, 16);
+    check_model("rt-16", 2, 12, 16);
     check_model("lmmse", 2, 18, 24);
     check_model("lmmse-5-rf6", 2, 12, 16);
     check_model_on("rt-8", "lmmse-5", 2, 12, 16);
