@@ -24,7 +24,7 @@
 #include <stdio.h>
 #include "models/model.h"
 #include "train/adam.h"
-#include "train/metrics.h"
+#include "data/metrics.h"
 #include "data/forward.h"
 
 #define LM_TRAIN_CFG_VERSION 1
