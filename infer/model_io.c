@@ -8,7 +8,7 @@
 #include <string.h>
 #include <sys/stat.h>
 #include "data/spectra.h"
-#include "train/mosaic_system.h"
+#include "data/mosaic.h"
 #include "train/train.h"
 
 static int is_dir(const char *p)

@@ -163,7 +163,7 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
                        const lm_train_opts *opts, lm_train_result *res, lm_err *err);
 
 /* A whole run from its configuration: loads the system description (cfg->system or the
- * bundled default), derives the network front (train/mosaic_system.h), creates the model from
+ * bundled default), derives the network front (data/mosaic.h), creates the model from
  * cfg->model and cfg->seed, opens the dataset (cfg->data, synthetic share, patch, noise, seed,
  * workers, validation samples) and runs lm_train_run. opts->system_path / system_hash are
  * filled in here. */

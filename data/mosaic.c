@@ -1,5 +1,5 @@
-/* mosaic_system.c — lm_mosaic from an lm_system (see mosaic_system.h). */
-#include "train/mosaic_system.h"
+/* mosaic.c — lm_mosaic from an lm_system (see mosaic.h). */
+#include "data/mosaic.h"
 #include "data/spectra.h"
 #include <math.h>
 #include <string.h>

@@ -1,4 +1,4 @@
-/* mosaic_system.h — the network front (lm_mosaic) derived from a system description.
+/* mosaic.h — the network front (lm_mosaic) derived from a system description.
  * What it is: channel order, tile phases and each channel's 33-channel response (system.md §3,
  * §6): channels are the tile positions ordered by the peak wavelength of their LED (UV first;
  * ties between positions of one LED in raster order), so the default system gives one channel
