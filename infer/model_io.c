@@ -9,7 +9,6 @@
 #include <sys/stat.h>
 #include "data/spectra.h"
 #include "data/mosaic.h"
-#include "train/train.h"
 
 static int is_dir(const char *p)
 {

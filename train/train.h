@@ -183,7 +183,5 @@ lm_status lm_train_load_checkpoint(const char *dir, lm_model *m, lm_adam *opt, l
 double lm_train_checkpoint_seconds(const char *dir);
 /* mkdir -p. */
 lm_status lm_train_make_dir(const char *path, lm_err *err);
-/* FNV-1a 64 of a file's bytes (0 if unreadable). */
-uint64_t lm_file_hash(const char *path);
 
 #endif
