@@ -69,9 +69,14 @@ typedef struct lm_backend {
     void (*release)(struct lm_backend *b, lm_ctx *c);
     int (*write)(struct lm_backend *b, lm_ctx *c, lm_tensor *t, const float *src);
     int (*read)(struct lm_backend *b, lm_ctx *c, const lm_tensor *t, float *dst);
+    /* Lifetime of a created backend (NULL for the static CPU backend): close frees it
+     * (lm_backend_close); device_name names its device for messages. */
+    void (*close)(struct lm_backend *b);
+    const char *device_name;
 } lm_backend;
 
-/* The CPU backend (static; the default of every ctx). */
+/* The CPU backend (static; the default of every ctx). Device backends are opened by name and
+ * tensors placed on them through tensor/device.h. */
 lm_backend *lm_backend_cpu(void);
 
 int lm_kernel_run(lm_ctx *c, const lm_kernel *k, lm_tensor *const *t, int nt, const void *params);

@@ -1,9 +1,9 @@
-/* cl_transfer.c — the recorded host<->device copies lm_tensor_to_device / lm_tensor_to_host.
- * Forward copies data across; backward copies the gradient back and adds it (+=) on the
- * input's side, so the tape runs across the boundary. Not here: plain copies without the tape
- * (lm_tensor_read / lm_tensor_write in tensor/tensor.c). */
-#include "kernels-opencl/cl_backend.h"
-#include "kernels-opencl/cl_impl.h"
+/* transfer.c — the recorded host<->device copies lm_tensor_to_device / lm_tensor_to_host
+ * (device.h), for any device backend: copies through its write / read, the device-side add of
+ * the backward through its "flat_add" kernel. Forward copies data across; backward copies the
+ * gradient back and adds it (+=) on the input's side, so the tape runs across the boundary.
+ * Not here: plain copies without the tape (lm_tensor_read / lm_tensor_write in tensor.c). */
+#include "tensor/device.h"
 #include "tensor/ops.h"
 
 /* Host tensor (any strides) packed row-major into dst. */
@@ -68,6 +68,17 @@ lm_tensor *lm_tensor_to_device(lm_ctx *c, lm_tensor *x)
 }
 
 /* ---- to_host ------------------------------------------------------------------------------ */
+/* t[0] += t[1], same numel, both contiguous: run on the device by the backend's "flat_add"
+ * (both tensors are device tensors there); the CPU loop is the kernel's reference. */
+static int flat_add_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p)
+{
+    (void)c, (void)nt, (void)p;
+    long n = lm_tensor_numel(t[0]);
+    for (long i = 0; i < n; i++) t[0]->data[i] += t[1]->data[i];
+    return 0;
+}
+static const lm_kernel K_FLAT_ADD = {"flat_add", flat_add_cpu};
+
 /* in[0]: device x (contiguous); out: host copy. grad(x) (device) += upload(grad(out)). */
 static void to_host_backward(lm_ctx *c, lm_node *n)
 {
@@ -77,15 +88,15 @@ static void to_host_backward(lm_ctx *c, lm_node *n)
     lm_tensor *tmp = gx ? lm_tensor_new_on(c, gx->device, gx->ndim, gx->shape) : NULL;
     if (!tmp || lm_tensor_write(c, tmp, n->out->grad->data)) return;
     lm_tensor *t[2] = {gx, tmp};
-    lm_cl_launch(c->backend->impl, c, "flat_add", t, 2, NULL);
+    lm_kernel_run(c, &K_FLAT_ADD, t, 2, NULL);
 }
 
 lm_tensor *lm_tensor_to_host(lm_ctx *c, lm_tensor *x)
 {
     if (!lm_check_inputs(c, "to_host", 1, x)) return NULL;
     if (x->device == LM_DEVICE_CPU) return x;
-    if (x->device != LM_DEVICE_OPENCL || c->backend->device != LM_DEVICE_OPENCL) {
-        lm_ctx_fail(c, LM_ERR_ARG, "to_host: tensor is not on the ctx's OpenCL device");
+    if (x->device != c->backend->device) {
+        lm_ctx_fail(c, LM_ERR_ARG, "to_host: tensor is not on the ctx's device");
         return NULL;
     }
     x = lm_contiguous(c, x);
