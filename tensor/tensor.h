@@ -116,9 +116,18 @@ struct lm_ctx {
     char msg[512];
     void *dev_arena;                  /* device memory of a device backend (owned by it) */
     lm_grad_pool *grad_pool;          /* set during lm_backward only */
+    /* Reference switches (tests and benchmarks compare the fast paths with them); 0 = the
+     * fast default except grad_reuse (1). conv_path: LM_CONV_PATH_* of conv2d's CPU kernels
+     * (lm_conv2d_set_path, tensor/ops/gemm_internal.h); op_path: LM_OP_PATH_* of the ops with a
+     * fast / reference pair (lm_op_set_path, tensor/ops/op_paths.h); grad_reuse: lm_backward
+     * releases and reuses intermediate gradients (lm_backward_set_grad_reuse, autograd.h). */
+    int conv_path;
+    int op_path;
+    int grad_reuse;
 };
 
-/* Initialise a context: CPU backend, grad enabled, nthreads (0 = all cores). */
+/* Initialise a context: CPU backend, grad enabled, nthreads (0 = all cores), fast kernel
+ * paths, gradient reuse on. */
 int lm_ctx_init(lm_ctx *c, int nthreads);
 void lm_ctx_free(lm_ctx *c);
 /* End of a step: drop the tape and everything allocated in the arena. Keeps the error. */
