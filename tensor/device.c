@@ -17,9 +17,9 @@ static int nregistered;
 
 void lm_backend_register(const char *name, lm_backend_open_fn open)
 {
+    if (!name || !open || nregistered == MAX_BACKENDS) return;
     for (int i = 0; i < nregistered; i++)
         if (!strcmp(registry[i].name, name)) return;
-    if (nregistered == MAX_BACKENDS || !name || !open) return;
     registry[nregistered].name = name;
     registry[nregistered].open = open;
     nregistered++;

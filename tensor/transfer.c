@@ -1,7 +1,8 @@
 /* transfer.c — the recorded host<->device copies lm_tensor_to_device / lm_tensor_to_host
  * (device.h), for any device backend: copies through its write / read, the device-side add of
- * the backward through its "flat_add" kernel. Forward copies data across; backward copies the
- * gradient back and adds it (+=) on the input's side, so the tape runs across the boundary.
+ * the backward through lm_grad_seed (its "flat_add" kernel). Forward copies data across;
+ * backward copies the gradient back and adds it (+=) on the input's side, so the tape runs
+ * across the boundary.
  * Not here: plain copies without the tape (lm_tensor_read / lm_tensor_write in tensor.c). */
 #include "tensor/device.h"
 #include "tensor/ops.h"
@@ -68,27 +69,13 @@ lm_tensor *lm_tensor_to_device(lm_ctx *c, lm_tensor *x)
 }
 
 /* ---- to_host ------------------------------------------------------------------------------ */
-/* t[0] += t[1], same numel, both contiguous: run on the device by the backend's "flat_add"
- * (both tensors are device tensors there); the CPU loop is the kernel's reference. */
-static int flat_add_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p)
-{
-    (void)c, (void)nt, (void)p;
-    long n = lm_tensor_numel(t[0]);
-    for (long i = 0; i < n; i++) t[0]->data[i] += t[1]->data[i];
-    return 0;
-}
-static const lm_kernel K_FLAT_ADD = {"flat_add", flat_add_cpu};
-
-/* in[0]: device x (contiguous); out: host copy. grad(x) (device) += upload(grad(out)). */
+/* in[0]: device x (contiguous); out: host copy. grad(x) (device) += upload(grad(out)): the
+ * seed rule of lm_grad_seed (host values uploaded, added by the backend's "flat_add"). */
 static void to_host_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
-    lm_tensor *gx = lm_grad(c, x);
-    lm_tensor *tmp = gx ? lm_tensor_new_on(c, gx->device, gx->ndim, gx->shape) : NULL;
-    if (!tmp || lm_tensor_write(c, tmp, n->out->grad->data)) return;
-    lm_tensor *t[2] = {gx, tmp};
-    lm_kernel_run(c, &K_FLAT_ADD, t, 2, NULL);
+    lm_grad_seed(c, x, n->out->grad);
 }
 
 lm_tensor *lm_tensor_to_host(lm_ctx *c, lm_tensor *x)
