@@ -12,10 +12,10 @@
  * of recorded ops) are released as soon as their op's backward has run (their buffers are
  * reused for later gradients) and are NULL afterwards. Returns LM_OK or the ctx error. */
 lm_status lm_backward(lm_ctx *c, lm_tensor *out, const lm_tensor *seed);
-/* Process-wide: 0 keeps every intermediate gradient until lm_ctx_reset (the reference
- * behaviour, for tests); 1 (default) releases and reuses them as above. Returns the previous
- * setting. */
-int lm_backward_set_grad_reuse(int on);
+/* Per context (c->grad_reuse): 0 keeps every intermediate gradient until lm_ctx_reset (the
+ * reference behaviour, for tests); 1 (default) releases and reuses them as above. Returns the
+ * previous setting. */
+int lm_backward_set_grad_reuse(lm_ctx *c, int on);
 
 /* Forget grads of every tensor on the tape (not parameters); the tape itself remains. */
 void lm_tape_clear(lm_ctx *c);

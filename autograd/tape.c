@@ -13,18 +13,16 @@
 #define VISITED (1u << 30) /* temporary flags of lm_tensor (tensor.h uses the low bits) */
 #define SHARED (1u << 31)
 
-static int grad_reuse = 1;
-
-int lm_backward_set_grad_reuse(int on)
+int lm_backward_set_grad_reuse(lm_ctx *c, int on)
 {
-    int old = grad_reuse;
-    grad_reuse = on;
+    int old = c->grad_reuse;
+    c->grad_reuse = on;
     return old;
 }
 
 static void pool_begin(lm_ctx *c, lm_grad_pool *p)
 {
-    if (!grad_reuse) return;
+    if (!c->grad_reuse) return;
     lm_arena_mark m = lm_arena_get_mark(&c->arena);
     p->data = lm_arena_alloc(&c->arena, sizeof *p->data * (size_t)(c->tape_len + 1));
     p->cap = p->data ? lm_arena_alloc(&c->arena, sizeof *p->cap * (size_t)(c->tape_len + 1)) : NULL;

@@ -96,22 +96,22 @@ static void run_config(int nt, int reps, int B, int C, const float *A, const flo
     static const int paths[2] = {LM_CONV_PATH_AUTO, LM_CONV_PATH_NO_WINOGRAD};
     static const char *names[2] = {"auto", "tiled"};
     for (int p = 0; p < 2; p++) { /* warm-up: arena blocks, page faults */
-        int old = lm_conv2d_set_path(paths[p]);
+        int old = lm_conv2d_set_path(&c, paths[p]);
         time_conv(&c, &io, 1);
-        lm_conv2d_set_path(old);
+        lm_conv2d_set_path(&c, old);
     }
     time_sgemm(nt, A, Bm, Cm);
     for (int i = 0; i < reps; i++) {
         for (int p = 0; p < 2; p++) {
-            int old = lm_conv2d_set_path(paths[p]);
+            int old = lm_conv2d_set_path(&c, paths[p]);
             tf[p][i] = time_conv(&c, &io, 0);
-            lm_conv2d_set_path(old);
+            lm_conv2d_set_path(&c, old);
         }
         tg[i] = time_sgemm(nt, A, Bm, Cm);
         for (int p = 0; p < 2; p++) {
-            int old = lm_conv2d_set_path(paths[p]);
+            int old = lm_conv2d_set_path(&c, paths[p]);
             tb[p][i] = time_conv(&c, &io, 1);
-            lm_conv2d_set_path(old);
+            lm_conv2d_set_path(&c, old);
         }
     }
     double gf = 2.0 * B * C * H * W * C * 9 * 1e-9, gg = 2.0 * GM * GN * GK * 1e-9;

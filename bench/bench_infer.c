@@ -33,7 +33,7 @@
 #include "infer/align.h"
 #include "infer/tile.h"
 #include "models/model.h"
-#include "train/mosaic_system.h"
+#include "data/mosaic.h"
 
 #define H 480
 #define W 640

@@ -10,7 +10,8 @@
 #include "autograd/autograd.h"
 #include "models/model.h"
 #include "train/adam.h"
-#include "train/mosaic_system.h"
+#include "data/mosaic.h"
+#include "data/system.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>

@@ -7,7 +7,8 @@
 #include "cli/commands.h"
 #include "data/spectra.h"
 #include "models/profile.h"
-#include "train/mosaic_system.h"
+#include "data/mosaic.h"
+#include "data/system.h"
 
 static void help(void)
 {

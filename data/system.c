@@ -524,6 +524,17 @@ lm_status lm_system_load(const char *path, lm_system *sys, lm_err *err)
     return finish(&ld, root);
 }
 
+uint64_t lm_file_hash(const char *path)
+{
+    FILE *f = path && path[0] ? fopen(path, "rb") : NULL;
+    if (!f) return 0;
+    uint64_t h = 1469598103934665603ull;
+    int ch;
+    while ((ch = fgetc(f)) != EOF) h = (h ^ (uint64_t)(unsigned char)ch) * 1099511628211ull;
+    fclose(f);
+    return h;
+}
+
 lm_status lm_system_default(lm_system *sys, lm_err *err)
 {
     char path[1024];

@@ -36,6 +36,7 @@
  * (with equal-white gains every LED's white response is then 1.0). */
 #ifndef LM_SYSTEM_H
 #define LM_SYSTEM_H
+#include <stdint.h>
 #include <stdio.h>
 #include "tensor/status.h"
 
@@ -88,6 +89,9 @@ lm_status lm_system_parse(const char *json_text, const char *base_dir, const cha
 /* The bundled default: <lm_data_dir()>/systems/default.json (see spectra.h). */
 lm_status lm_system_default(lm_system *sys, lm_err *err);
 void lm_system_free(lm_system *sys);
+/* FNV-1a 64 of a file's bytes (0 if unreadable): the identity of a system description that a
+ * trained model records (metadata "system_hash") and inference checks. */
+uint64_t lm_file_hash(const char *path);
 
 static inline int lm_system_num_leds(const lm_system *s) { return s->nleds; }
 /* a_l, nbins floats. */

@@ -2,7 +2,7 @@
  * What it is: preparing a ground-truth cube (crop to the mosaic tile, normalise by its own
  * maximum), simulating its coded frame at given Gaussian noise levels k (sigma = k x the largest
  * clean value, §4) from an explicit generator, reconstructing with lm_tile_infer and scoring
- * PSNR / SSIM / MAE / SAM on the 31 bands (train/metrics.h); and the rainbow test (§7): per row
+ * PSNR / SSIM / MAE / SAM on the 31 bands (data/metrics.h); and the rainbow test (§7): per row
  * the recovered peak wavelength (parabolic interpolation around the largest band of the
  * row-averaged reconstructed spectrum) against the row's true peak.
  * Motion: the prepared cube translating at a given speed in a fixed direction is simulated as
@@ -26,7 +26,7 @@
 #include "infer/model_io.h"
 #include "infer/tile.h"
 #include "tensor/rng.h"
-#include "train/metrics.h"
+#include "data/metrics.h"
 
 #define LM_EVAL_MAX_NOISE 16
 

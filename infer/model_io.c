@@ -8,8 +8,7 @@
 #include <string.h>
 #include <sys/stat.h>
 #include "data/spectra.h"
-#include "train/mosaic_system.h"
-#include "train/train.h"
+#include "data/mosaic.h"
 
 static int is_dir(const char *p)
 {

@@ -2,7 +2,7 @@
  * What it is not: a tensor op (no autograd: inference only) or model loading. */
 #include "infer/tile.h"
 #include "infer/model_io.h"
-#include "kernels-opencl/cl_backend.h"
+#include "tensor/device.h"
 #include <math.h>
 #include <omp.h>
 #include <stdlib.h>
@@ -291,7 +291,7 @@ lm_status lm_tile_device_open(lm_tile_device *d, const char *name, lm_model *m, 
 const char *lm_tile_device_name(const lm_tile_device *d)
 {
     if (!d->backend || d->backend->device == LM_DEVICE_CPU) return "cpu";
-    return lm_cl_backend_device_name(d->backend);
+    return lm_backend_device_name(d->backend);
 }
 
 void lm_tile_device_close(lm_tile_device *d)

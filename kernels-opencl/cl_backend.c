@@ -1,7 +1,8 @@
 /* cl_backend.c — OpenCL backend lifetime: device choice, the program (every embedded .cl file)
  * built once with its kernels cached by name, the launcher table, and dispatch by kernel name.
  * Not here: device memory (cl_memory.c), argument helpers (cl_launch.c), the launchers
- * themselves (cl_ops_*.c), transfers (cl_transfer.c). */
+ * themselves (cl_ops_*.c); the recorded transfers and parameter swaps are the backend-blind
+ * tensor/transfer.c and tensor/mirror.c (tensor/device.h). */
 #include "kernels-opencl/cl_backend.h"
 #include "kernels-opencl/cl_impl.h"
 #include <stdio.h>
@@ -276,6 +277,8 @@ lm_backend *lm_cl_backend_create(lm_err *e)
     b->base.device = LM_DEVICE_OPENCL;
     b->base.run = cl_run;
     b->base.impl = b;
+    b->base.close = lm_cl_backend_free;
+    b->base.device_name = b->device_name;
     b->conv_scratch = 1L << 22;
     const char *cs = getenv("LM_OPENCL_CONV_SCRATCH");
     if (cs && atol(cs) > 0) b->conv_scratch = atol(cs);
@@ -309,16 +312,10 @@ void lm_cl_backend_finish(lm_backend *bb)
     if (bb && bb->device == LM_DEVICE_OPENCL) clFinish(((lm_cl *)bb->impl)->queue);
 }
 
-lm_backend *lm_backend_open(const char *name, lm_err *e)
+/* The backend registers itself as "opencl" (lm_backend_open, tensor/device.h) when the program
+ * starts; kernels-opencl/opencl.cmake makes every program that links the library link this
+ * file. */
+__attribute__((constructor)) static void register_opencl(void)
 {
-    if (!name || !*name) name = getenv("LM_DEVICE");
-    if (!name || !*name || !strcmp(name, "cpu")) return lm_backend_cpu();
-    if (!strcmp(name, "opencl")) return lm_cl_backend_create(e);
-    lm_err_set(e, LM_ERR_ARG, "unknown device '%s' (expected cpu or opencl)", name);
-    return NULL;
-}
-
-void lm_backend_close(lm_backend *b)
-{
-    if (b && b->device == LM_DEVICE_OPENCL) lm_cl_backend_free(b);
+    lm_backend_register("opencl", lm_cl_backend_create);
 }

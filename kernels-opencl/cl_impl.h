@@ -76,8 +76,7 @@ lm_cl_kernel *lm_cl_find_kernel(lm_cl *b, const char *name);
 const char *lm_cl_error_str(cl_int err);
 /* Set the ctx error: "opencl: <what> (kernel <kname>): <CL error>". Returns the status. */
 lm_status lm_cl_fail(lm_ctx *c, cl_int err, const char *what, const char *kname);
-/* Run a launcher by kernel name directly (both tensors on the device); used by the transfer
- * ops' backward. */
+/* Run a launcher by kernel name directly (every tensor on the device). */
 int lm_cl_launch(lm_cl *b, lm_ctx *c, const char *name, lm_tensor *const *t, int nt,
                  const void *params);
 

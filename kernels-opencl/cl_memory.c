@@ -3,7 +3,7 @@
  * copies of contiguous tensors.
  * Like the host arena (tensor/arena.c), a reset after a step that needed several blocks
  * replaces them with one block of the high-water size, so repeated steps allocate nothing.
- * Not here: kernels, transfers recorded on the tape (cl_transfer.c). */
+ * Not here: kernels, transfers recorded on the tape (tensor/transfer.c). */
 #include "kernels-opencl/cl_impl.h"
 #include <limits.h>
 #include <stdlib.h>

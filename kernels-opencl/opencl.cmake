@@ -1,8 +1,8 @@
 # opencl.cmake — the OpenCL backend (kernels-opencl/), included by the top-level CMakeLists.txt
 # after the library and the tests are defined. It finds OpenCL (ICD loader + headers), embeds
 # every kernels-opencl/*.cl file into a generated C file at build time (cmake/EmbedCL.cmake;
-# editing a .cl file re-runs it), adds the backend's C files to lumosaic_core, and sets the
-# environment of the OpenCL tests.
+# editing a .cl file re-runs it), adds the backend's C files to lumosaic_core (linked into every
+# program, where the backend registers itself), and sets the environment of the OpenCL tests.
 find_package(OpenCL REQUIRED)
 file(GLOB LM_CL_KERNELS CONFIGURE_DEPENDS ${CMAKE_SOURCE_DIR}/kernels-opencl/*.cl)
 list(SORT LM_CL_KERNELS)
@@ -20,6 +20,9 @@ add_custom_command(OUTPUT ${LM_CL_EMBEDDED}
   VERBATIM)
 target_sources(lumosaic_core PRIVATE ${LM_CL_C_SOURCES} ${LM_CL_EMBEDDED})
 target_link_libraries(lumosaic_core PUBLIC OpenCL::OpenCL)
+# The backend registers itself as "opencl" from a constructor in cl_backend.c; nothing above
+# tensor/ refers to it, so every program linking the (static) library is told to link that file.
+target_link_options(lumosaic_core INTERFACE "LINKER:--undefined=lm_cl_backend_create")
 target_compile_definitions(lumosaic_core PUBLIC CL_TARGET_OPENCL_VERSION=120 LM_HAVE_OPENCL=1)
 
 # The OpenCL tests. Under sanitizers, the driver (PoCL, not built with ASan) leaks what its

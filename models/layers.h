@@ -3,6 +3,7 @@
  * What it is not: networks (han.c, mcan.c, ...), which compose these with ops. */
 #ifndef LM_LAYERS_H
 #define LM_LAYERS_H
+#include "data/mosaic.h"
 #include "models/params.h"
 #include "tensor/ops.h"
 
@@ -65,26 +66,8 @@ typedef void (*lm_layer_observer)(void *user, const char *kind, const lm_tensor 
                                   const lm_tensor *b, const lm_tensor *x, const lm_tensor *y);
 void lm_layer_observe(const lm_ctx *c, lm_layer_observer fn, void *user);
 
-/* The network input: how the raw mosaic maps to channels (system.md §6). Filled from the
- * system description by data/; models only read it. */
-#define LM_MOSAIC_MAX_CH 64
-#define LM_MOSAIC_RESP_CH 33
-typedef struct lm_mosaic {
-    int ty, tx;                    /* tile rows, cols (3, 4) */
-    int nch;                       /* channels = LEDs (12) */
-    int phase_y[LM_MOSAIC_MAX_CH]; /* channel k (by LED wavelength) -> tile phase */
-    int phase_x[LM_MOSAIC_MAX_CH];
-    /* Optional: each channel's LED response on the 33-channel target grid (system.md §3),
-     * as SRNet's per-pixel response map needs; filled from the system description. */
-    int has_response;
-    float response[LM_MOSAIC_MAX_CH][LM_MOSAIC_RESP_CH];
-} lm_mosaic;
-
-/* The paper's default: 3x4 tile, channels ordered by LED wavelength for the map of
- * system.md §2 (UV, Violet, RoyalBlue, Blue, Cyan, Green, Lime, Amber, RedOrange, Red, DeepRed,
- * FarRed). Used when no system description is given. */
-void lm_mosaic_default(lm_mosaic *m);
-/* raw B x 1 x H x W -> B x nch x H x W (phase-aware bilinear, differentiable). */
+/* The network input (the mosaic description, data/mosaic.h): raw B x 1 x H x W ->
+ * B x nch x H x W (phase-aware bilinear, differentiable). */
 lm_tensor *lm_mosaic_demosaic(lm_ctx *c, const lm_mosaic *m, lm_tensor *raw);
 
 #endif

@@ -4,7 +4,7 @@
  * depends on each pixel's tile phase through a small MLP; mosaic attention (MA); two
  * conv-attention blocks; output = back conv + lifted WB. Names follow the official `Net`. */
 #include "models/model.h"
-#include "kernels-opencl/cl_backend.h"
+#include "tensor/device.h"
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>

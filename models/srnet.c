@@ -4,7 +4,7 @@
  * self-attention blocks (SAM); H and W padded (reflect) to multiples of 16 inside the model
  * and cropped back. Parameter names follow the official SRNet module. */
 #include "models/model.h"
-#include "kernels-opencl/cl_backend.h"
+#include "tensor/device.h"
 #include <stdio.h>
 #include <stdlib.h>
 

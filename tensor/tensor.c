@@ -17,6 +17,7 @@ int lm_ctx_init(lm_ctx *c, int nthreads)
     memset(c, 0, sizeof *c);
     if (lm_arena_init(&c->arena, 0) != 0) return LM_ERR_NOMEM;
     c->grad_enabled = 1;
+    c->grad_reuse = 1;
     c->nthreads = nthreads > 0 ? nthreads : omp_get_num_procs();
     c->backend = &cpu_backend;
     /* Our kernels parallelise with OpenMP and call BLAS from inside parallel regions or on

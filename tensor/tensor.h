@@ -69,9 +69,14 @@ typedef struct lm_backend {
     void (*release)(struct lm_backend *b, lm_ctx *c);
     int (*write)(struct lm_backend *b, lm_ctx *c, lm_tensor *t, const float *src);
     int (*read)(struct lm_backend *b, lm_ctx *c, const lm_tensor *t, float *dst);
+    /* Lifetime of a created backend (NULL for the static CPU backend): close frees it
+     * (lm_backend_close); device_name names its device for messages. */
+    void (*close)(struct lm_backend *b);
+    const char *device_name;
 } lm_backend;
 
-/* The CPU backend (static; the default of every ctx). */
+/* The CPU backend (static; the default of every ctx). Device backends are opened by name and
+ * tensors placed on them through tensor/device.h. */
 lm_backend *lm_backend_cpu(void);
 
 int lm_kernel_run(lm_ctx *c, const lm_kernel *k, lm_tensor *const *t, int nt, const void *params);
@@ -111,9 +116,18 @@ struct lm_ctx {
     char msg[512];
     void *dev_arena;                  /* device memory of a device backend (owned by it) */
     lm_grad_pool *grad_pool;          /* set during lm_backward only */
+    /* Reference switches (tests and benchmarks compare the fast paths with them); 0 = the
+     * fast default except grad_reuse (1). conv_path: LM_CONV_PATH_* of conv2d's CPU kernels
+     * (lm_conv2d_set_path, tensor/ops/gemm_internal.h); op_path: LM_OP_PATH_* of the ops with a
+     * fast / reference pair (lm_op_set_path, tensor/ops/op_paths.h); grad_reuse: lm_backward
+     * releases and reuses intermediate gradients (lm_backward_set_grad_reuse, autograd.h). */
+    int conv_path;
+    int op_path;
+    int grad_reuse;
 };
 
-/* Initialise a context: CPU backend, grad enabled, nthreads (0 = all cores). */
+/* Initialise a context: CPU backend, grad enabled, nthreads (0 = all cores), fast kernel
+ * paths, gradient reuse on. */
 int lm_ctx_init(lm_ctx *c, int nthreads);
 void lm_ctx_free(lm_ctx *c);
 /* End of a step: drop the tape and everything allocated in the arena. Keeps the error. */

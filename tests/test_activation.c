@@ -253,10 +253,10 @@ static void test_gelu_fast_matches_reference(void)
     for (int v = 0; v < 3; v++) {
         lm_ctx c;
         lm_ctx_init(&c, v == 1 ? 2 : 1);
-        int old = lm_op_set_path(v == 2 ? LM_OP_PATH_REFERENCE : LM_OP_PATH_FAST);
+        int old = lm_op_set_path(&c, v == 2 ? LM_OP_PATH_REFERENCE : LM_OP_PATH_FAST);
         lm_tensor *x = lm_tensor_from(&c, 1, (int[]){(int)n}, xv);
         lm_tensor *y = lm_gelu(&c, x);
-        lm_op_set_path(old);
+        lm_op_set_path(&c, old);
         out[v] = malloc(sizeof(float) * n);
         if (y) memcpy(out[v], y->data, sizeof(float) * n);
         CHECK_CTX_OK(&c);
@@ -295,14 +295,14 @@ static void test_gelu_grad_fast_matches_reference(void)
     for (int v = 0; v < 3; v++) {
         lm_ctx c;
         lm_ctx_init(&c, v == 1 ? 2 : 1);
-        int old = lm_op_set_path(v == 2 ? LM_OP_PATH_REFERENCE : LM_OP_PATH_FAST);
+        int old = lm_op_set_path(&c, v == 2 ? LM_OP_PATH_REFERENCE : LM_OP_PATH_FAST);
         lm_tensor *x = lm_tensor_from(&c, 1, (int[]){(int)n}, xv);
         lm_tensor_set_requires_grad(x, 1);
         lm_tensor *y = lm_gelu(&c, x);
         out[v] = calloc((size_t)n, sizeof(float));
         if (y && lm_backward(&c, y, NULL) == LM_OK && x->grad)
             memcpy(out[v], x->grad->data, sizeof(float) * n);
-        lm_op_set_path(old);
+        lm_op_set_path(&c, old);
         CHECK_CTX_OK(&c);
         lm_ctx_free(&c);
     }

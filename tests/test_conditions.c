@@ -15,7 +15,7 @@
 #include "tests/check.h"
 #include "data/forward.h"
 #include "infer/conditions.h"
-#include "train/mosaic_system.h"
+#include "data/mosaic.h"
 
 #define SH 72
 #define SW 96

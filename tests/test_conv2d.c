@@ -177,7 +177,7 @@ static void check_config_paths(const cfg *k, const int (*variants)[2], int nvar,
     long n[4] = {lm_tensor_numel(y), lm_tensor_numel(m.x), lm_tensor_numel(m.w), k->Cout};
     static const char *names[4] = {"y", "dx", "dw", "db"};
     for (int v = 0; v < nvar; v++) {
-        int old = lm_conv2d_set_path(variants[v][0]);
+        int old = lm_conv2d_set_path(&c, variants[v][0]);
         c.nthreads = variants[v][1];
         lm_tape_clear(&c); /* earlier variants' nodes stay on the tape but are skipped */
         y = lm_conv2d(&c, m.x, m.w, m.b, &k->o);
@@ -188,7 +188,7 @@ static void check_config_paths(const cfg *k, const int (*variants)[2], int nvar,
                                m.b && m.b->grad ? m.b->grad->data : NULL};
         for (int i = 0; i < (m.b ? 4 : 3); i++)
             if (got[i]) check_doubles(got[i], R.val[i], R.mag[i], n[i], tol, k->what, names[i]);
-        lm_conv2d_set_path(old);
+        lm_conv2d_set_path(&c, old);
     }
     free_reference(&R);
     lm_ctx_free(&c);
@@ -333,9 +333,9 @@ static void gradcheck_config(const cfg *k, int path)
     go.atol = 1e-3;
     go.rtol = 5e-3;
     go.max_checks = 60;
-    int old = lm_conv2d_set_path(path);
+    int old = lm_conv2d_set_path(&c, path);
     CHECK_GRAD(&c, fn_conv, in, m.b ? 3 : 2, (void *)&k->o, &go);
-    lm_conv2d_set_path(old);
+    lm_conv2d_set_path(&c, old);
     lm_ctx_free(&c);
 }
 
@@ -371,7 +371,7 @@ static run_out run_once(const cfg *k, int path, int nthreads, int pre)
         lm_tensor_fill(lm_grad(&c, m.w), 1.0f);
         if (m.b) lm_tensor_fill(lm_grad(&c, m.b), 1.0f);
     }
-    int old = lm_conv2d_set_path(path);
+    int old = lm_conv2d_set_path(&c, path);
     lm_tensor *y = lm_conv2d(&c, m.x, m.w, m.b, &k->o);
     lm_tensor *seed = y ? lm_tensor_uniform(&c, 4, y->shape, &r, -1, 1) : NULL;
     if (y && seed && lm_backward(&c, y, seed) == LM_OK) {
@@ -386,7 +386,7 @@ static run_out run_once(const cfg *k, int path, int nthreads, int pre)
         if (m.b) memcpy(o.db, m.b->grad->data, sizeof(float) * (size_t)k->Cout);
     }
     CHECK_CTX_OK(&c);
-    lm_conv2d_set_path(old);
+    lm_conv2d_set_path(&c, old);
     lm_ctx_free(&c);
     return o;
 }

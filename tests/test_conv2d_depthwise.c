@@ -35,10 +35,10 @@ static void run_case(const dw_case *k, int op_path, int conv_path, int threads, 
     lm_tensor *w = lm_tensor_from(&c, 4, (int[]){Co, 1, k->kh, k->kw}, wv);
     lm_tensor *b = k->bias ? lm_tensor_from(&c, 1, (int[]){Co}, bv) : NULL;
     lm_conv2d_opts o = {k->stride, k->stride, k->ph, k->pw, 1, 1, k->C};
-    int old_op = lm_op_set_path(op_path), old_conv = lm_conv2d_set_path(conv_path);
+    int old_op = lm_op_set_path(&c, op_path), old_conv = lm_conv2d_set_path(&c, conv_path);
     lm_tensor *y = lm_conv2d(&c, x, w, b, &o);
-    lm_op_set_path(old_op);
-    lm_conv2d_set_path(old_conv);
+    lm_op_set_path(&c, old_op);
+    lm_conv2d_set_path(&c, old_conv);
     CHECK_CTX_OK(&c);
     *n_out = y ? lm_tensor_numel(y) : 0;
     if (y) memcpy(out, y->data, sizeof(float) * (size_t)*n_out);

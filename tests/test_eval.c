@@ -27,7 +27,7 @@
 #include "infer/eval.h"
 #include "infer/whole.h"
 #include "models/layers.h"
-#include "train/mosaic_system.h"
+#include "data/mosaic.h"
 
 static lm_system g_sys;
 static int g_ok;

@@ -1,5 +1,5 @@
 /* test_grad_reuse.c — lm_backward's reuse of intermediate gradient buffers (autograd/tape.c)
- * against the reference behaviour (every gradient kept, lm_backward_set_grad_reuse(0)):
+ * against the reference behaviour (every gradient kept, lm_backward_set_grad_reuse(c, 0)):
  * identical gradients on a branchy graph and on whole models (han-tiny, srnet-tiny: the same
  * bits), what stays readable afterwards (leaves, the root, parameters), lower arena peak, and
  * a repeated backward call. */
@@ -23,9 +23,9 @@ static void test_branchy_graph(void)
 {
     float *g[2] = {0};
     for (int reuse = 0; reuse < 2; reuse++) {
-        int old = lm_backward_set_grad_reuse(reuse);
         lm_ctx c;
         lm_ctx_init(&c, 2);
+        lm_backward_set_grad_reuse(&c, reuse);
         lm_rng r;
         lm_rng_seed(&r, 41);
         lm_tensor *x = lm_tensor_uniform(&c, 3, (int[]){3, 7, 50}, &r, -1, 1);
@@ -50,7 +50,6 @@ static void test_branchy_graph(void)
         }
         CHECK_CTX_OK(&c);
         lm_ctx_free(&c);
-        lm_backward_set_grad_reuse(old);
     }
     if (g[0] && g[1]) CHECK_ARRAY_CLOSE(g[1], g[0], 1050, 0, 0);
     free(g[0]), free(g[1]);
@@ -62,9 +61,9 @@ static void test_chain_peak(void)
 {
     size_t peak[2];
     for (int reuse = 0; reuse < 2; reuse++) {
-        int old = lm_backward_set_grad_reuse(reuse);
         lm_ctx c;
         lm_ctx_init(&c, 1);
+        lm_backward_set_grad_reuse(&c, reuse);
         lm_rng r;
         lm_rng_seed(&r, 42);
         lm_tensor *x = lm_tensor_uniform(&c, 2, (int[]){256, 256}, &r, -1, 1);
@@ -76,7 +75,6 @@ static void test_chain_peak(void)
         peak[reuse] = c.arena.high_water - fwd;
         CHECK_CTX_OK(&c);
         lm_ctx_free(&c);
-        lm_backward_set_grad_reuse(old);
     }
     const size_t one = 256 * 256 * sizeof(float);
     CHECK_MSG(peak[0] >= 40 * one && peak[1] <= 4 * one, "backward allocated %zu MB without "
@@ -98,9 +96,9 @@ static void model_grads_same(const char *preset, int H, int W)
     size_t np = m->params.total;
     float *g[2];
     for (int reuse = 0; reuse < 2; reuse++) {
-        int old = lm_backward_set_grad_reuse(reuse);
         lm_ctx c;
         lm_ctx_init(&c, 2);
+        lm_backward_set_grad_reuse(&c, reuse);
         lm_rng r;
         lm_rng_seed(&r, 43);
         lm_params_zero_grad(&m->params);
@@ -115,7 +113,6 @@ static void model_grads_same(const char *preset, int H, int W)
         if (x->grad) memcpy(g[reuse] + np, x->grad->data, sizeof(float) * (size_t)nx);
         CHECK_CTX_OK(&c);
         lm_ctx_free(&c);
-        lm_backward_set_grad_reuse(old);
     }
     CHECK_ARRAY_CLOSE(g[1], g[0], (long)np + 2L * H * W, 0, 0);
     free(g[0]), free(g[1]);

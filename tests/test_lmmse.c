@@ -9,7 +9,7 @@
 #include "tests/check.h"
 #include "tests/model_fixture.h"
 #include "train/fit_lmmse.h"
-#include "train/mosaic_system.h"
+#include "data/mosaic.h"
 #include <stdlib.h>
 
 #define O LM_MODEL_OUT_CHANNELS

@@ -1,7 +1,7 @@
 /* test_metrics.c — PSNR, SSIM, MAE, SAM (system.md §10) against hand-computed values and an
  * independent direct-window SSIM reference; error handling. */
 #include "tests/check.h"
-#include "train/metrics.h"
+#include "data/metrics.h"
 #include <stdlib.h>
 
 #define H 16

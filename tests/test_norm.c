@@ -302,10 +302,10 @@ static void test_l2_rows_match_reference(void)
         for (int v = 0; v < 3; v++) {
             lm_ctx c;
             lm_ctx_init(&c, v == 1 ? 2 : 1);
-            int old = lm_op_set_path(v == 2 ? LM_OP_PATH_REFERENCE : LM_OP_PATH_FAST);
+            int old = lm_op_set_path(&c, v == 2 ? LM_OP_PATH_REFERENCE : LM_OP_PATH_FAST);
             lm_tensor *x = lm_tensor_from(&c, 3, shape, xv);
             lm_tensor *yt = lm_l2_normalize(&c, x, -1, lens[i] < 100 ? 1e-2f : 1e-12f);
-            lm_op_set_path(old);
+            lm_op_set_path(&c, old);
             y[v] = malloc(sizeof(float) * n);
             if (yt) memcpy(y[v], yt->data, sizeof(float) * n);
             CHECK_CTX_OK(&c);

@@ -4,7 +4,7 @@
  * dry-run layer profile of `lumosaic info` (HAN paper size: 3.35 TMAC at batch 14, 66 x 64). */
 #include "tests/check.h"
 #include "models/profile.h"
-#include "train/mosaic_system.h"
+#include "data/mosaic.h"
 #include "train/train.h"
 #include <stdlib.h>
 #include <unistd.h>

@@ -6,7 +6,7 @@
  * the training split. Skipped (77) when $LM_SHARED_DIR/data/cave is absent. */
 #include "tests/check.h"
 #include "data/dataset.h"
-#include "train/mosaic_system.h"
+#include "data/mosaic.h"
 #include "train/train.h"
 #include <stdlib.h>
 #include <sys/stat.h>

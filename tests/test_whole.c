@@ -60,7 +60,7 @@ static void test_direct_matches_references(void)
     lm_ctx_init(&c, 2);
     lm_rng r;
     /* 3x3 convs with 16+ channels take the Winograd path by default: test the direct one */
-    int path0 = lm_conv2d_set_path(LM_CONV_PATH_NO_WINOGRAD);
+    int path0 = lm_conv2d_set_path(&c, LM_CONV_PATH_NO_WINOGRAD);
     for (int q = 0; q < NDCFG; q++) {
         const dcfg *k = &DCFGS[q];
         int Ho = k->H + 2 * k->pad - k->k + 1, Wo = k->W + 2 * k->pad - k->k + 1;
@@ -68,9 +68,9 @@ static void test_direct_matches_references(void)
                           k->pad, k->pad, 1, 1, 1};
         CHECK_MSG(lm_conv2d_direct_applies(&g), "config %d: the direct path does not apply", q);
         lm_tensor *y2 = direct_conv(&c, k, &r, 2), *y1 = direct_conv(&c, k, &r, 1);
-        int old = lm_conv2d_set_path(LM_CONV_PATH_SIMPLE);
+        int old = lm_conv2d_set_path(&c, LM_CONV_PATH_SIMPLE);
         lm_tensor *ys = direct_conv(&c, k, &r, 2);
-        lm_conv2d_set_path(old);
+        lm_conv2d_set_path(&c, old);
         CHECK_CTX_OK(&c);
         if (!y1 || !y2 || !ys) continue;
         long n = lm_tensor_numel(y2);
@@ -91,7 +91,7 @@ static void test_direct_matches_references(void)
         free(ref);
         lm_ctx_reset(&c);
     }
-    lm_conv2d_set_path(path0);
+    lm_conv2d_set_path(&c, path0);
     lm_ctx_free(&c);
 }
 

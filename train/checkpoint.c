@@ -8,17 +8,6 @@
 
 #define CKPT_FORMAT "lumosaic-checkpoint-1"
 
-uint64_t lm_file_hash(const char *path)
-{
-    FILE *f = path && path[0] ? fopen(path, "rb") : NULL;
-    if (!f) return 0;
-    uint64_t h = 1469598103934665603ull;
-    int ch;
-    while ((ch = fgetc(f)) != EOF) h = (h ^ (uint64_t)(unsigned char)ch) * 1099511628211ull;
-    fclose(f);
-    return h;
-}
-
 /* An lm_params whose tensors view the optimizer moments (never finalized: data points into
  * opt->m / opt->v, so save and load need no copy). */
 static lm_status moment_views(const lm_model *m, const lm_adam *opt, lm_params *v, lm_err *err)

@@ -6,7 +6,7 @@
 #include "data/dataset.h"
 #include "data/spectra.h"
 #include "train/fit_lmmse.h"
-#include "train/mosaic_system.h"
+#include "data/mosaic.h"
 #include <jansson.h>
 #include <math.h>
 #include <stdlib.h>

@@ -8,7 +8,7 @@
 #include "train/train.h"
 #include "autograd/autograd.h"
 #include "data/noise_est.h"
-#include "kernels-opencl/cl_backend.h"
+#include "tensor/device.h"
 #include <errno.h>
 #include <math.h>
 #include <stdlib.h>
@@ -317,7 +317,7 @@ static lm_status open_device(loop *L, lm_err *err)
     L->np = p->n;
     if (L->opts->progress)
         fprintf(L->opts->progress_out ? L->opts->progress_out : stderr, "train: device %s: %s\n",
-                cfg->device, lm_cl_backend_device_name(L->backend));
+                cfg->device, lm_backend_device_name(L->backend));
     return LM_OK;
 }
 

@@ -24,7 +24,7 @@
 #include <stdio.h>
 #include "models/model.h"
 #include "train/adam.h"
-#include "train/metrics.h"
+#include "data/metrics.h"
 #include "data/forward.h"
 
 #define LM_TRAIN_CFG_VERSION 1
@@ -165,7 +165,7 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
                        const lm_train_opts *opts, lm_train_result *res, lm_err *err);
 
 /* A whole run from its configuration: loads the system description (cfg->system or the
- * bundled default), derives the network front (train/mosaic_system.h), creates the model from
+ * bundled default), derives the network front (data/mosaic.h), creates the model from
  * cfg->model and cfg->seed, opens the dataset (cfg->data, synthetic share, patch, noise, seed,
  * workers, validation samples) and runs lm_train_run. opts->system_path / system_hash are
  * filled in here. */
@@ -185,7 +185,5 @@ lm_status lm_train_load_checkpoint(const char *dir, lm_model *m, lm_adam *opt, l
 double lm_train_checkpoint_seconds(const char *dir);
 /* mkdir -p. */
 lm_status lm_train_make_dir(const char *path, lm_err *err);
-/* FNV-1a 64 of a file's bytes (0 if unreadable). */
-uint64_t lm_file_hash(const char *path);
 
 #endif

@@ -40,7 +40,7 @@ static inline float sigmoid_stable(float x)
  * |a| <= 0.927734375, else sign(a) (1 - exp(r(|a|))) with r a polynomial (N. Juffa's
  * minimax fits); exp by Cody-Waite reduction and a degree-7 polynomial. Max error over all
  * floats in [-8, 8]: 1.04 ulp of erf (glibc's erff: 0.9 ulp), so GELU agrees with the
- * reference loop (erff) to float rounding; lm_op_set_path(LM_OP_PATH_REFERENCE) selects it. */
+ * reference loop (erff) to float rounding; lm_op_set_path(c, LM_OP_PATH_REFERENCE) selects it. */
 static inline int32_t f2i(float f)
 {
     int32_t i;
@@ -154,7 +154,7 @@ static int act_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *param
     case ACT_SIGMOID: FLAT_LOOP(y[i] = sigmoid_stable(x[i])); break;
     case ACT_TANH: FLAT_LOOP(y[i] = tanhf(x[i])); break;
     default:
-        if (lm_op_path() == LM_OP_PATH_FAST) gelu_fwd_fast(x, y, n, nthr);
+        if (lm_op_path(c) == LM_OP_PATH_FAST) gelu_fwd_fast(x, y, n, nthr);
         else FLAT_LOOP(y[i] = 0.5f * x[i] * (1.0f + erff(x[i] * INV_SQRT2)));
         break;
     }
@@ -198,7 +198,7 @@ static int act_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *param
     case ACT_SIGMOID: FLAT_LOOP(gx[i] += gy[i] * y[i] * (1.0f - y[i])); break;
     case ACT_TANH: FLAT_LOOP(gx[i] += gy[i] * (1.0f - y[i] * y[i])); break;
     default:
-        if (lm_op_path() == LM_OP_PATH_FAST) gelu_bwd_fast(x, gy, gx, n, nthr);
+        if (lm_op_path(c) == LM_OP_PATH_FAST) gelu_bwd_fast(x, gy, gx, n, nthr);
         else FLAT_LOOP(gx[i] += gy[i] * gelu_grad(x[i]));
         break;
     }

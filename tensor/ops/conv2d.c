@@ -6,19 +6,17 @@
  * im2col + GEMM, cache-sized column blocks), conv2d_winograd.c (3x3 stride 1, F(4x4, 3x3)),
  * conv2d_pointwise.c (1x1 forward and input gradient), conv2d_direct.c (few output channels) and
  * conv2d_depthwise.c (direct loops); the kernel
- * picks one (lm_conv2d_set_path() forces the reference, for tests).
+ * picks one (lm_conv2d_set_path() forces the reference on a context, for tests).
  * What it is not: transposed or 3-D convolution (conv_transpose2d.c, conv3d.c). */
 #include "tensor/ops.h"
 #include "tensor/ops/gemm_internal.h"
 #include <omp.h>
 #include <string.h>
 
-static int conv_path = LM_CONV_PATH_AUTO;
-
-int lm_conv2d_set_path(int path)
+int lm_conv2d_set_path(lm_ctx *c, int path)
 {
-    int old = conv_path;
-    conv_path = path;
+    int old = c->conv_path;
+    c->conv_path = path;
     return old;
 }
 
@@ -94,14 +92,14 @@ static int simple_run(lm_ctx *c, const lm_conv_geom *g, int which, const float *
 
 /* ---- kernels ------------------------------------------------------------------------------ */
 /* One input channel per group, and the fast paths allowed. */
-static int depthwise(const lm_conv_geom *g)
+static int depthwise(const lm_ctx *c, const lm_conv_geom *g)
 {
-    return g->groups == g->Cin && conv_path != LM_CONV_PATH_SIMPLE;
+    return g->groups == g->Cin && c->conv_path != LM_CONV_PATH_SIMPLE;
 }
 
-static int winograd(const lm_conv_geom *g)
+static int winograd(const lm_ctx *c, const lm_conv_geom *g)
 {
-    return conv_path == LM_CONV_PATH_AUTO && lm_conv2d_winograd_applies(g);
+    return c->conv_path == LM_CONV_PATH_AUTO && lm_conv2d_winograd_applies(g);
 }
 
 /* t = {x, w, y[, bias]}: y = conv(x, w) + bias (writes =). */
@@ -110,9 +108,9 @@ static int conv2d_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     const lm_conv_geom *g = params;
     const float *x = t[0]->data, *w = t[1]->data, *bias = nt > 3 ? t[3]->data : NULL;
     float *y = t[2]->data;
-    if (conv_path == LM_CONV_PATH_SIMPLE) return simple_run(c, g, 0, x, w, bias, NULL, y);
-    if (depthwise(g)) return lm_conv2d_dw_fwd(c, g, x, w, bias, y);
-    if (winograd(g)) return lm_conv2d_winograd_fwd(c, g, x, w, bias, y);
+    if (c->conv_path == LM_CONV_PATH_SIMPLE) return simple_run(c, g, 0, x, w, bias, NULL, y);
+    if (depthwise(c, g)) return lm_conv2d_dw_fwd(c, g, x, w, bias, y);
+    if (winograd(c, g)) return lm_conv2d_winograd_fwd(c, g, x, w, bias, y);
     if (lm_conv2d_pointwise_applies(g)) return lm_conv2d_pointwise_fwd(c, g, x, w, bias, y);
     if (lm_conv2d_direct_applies(g)) return lm_conv2d_direct_fwd(c, g, x, w, bias, y);
     return lm_conv2d_tiled_fwd(c, g, x, w, bias, y);
@@ -123,10 +121,10 @@ static int conv2d_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
 {
     (void)nt;
     const lm_conv_geom *g = params;
-    if (conv_path == LM_CONV_PATH_SIMPLE)
+    if (c->conv_path == LM_CONV_PATH_SIMPLE)
         return simple_run(c, g, 1, t[0]->data, t[1]->data, NULL, NULL, t[2]->data);
-    if (depthwise(g)) return lm_conv2d_dw_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
-    if (winograd(g)) return lm_conv2d_winograd_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
+    if (depthwise(c, g)) return lm_conv2d_dw_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
+    if (winograd(c, g)) return lm_conv2d_winograd_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
     if (lm_conv2d_pointwise_applies(g))
         return lm_conv2d_pointwise_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
     return lm_conv2d_tiled_bwd_x(c, g, t[0]->data, t[1]->data, t[2]->data);
@@ -137,10 +135,10 @@ static int conv2d_bwd_w_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
 {
     (void)nt;
     const lm_conv_geom *g = params;
-    if (conv_path == LM_CONV_PATH_SIMPLE)
+    if (c->conv_path == LM_CONV_PATH_SIMPLE)
         return simple_run(c, g, 2, t[1]->data, NULL, NULL, t[0]->data, t[2]->data);
-    if (depthwise(g)) return lm_conv2d_dw_bwd_w(c, g, t[0]->data, t[1]->data, t[2]->data);
-    if (winograd(g)) return lm_conv2d_winograd_bwd_w(c, g, t[0]->data, t[1]->data, t[2]->data);
+    if (depthwise(c, g)) return lm_conv2d_dw_bwd_w(c, g, t[0]->data, t[1]->data, t[2]->data);
+    if (winograd(c, g)) return lm_conv2d_winograd_bwd_w(c, g, t[0]->data, t[1]->data, t[2]->data);
     return lm_conv2d_tiled_bwd_w(c, g, t[0]->data, t[1]->data, t[2]->data);
 }
 

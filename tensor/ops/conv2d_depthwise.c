@@ -53,11 +53,11 @@ static void fwd_plane(const lm_conv_geom *g, const float *xp, const float *wk, f
  * multiply-add per tap; no per-tap pass over the plane, no bounds checks). Same order of
  * summation as the per-tap loops (bias, then taps in (i, j) order, zero taps outside the
  * image), so the result is the same (bit for bit where multiply-adds are fused, as with
- * -march=native on x86-64); lm_op_set_path(LM_OP_PATH_REFERENCE) selects the per-tap loops
+ * -march=native on x86-64); lm_op_set_path(c, LM_OP_PATH_REFERENCE) selects the per-tap loops
  * (tests compare the two). */
-static int stencil_applies(const lm_conv_geom *g)
+static int stencil_applies(const lm_ctx *c, const lm_conv_geom *g)
 {
-    return lm_op_path() == LM_OP_PATH_FAST && g->sh == 1 && g->sw == 1 && g->dh == 1 &&
+    return lm_op_path(c) == LM_OP_PATH_FAST && g->sh == 1 && g->sw == 1 && g->dh == 1 &&
            g->dw == 1;
 }
 
@@ -157,7 +157,7 @@ static int stencil_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const f
 int lm_conv2d_dw_fwd(lm_ctx *c, const lm_conv_geom *g, const float *x, const float *w,
                      const float *bias, float *y)
 {
-    if (stencil_applies(g)) return stencil_fwd(c, g, x, w, bias, y);
+    if (stencil_applies(c, g)) return stencil_fwd(c, g, x, w, bias, y);
     int mult = g->Cout / g->Cin, khw = g->kh * g->kw;
     long hw = (long)g->H * g->W, ohw = (long)g->Ho * g->Wo, planes = (long)g->B * g->Cout;
 #pragma omp parallel for schedule(static) num_threads(lm_nthreads(c))
@@ -232,7 +232,7 @@ static int stencil_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, cons
 int lm_conv2d_dw_bwd_x(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *w,
                        float *dx)
 {
-    if (stencil_applies(g) && g->Cout == g->Cin && g->ph < g->kh && g->pw < g->kw)
+    if (stencil_applies(c, g) && g->Cout == g->Cin && g->ph < g->kh && g->pw < g->kw)
         return stencil_bwd_x(c, g, dy, w, dx);
     int mult = g->Cout / g->Cin, khw = g->kh * g->kw;
     long hw = (long)g->H * g->W, ohw = (long)g->Ho * g->Wo, planes = (long)g->B * g->Cin;
@@ -340,7 +340,7 @@ static int stencil_bwd_w_3x3(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
 int lm_conv2d_dw_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const float *x,
                        float *dw)
 {
-    if (stencil_applies(g) && g->kh == 3 && g->kw == 3) return stencil_bwd_w_3x3(c, g, dy, x, dw);
+    if (stencil_applies(c, g) && g->kh == 3 && g->kw == 3) return stencil_bwd_w_3x3(c, g, dy, x, dw);
     int mult = g->Cout / g->Cin, khw = g->kh * g->kw, nt = lm_nthreads(c);
     long hw = (long)g->H * g->W, ohw = (long)g->Ho * g->Wo;
     lm_arena_mark m = lm_arena_get_mark(&c->arena);

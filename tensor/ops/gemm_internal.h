@@ -53,9 +53,9 @@ typedef struct lm_conv_geom {
  * SIMPLE: the whole-image im2col + GEMM reference (tests compare the two). NO_WINOGRAD: AUTO
  * without the Winograd path (benchmarks and tests compare them). */
 enum { LM_CONV_PATH_AUTO = 0, LM_CONV_PATH_SIMPLE = 1, LM_CONV_PATH_NO_WINOGRAD = 2 };
-/* Select the path for later conv2d kernels (process-wide; for tests and benchmarks).
- * Returns the previous setting. */
-int lm_conv2d_set_path(int path);
+/* Select the path for later conv2d kernels run on c (c->conv_path; for tests and
+ * benchmarks). Returns the previous setting. */
+int lm_conv2d_set_path(lm_ctx *c, int path);
 
 /* Per path: fwd writes y = conv(x, w) + bias (bias may be NULL); bwd_x ADDS into dx;
  * bwd_w ADDS into dw. Scratch comes from the ctx arena and is released before returning.

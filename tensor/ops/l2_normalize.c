@@ -59,7 +59,7 @@ static int l2_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params
     const l2_params *p = params;
     long outer, len, inner;
     l2_geometry(t[0], p->axis, &outer, &len, &inner);
-    if (inner == 1 && lm_op_path() == LM_OP_PATH_FAST) {
+    if (inner == 1 && lm_op_path(c) == LM_OP_PATH_FAST) {
         l2_rows_fwd(c, t[0]->data, t[1]->data, outer, len, p->eps);
         return 0;
     }

@@ -1,13 +1,11 @@
-/* op_paths.c — the process-wide fast / reference switch of op_paths.h. */
+/* op_paths.c — the fast / reference switch of op_paths.h, a field of the context. */
 #include "tensor/ops/op_paths.h"
 
-static int op_path = LM_OP_PATH_FAST;
-
-int lm_op_set_path(int path)
+int lm_op_set_path(lm_ctx *c, int path)
 {
-    int old = op_path;
-    op_path = path;
+    int old = c->op_path;
+    c->op_path = path;
     return old;
 }
 
-int lm_op_path(void) { return op_path; }
+int lm_op_path(const lm_ctx *c) { return c->op_path; }

@@ -1,10 +1,10 @@
 /* cube_psnr.c — prints the PSNR (dB) of a predicted cube against a ground-truth cube for the
  * end-to-end CLI tests (tests/cli/infer.sh): `cli_cube_psnr PRED TRUTH`, any format lm_cube_read
  * takes, same size and band count; both divided by the truth's maximum (system.md §10), PSNR
- * with peak 1 over all bands (train/metrics.h). What it is not: a test by itself. */
+ * with peak 1 over all bands (data/metrics.h). What it is not: a test by itself. */
 #include <stdio.h>
 #include "data/cube_io.h"
-#include "train/metrics.h"
+#include "data/metrics.h"
 
 int main(int argc, char **argv)
 {

@@ -1,5 +1,5 @@
 /* metrics.c — PSNR, SSIM, MAE and SAM (system.md §10; definitions in metrics.h). */
-#include "train/metrics.h"
+#include "data/metrics.h"
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>

@@ -1,11 +1,12 @@
-/* cl_mirror.c — model parameters on the device for one step: persistent host tensors swapped
- * in place for device copies, and their device gradients added back into the host gradients
- * (so the optimizer keeps running on the host's contiguous parameter block).
+/* mirror.c — model parameters on the device for one step (device.h), for any device backend:
+ * persistent host tensors swapped in place for device copies, and their device gradients added
+ * back into the host gradients (so the optimizer keeps running on the host's contiguous
+ * parameter block).
  * The copies are views into one device block (one upload) and their gradients views into one
  * zero-filled device gradient block (one download), at the same 16-float-aligned offsets: a
  * model has a hundred small parameters and each transfer costs a queue round trip.
- * Not here: recorded transfers of activations (cl_transfer.c). */
-#include "kernels-opencl/cl_backend.h"
+ * Not here: recorded transfers of activations (transfer.c). */
+#include "tensor/device.h"
 #include <string.h>
 
 /* Offsets (floats) of each tensor in the blocks; returns the block size. */

@@ -1,8 +1,31 @@
-/* mosaic_system.c — lm_mosaic from an lm_system (see mosaic_system.h). */
-#include "train/mosaic_system.h"
+/* mosaic.c — the mosaic description: the paper's default and lm_mosaic from an lm_system
+ * (see mosaic.h). */
+#include "data/mosaic.h"
 #include "data/spectra.h"
+#include "data/system.h"
 #include <math.h>
 #include <string.h>
+
+void lm_mosaic_default(lm_mosaic *m)
+{
+    /* system.md §2 map; tile phase t = row*4 + col:
+     * row 0: FarRed Green DeepRed RoyalBlue / row 1: Red Violet Lime UV /
+     * row 2: Amber Blue RedOrange Cyan. Channels in LED wavelength order: */
+    static const int phase[12][2] = {
+        {1, 3}, /* UV */        {1, 1}, /* Violet */   {0, 3}, /* RoyalBlue */
+        {2, 1}, /* Blue */      {2, 3}, /* Cyan */     {0, 1}, /* Green */
+        {1, 2}, /* Lime */      {2, 0}, /* Amber */    {2, 2}, /* RedOrange */
+        {1, 0}, /* Red */       {0, 2}, /* DeepRed */  {0, 0}, /* FarRed */
+    };
+    memset(m, 0, sizeof *m);
+    m->ty = 3;
+    m->tx = 4;
+    m->nch = 12;
+    for (int k = 0; k < 12; k++) {
+        m->phase_y[k] = phase[k][0];
+        m->phase_x[k] = phase[k][1];
+    }
+}
 
 void lm_reduce41_to33(const float *in41, float *out33)
 {

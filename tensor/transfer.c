@@ -1,9 +1,10 @@
-/* cl_transfer.c — the recorded host<->device copies lm_tensor_to_device / lm_tensor_to_host.
- * Forward copies data across; backward copies the gradient back and adds it (+=) on the
- * input's side, so the tape runs across the boundary. Not here: plain copies without the tape
- * (lm_tensor_read / lm_tensor_write in tensor/tensor.c). */
-#include "kernels-opencl/cl_backend.h"
-#include "kernels-opencl/cl_impl.h"
+/* transfer.c — the recorded host<->device copies lm_tensor_to_device / lm_tensor_to_host
+ * (device.h), for any device backend: copies through its write / read, the device-side add of
+ * the backward through lm_grad_seed (its "flat_add" kernel). Forward copies data across;
+ * backward copies the gradient back and adds it (+=) on the input's side, so the tape runs
+ * across the boundary.
+ * Not here: plain copies without the tape (lm_tensor_read / lm_tensor_write in tensor.c). */
+#include "tensor/device.h"
 #include "tensor/ops.h"
 
 /* Host tensor (any strides) packed row-major into dst. */
@@ -68,24 +69,21 @@ lm_tensor *lm_tensor_to_device(lm_ctx *c, lm_tensor *x)
 }
 
 /* ---- to_host ------------------------------------------------------------------------------ */
-/* in[0]: device x (contiguous); out: host copy. grad(x) (device) += upload(grad(out)). */
+/* in[0]: device x (contiguous); out: host copy. grad(x) (device) += upload(grad(out)): the
+ * seed rule of lm_grad_seed (host values uploaded, added by the backend's "flat_add"). */
 static void to_host_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
-    lm_tensor *gx = lm_grad(c, x);
-    lm_tensor *tmp = gx ? lm_tensor_new_on(c, gx->device, gx->ndim, gx->shape) : NULL;
-    if (!tmp || lm_tensor_write(c, tmp, n->out->grad->data)) return;
-    lm_tensor *t[2] = {gx, tmp};
-    lm_cl_launch(c->backend->impl, c, "flat_add", t, 2, NULL);
+    lm_grad_seed(c, x, n->out->grad);
 }
 
 lm_tensor *lm_tensor_to_host(lm_ctx *c, lm_tensor *x)
 {
     if (!lm_check_inputs(c, "to_host", 1, x)) return NULL;
     if (x->device == LM_DEVICE_CPU) return x;
-    if (x->device != LM_DEVICE_OPENCL || c->backend->device != LM_DEVICE_OPENCL) {
-        lm_ctx_fail(c, LM_ERR_ARG, "to_host: tensor is not on the ctx's OpenCL device");
+    if (x->device != c->backend->device) {
+        lm_ctx_fail(c, LM_ERR_ARG, "to_host: tensor is not on the ctx's device");
         return NULL;
     }
     x = lm_contiguous(c, x);
