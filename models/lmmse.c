@@ -156,11 +156,21 @@ static void direct_frame(const lm_model *m, const lmmse_net *n, const float *wt,
     const int PW = W + 2 * r, PH = H + 2 * r;
     const int reflect = H / ty > n->hi_y && H / ty > -n->lo_y && W / tx > n->hi_x &&
                         W / tx > -n->lo_x;
+    int lx[64], rx[64]; /* the r columns each side (K <= 31) */
+    for (int x = 0; x < r; x++)
+        lx[x] = pad_index(x - r, tx, W, reflect), rx[x] = pad_index(W + x, tx, W, reflect);
     for (int y = 0; y < PH; y++) {
-        int sy = pad_index(y - r, ty, H, reflect);
-        for (int x = 0; x < PW; x++) {
-            int sx = pad_index(x - r, tx, W, reflect);
-            pad[(size_t)y * PW + x] = sy < 0 || sx < 0 ? 0.0f : raw[(size_t)sy * W + sx];
+        const int sy = pad_index(y - r, ty, H, reflect);
+        float *d = pad + (size_t)y * PW;
+        if (sy < 0) {
+            memset(d, 0, sizeof(float) * (size_t)PW);
+            continue;
+        }
+        const float *src = raw + (size_t)sy * W;
+        memcpy(d + r, src, sizeof(float) * (size_t)W);
+        for (int x = 0; x < r; x++) {
+            d[x] = lx[x] < 0 ? 0.0f : src[lx[x]];
+            d[r + W + x] = rx[x] < 0 ? 0.0f : src[rx[x]];
         }
     }
     const size_t plane = (size_t)H * W;
