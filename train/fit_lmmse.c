@@ -273,6 +273,7 @@ static const double synth_grid[] = {0.05, 0.1, 0.2, 0.35, 0.5};
 static lm_status fit_levels(fitter *f, lm_model *m, int have_val, int level, double *coef,
                             lm_lmmse_fit_report *rep, lm_err *err)
 {
+    const double t0 = now();
     double *W = malloc(sizeof(double) * f->F1 * O), *L = malloc(sizeof(double) * f->F1 * f->F1);
     if (!W || !L) return free(W), free(L), lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: out of memory");
     lm_status st = LM_OK;
@@ -308,6 +309,7 @@ static lm_status fit_levels(fitter *f, lm_model *m, int have_val, int level, dou
         }
     }
     free(W), free(L);
+    rep->seconds_solve += now() - t0;
     return st;
 }
 

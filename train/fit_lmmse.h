@@ -18,7 +18,8 @@ typedef struct lm_lmmse_fit_report {
                                            * statistics (NaN: an interpolated level) */
     double val_psnr[LM_LMMSE_LEVELS]; /* validation PSNR (31 bands, interior pixels, noise at
                                        * the level's sd); NaN without a validation split */
-    double seconds;
+    double seconds;              /* the whole fit */
+    double seconds_solve;        /* of which solving (ridge and share search, every level) */
 } lm_lmmse_fit_report;
 
 typedef struct lm_dataset lm_dataset;

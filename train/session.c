@@ -130,10 +130,10 @@ static lm_status write_fit_report(const lm_train_cfg *cfg, const lm_lmmse_fit_re
                               : json_null(), "val_psnr",
                               isfinite(r->val_psnr[l]) ? json_real(r->val_psnr[l]) : json_null(),
                               "interpolated", !isfinite(r->ridge[l])));
-    json_t *root = json_pack("{s:s, s:i, s:I, s:I, s:I, s:f, s:b, s:o}", "model", cfg->model,
+    json_t *root = json_pack("{s:s, s:i, s:I, s:I, s:I, s:f, s:f, s:b, s:o}", "model", cfg->model,
                              "window", K, "patches", (json_int_t)r->patches,
                              "val_patches", (json_int_t)r->val_patches, "rows", (json_int_t)r->rows,
-                             "seconds", r->seconds, "ridge_from_validation", r->val_patches > 0,
+                             "seconds", r->seconds, "seconds_solve", r->seconds_solve, "ridge_from_validation", r->val_patches > 0,
                              "levels", lv);
     char path[LM_TRAIN_PATH_LEN + 32], tmp[LM_TRAIN_PATH_LEN + 48];
     snprintf(path, sizeof path, "%s/fit.json", cfg->output);
@@ -173,7 +173,8 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     if (st) return st;
     if (opts->progress) {
         fprintf(out, "train: %s fitted in closed form in %.1f s (%ld patches, %ld pixels; %ld "
-                "validation patches)\n", cfg->model, r.seconds, r.patches, r.rows, r.val_patches);
+                "validation patches; solving %.1f s)\n", cfg->model, r.seconds, r.patches, r.rows,
+                r.val_patches, r.seconds_solve);
         for (int l = 0; l < LM_LMMSE_LEVELS; l++)
             fprintf(out, "  noise sd %-7g ridge %-6g synthetic share %-5.2g validation PSNR "
                     "%.2f dB\n", (double)lm_lmmse_sigmas[l], r.ridge[l], r.synth_weight[l],
