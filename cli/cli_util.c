@@ -2,6 +2,7 @@
  * cli_util.h). */
 #define _GNU_SOURCE /* nftw flags */
 #include "cli/cli_util.h"
+#include "tensor/tensor.h"
 #include <dirent.h>
 #include <errno.h>
 #include <ftw.h>
@@ -136,6 +137,11 @@ int lm_cli_real(lm_cli *c, const char *name, double lo, double hi, double *out)
     }
     *out = v;
     return 1;
+}
+
+int lm_cli_threads(lm_cli *c, long long *out)
+{
+    return lm_cli_int(c, "--threads", 1, LM_MAX_THREADS, out);
 }
 
 int lm_cli_choice(lm_cli *c, const char *name, const char *const *choices, int *out)

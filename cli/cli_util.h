@@ -34,6 +34,8 @@ int lm_cli_flag(lm_cli *c, const char *name, int *flag);
 /* A value that must be an integer in [lo, hi] / a finite real in [lo, hi]. */
 int lm_cli_int(lm_cli *c, const char *name, long long lo, long long hi, long long *out);
 int lm_cli_real(lm_cli *c, const char *name, double lo, double hi, double *out);
+/* "--threads T": an integer in 1..LM_MAX_THREADS (the same bound for every command). */
+int lm_cli_threads(lm_cli *c, long long *out);
 /* A value that must be one of the NULL-terminated `choices`; *out = its index. */
 int lm_cli_choice(lm_cli *c, const char *name, const char *const *choices, int *out);
 

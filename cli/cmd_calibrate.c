@@ -90,7 +90,7 @@ static int parse_opt(lm_cli *c, cal_opts *o)
         (r = lm_cli_int(c, "--bins", 1, LM_AUTO_MAX_BINS, &o->bins)) ||
         (r = lm_cli_int(c, "--seed", 0, LLONG_MAX / 2000000, &o->seed)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
-        (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
+        (r = lm_cli_threads(c, &o->threads)) ||
         (r = lm_cli_real(c, "--noise", 0.0, 100.0, &o->noise)))
         return r < 0 ? 2 : 1;
     return 0;

@@ -150,7 +150,7 @@ static int parse_one(lm_cli *c, sim_opts *o)
         (r = lm_cli_real(c, "--read-noise", 0, 1e6, &o->read_noise)) ||
         (r = lm_cli_int(c, "--bits", 1, 24, &o->bits)) ||
         (r = lm_cli_int(c, "--seed", 0, 0x7fffffffffffffffLL, &o->seed)) ||
-        (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
+        (r = lm_cli_threads(c, &o->threads)) ||
         (r = lm_cli_choice(c, "--format", FORMATS, &o->format)))
         return r;
     if ((r = lm_cli_int(c, "--frames", 1, 10000, &o->frames)) ||

@@ -368,7 +368,8 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
         BAD("'noise': need 0 <= min <= max <= 1 (got %g,%g)", c->noise_min, c->noise_max);
     if (!(c->val_noise >= 0 && c->val_noise <= 1))
         BAD("'val_noise': must be in [0, 1] (got %g)", c->val_noise);
-    if (c->threads < 0) BAD("'threads': must be >= 0 (got %d)", c->threads);
+    if (c->threads < 0 || c->threads > LM_MAX_THREADS)
+        BAD("'threads': %d is out of range (0..%d)", c->threads, LM_MAX_THREADS);
     if (strcmp(c->device, "cpu") && strcmp(c->device, "opencl"))
         BAD("'device': must be cpu or opencl (got '%s'; --device, the config or $LM_DEVICE)",
             c->device);
