@@ -51,6 +51,10 @@ int lm_cli_unknown(const lm_cli *c);
  * consumed; an unknown "--option" is reported instead (lm_cli_unknown's status). Returns 0. */
 int lm_cli_positional(lm_cli *c, const char **out, int *n);
 
+/* "HxW", each an integer in [lo, hi] (checked before it becomes an int): 0, or -1 (nothing
+ * printed). */
+int lm_cli_parse_size(const char *s, long long lo, long long hi, int *h, int *w);
+
 /* Case-insensitive: does path end with ext (".png")? */
 int lm_cli_has_ext(const char *path, const char *ext);
 
