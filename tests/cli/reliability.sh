@@ -62,4 +62,18 @@ expect_error "system gains[0] 1e308" 2 \
   "gains[0]: must be a non-negative number of at most 1e+12 (got 1e+308)" "$T/n13" -- \
   "$LM" simulate --input "$CAVE" --crop --system "$T/gains.json" --output "$T/n13"
 
+# ---- resume of a run started with relative paths (the README's example) ------------------
+# config.json stored --data as given (relative to the working directory) and resume read it
+# relative to the run folder: resuming failed, from the same working directory or another.
+mkdir -p "$T/wd1/scenes" "$T/wd2"
+cp -r "$CAVE" "$T/wd1/scenes/"
+RT="--model linear --batch 2 --accum-steps 1 --synth-fraction 0 --val-patches 1 --quiet"
+(cd "$T/wd1" && "$LM" train $RT --data scenes/balloons_crop100 --iterations 2 \
+  --output runs/rel > "$T/rel.log" 2>&1)
+check "relative run: $(cat "$T/rel.log")" [ -s "$T/wd1/runs/rel/model.safetensors" ]
+(cd "$T/wd1" && "$LM" train --resume runs/rel --iterations 3 > "$T/rel2.log" 2>&1)
+check "resume from the same folder: $(cat "$T/rel2.log")" grep -q "for 3 iterations" "$T/rel2.log"
+(cd "$T/wd2" && "$LM" train --resume ../wd1/runs/rel --iterations 4 > "$T/rel3.log" 2>&1)
+check "resume from another folder: $(cat "$T/rel3.log")" grep -q "for 4 iterations" "$T/rel3.log"
+
 finish
