@@ -2,6 +2,7 @@
  * cli_util.h). */
 #define _GNU_SOURCE /* nftw flags */
 #include "cli/cli_util.h"
+#include "tensor/tensor.h"
 #include <dirent.h>
 #include <errno.h>
 #include <ftw.h>
@@ -109,7 +110,7 @@ int lm_cli_int(lm_cli *c, const char *name, long long lo, long long hi, long lon
     if (r <= 0) return r;
     long long v;
     if (lm_cli_parse_ll(s, &v) != 0) {
-        lm_cli_error(c, "%s: '%s' is not an integer", name, s);
+        lm_cli_error(c, "%s: '%s' is not an integer in %lld..%lld", name, s, lo, hi);
         return -1;
     }
     if (v < lo || v > hi) {
@@ -127,7 +128,7 @@ int lm_cli_real(lm_cli *c, const char *name, double lo, double hi, double *out)
     if (r <= 0) return r;
     double v;
     if (lm_cli_parse_real(s, &v) != 0) {
-        lm_cli_error(c, "%s: '%s' is not a finite number", name, s);
+        lm_cli_error(c, "%s: '%s' is not a finite number in %g..%g", name, s, lo, hi);
         return -1;
     }
     if (v < lo || v > hi) {
@@ -136,6 +137,11 @@ int lm_cli_real(lm_cli *c, const char *name, double lo, double hi, double *out)
     }
     *out = v;
     return 1;
+}
+
+int lm_cli_threads(lm_cli *c, long long *out)
+{
+    return lm_cli_int(c, "--threads", 1, LM_MAX_THREADS, out);
 }
 
 int lm_cli_choice(lm_cli *c, const char *name, const char *const *choices, int *out)
@@ -154,6 +160,20 @@ int lm_cli_choice(lm_cli *c, const char *name, const char *const *choices, int *
     }
     lm_cli_error(c, "%s: unknown value '%s' (one of: %s)", name, s, list);
     return -1;
+}
+
+int lm_cli_parse_size(const char *s, long long lo, long long hi, int *h, int *w)
+{
+    char buf[64], *x;
+    long long a, b;
+    if (snprintf(buf, sizeof buf, "%s", s) >= (int)sizeof buf || !(x = strchr(buf, 'x')))
+        return -1;
+    *x = 0;
+    if (lm_cli_parse_ll(buf, &a) || lm_cli_parse_ll(x + 1, &b) || a < lo || a > hi || b < lo ||
+        b > hi)
+        return -1;
+    *h = (int)a, *w = (int)b;
+    return 0;
 }
 
 int lm_cli_has_ext(const char *path, const char *ext)

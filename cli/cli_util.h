@@ -34,6 +34,8 @@ int lm_cli_flag(lm_cli *c, const char *name, int *flag);
 /* A value that must be an integer in [lo, hi] / a finite real in [lo, hi]. */
 int lm_cli_int(lm_cli *c, const char *name, long long lo, long long hi, long long *out);
 int lm_cli_real(lm_cli *c, const char *name, double lo, double hi, double *out);
+/* "--threads T": an integer in 1..LM_MAX_THREADS (the same bound for every command). */
+int lm_cli_threads(lm_cli *c, long long *out);
 /* A value that must be one of the NULL-terminated `choices`; *out = its index. */
 int lm_cli_choice(lm_cli *c, const char *name, const char *const *choices, int *out);
 
@@ -48,6 +50,10 @@ int lm_cli_unknown(const lm_cli *c);
 /* The current argument as a positional one: appended to out[*n] (out sized for argc) and
  * consumed; an unknown "--option" is reported instead (lm_cli_unknown's status). Returns 0. */
 int lm_cli_positional(lm_cli *c, const char **out, int *n);
+
+/* "HxW", each an integer in [lo, hi] (checked before it becomes an int): 0, or -1 (nothing
+ * printed). */
+int lm_cli_parse_size(const char *s, long long lo, long long hi, int *h, int *w);
 
 /* Case-insensitive: does path end with ext (".png")? */
 int lm_cli_has_ext(const char *path, const char *ext);

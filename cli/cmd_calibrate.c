@@ -90,7 +90,7 @@ static int parse_opt(lm_cli *c, cal_opts *o)
         (r = lm_cli_int(c, "--bins", 1, LM_AUTO_MAX_BINS, &o->bins)) ||
         (r = lm_cli_int(c, "--seed", 0, LLONG_MAX / 2000000, &o->seed)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
-        (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
+        (r = lm_cli_threads(c, &o->threads)) ||
         (r = lm_cli_real(c, "--noise", 0.0, 100.0, &o->noise)))
         return r < 0 ? 2 : 1;
     return 0;
@@ -135,9 +135,9 @@ static int check_opts(lm_cli *c, cal_opts *o)
     if (o->measure < 0)
         return lm_cli_error(c, "--measure '%s': use grad or relgrad", o->measure_s);
     o->sh = 198, o->sw = 256;
-    if (o->size_s && (sscanf(o->size_s, "%dx%d", &o->sh, &o->sw) != 2 || o->sh < 66 ||
-                      o->sw < 64 || o->sh > 4096 || o->sw > 4096))
-        return lm_cli_error(c, "--synth-size '%s': want HxW, at least 66x64", o->size_s);
+    if (o->size_s && (lm_cli_parse_size(o->size_s, 64, 4096, &o->sh, &o->sw) || o->sh < 66))
+        return lm_cli_error(c, "--synth-size '%s': want HxW, from 66x64 to 4096x4096",
+                            o->size_s);
     if (parse_tol(c, o)) return 2;
     return 1;
 }

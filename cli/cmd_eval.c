@@ -131,7 +131,7 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_value(c, "--device", &o->device)) ||
         (r = lm_cli_choice(c, "--split", split_names, &o->split)) ||
         (r = lm_cli_int(c, "--seed", 0, (long long)1 << 62, &o->seed)) ||
-        (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
+        (r = lm_cli_threads(c, &o->threads)) ||
         (r = lm_cli_int(c, "--rainbow", 0, 4096, &o->rainbow)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
         (r = lm_cli_value(c, "--noise", &noise)) ||

@@ -97,7 +97,7 @@ static int parse(lm_cli *c, infer_opts *o)
             (r = lm_cli_real(c, "--noise-level", 0.0, 1.0, &o->noise_level)) ||
             (r = lm_cli_flag(c, "--tiles", &o->tiles)) ||
             (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
-            (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
+            (r = lm_cli_threads(c, &o->threads)) ||
             (r = lm_cli_flag(c, "--no-align", &o->no_align))) {
             if (r < 0) return 2;
             continue;

@@ -42,7 +42,7 @@ static int parse(lm_cli *c, render_opts *o)
         if ((r = lm_cli_value(c, "--input", &o->input)) ||
             (r = lm_cli_value(c, "--output", &o->output)) ||
             (r = lm_cli_real(c, "--exposure", 1e-12, 1e6, &o->exposure)) ||
-            (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads))) {
+            (r = lm_cli_threads(c, &o->threads))) {
             if (r < 0) return 2;
             continue;
         }

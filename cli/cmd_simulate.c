@@ -78,7 +78,7 @@ typedef struct sim_opts {
     int nmotion;
 } sim_opts;
 
-/* Parse "a,b,c" into up to max reals; returns the count or -1. */
+/* Parse "a,b,c" into up to max reals, each in -1e6..1e6; returns the count or -1. */
 static int parse_reals(const char *s, double *v, int max)
 {
     char buf[256];
@@ -86,7 +86,7 @@ static int parse_reals(const char *s, double *v, int max)
     int n = 0;
     for (char *save = NULL, *tok = strtok_r(buf, ",", &save); tok;
          tok = strtok_r(NULL, ",", &save)) {
-        if (n == max || lm_cli_parse_real(tok, &v[n]) != 0) return -1;
+        if (n == max || lm_cli_parse_real(tok, &v[n]) != 0 || fabs(v[n]) > 1e6) return -1;
         n++;
     }
     return n;
@@ -125,12 +125,11 @@ static int parse_motion(const lm_cli *c, const char *spec, lm_motion *m)
                 ell ? LM_REGION_ELLIPSE : LM_REGION_RECT, v[0], v[1], v[2], v[3], v[4], v[5]};
     } else
         bad = 1;
-    for (int k = 0; !bad && k < 2; k++) bad = fabs(k ? m->vy : m->vx) > 1e6;
     if (bad)
         lm_cli_error(c, "--motion: invalid '%s' (translate:VX,VY | rotate:DEG[,CX,CY] | "
                      "zoom:PCT[,CX,CY] with PCT > -100 | region:rect|ellipse,CX,CY,W,H,VX,VY "
-                     "with W, H > 0, at most %d regions; one rotate/zoom centre)", spec,
-                     LM_VIDEO_MAX_REGIONS);
+                     "with W, H > 0, every number in -1e6..1e6, at most %d regions; one "
+                     "rotate/zoom centre)", spec, LM_VIDEO_MAX_REGIONS);
     return bad ? -1 : 0;
 }
 
@@ -150,7 +149,7 @@ static int parse_one(lm_cli *c, sim_opts *o)
         (r = lm_cli_real(c, "--read-noise", 0, 1e6, &o->read_noise)) ||
         (r = lm_cli_int(c, "--bits", 1, 24, &o->bits)) ||
         (r = lm_cli_int(c, "--seed", 0, 0x7fffffffffffffffLL, &o->seed)) ||
-        (r = lm_cli_int(c, "--threads", 1, 1024, &o->threads)) ||
+        (r = lm_cli_threads(c, &o->threads)) ||
         (r = lm_cli_choice(c, "--format", FORMATS, &o->format)))
         return r;
     if ((r = lm_cli_int(c, "--frames", 1, 10000, &o->frames)) ||

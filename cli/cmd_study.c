@@ -55,7 +55,7 @@ static int parse(lm_cli *c, study_args *a)
         }
         if ((r = lm_cli_value(c, "--config", &a->config)) ||
             (r = lm_cli_value(c, "--output", &a->output)) ||
-            (r = lm_cli_int(c, "--threads", 1, 1024, &a->threads)) ||
+            (r = lm_cli_threads(c, &a->threads)) ||
             (r = lm_cli_flag(c, "--no-charts", &a->no_charts)) ||
             (r = lm_cli_flag(c, "--dry-run", &a->dry_run)) ||
             (r = lm_cli_flag(c, "--quiet", &a->quiet))) {

@@ -20,7 +20,7 @@
 #include <sys/stat.h>
 
 #define DS_PATH_MAX 4096
-#define DS_MAX_WORKERS 64
+#define DS_MAX_WORKERS LM_DATASET_MAX_WORKERS
 
 typedef struct scene {
     char *path;          /* what lm_cube_read opens */

@@ -29,6 +29,9 @@ typedef enum lm_data_split {
     LM_SPLIT_TEST = 2
 } lm_data_split;
 
+/* The most data preparation threads a dataset runs. */
+#define LM_DATASET_MAX_WORKERS 64
+
 typedef struct lm_dataset_cfg {
     const char *const *paths;   /* scene files/folders, or folders of scenes */
     int npaths;
@@ -38,7 +41,8 @@ typedef struct lm_dataset_cfg {
     float noise_min, noise_max; /* Gaussian noise k ~ U[min, max] x max clean value (0, 0.15) */
     int flips;                  /* random horizontal/vertical flips (training split only) */
     uint64_t seed;
-    int workers;                /* threads preparing batches ahead (0 = synchronous) */
+    int workers;                /* threads preparing batches ahead (0 = synchronous; at most
+                                 * LM_DATASET_MAX_WORKERS) */
     int cache_scenes;           /* scenes kept in memory (LRU); 0 = all. Never exceeded: when
                                  * every cached scene is in use by a worker, a scene is read for
                                  * that one sample without being cached */

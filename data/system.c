@@ -58,20 +58,37 @@ static lm_status lookup(loader *ld, json_t *obj, const char *prefix, const char 
     return LM_OK;
 }
 
-/* Number field >= min: absent -> def (or an error when required). */
-static lm_status get_number(loader *ld, json_t *obj, const char *prefix, const char *key,
-                            int required, double def, double min, double *out)
+/* The largest value of any spectrum sample and of any gain: far above real data, small
+ * enough that every product of the responses stays finite (in float too). */
+#define MAX_SPECTRUM 1e12
+#define MAX_GAIN 1e12
+
+/* " (got <number>)" or "" for a value that is not a number, for messages. */
+static const char *got(json_t *v, char *buf, size_t n)
 {
-    char f[128];
+    if (json_is_number(v)) snprintf(buf, n, " (got %g)", json_number_value(v));
+    else buf[0] = 0;
+    return buf;
+}
+
+/* Number field in [min, max] (min > 0: a positive number): absent -> def (or an error when
+ * required). */
+static lm_status get_number(loader *ld, json_t *obj, const char *prefix, const char *key,
+                            int required, double def, double min, double max, double *out)
+{
+    char f[128], g[48];
     json_t *v;
     lm_status st = lookup(ld, obj, prefix, key, required, f, &v);
     *out = def;
     if (st || !v) return st;
-    if (!json_is_number(v) || !isfinite(json_number_value(v)) || json_number_value(v) < min) {
-        if (min > 0) return fail(ld, LM_ERR_FORMAT, f, "must be a positive number");
-        return fail(ld, LM_ERR_FORMAT, f, "must be a number >= %g", min);
+    double x = json_number_value(v);
+    if (!json_is_number(v) || !(x >= min && x <= max)) {
+        if (min > 0) return fail(ld, LM_ERR_FORMAT, f, "must be a positive number of at most %g%s",
+                                 max, got(v, g, sizeof g));
+        return fail(ld, LM_ERR_FORMAT, f, "must be a number in %g..%g%s", min, max,
+                    got(v, g, sizeof g));
     }
-    *out = json_number_value(v);
+    *out = x;
     return LM_OK;
 }
 
@@ -103,8 +120,11 @@ static lm_status spectrum_inline(loader *ld, json_t *v, const char *field, float
     int best = 0;
     for (int b = 0; b < s->nbins; b++) {
         json_t *e = json_array_get(v, (size_t)b);
-        if (!json_is_number(e) || !isfinite(json_number_value(e)) || json_number_value(e) < 0)
-            return fail(ld, LM_ERR_FORMAT, field, "value %d must be a non-negative number", b);
+        double x = json_number_value(e);
+        char g[48];
+        if (!json_is_number(e) || !(x >= 0 && x <= MAX_SPECTRUM))
+            return fail(ld, LM_ERR_FORMAT, field, "value %d must be a non-negative number of at "
+                        "most %g%s", b, MAX_SPECTRUM, got(e, g, sizeof g));
         out[b] = (float)json_number_value(e);
         if (out[b] > out[best]) best = b;
     }
@@ -123,8 +143,10 @@ static lm_status spectrum_csv(loader *ld, json_t *v, const char *field, float *o
     json_t *csv = json_object_get(v, "csv"), *col = json_object_get(v, "column");
     if (!json_is_string(csv) || !json_string_value(csv)[0])
         return fail(ld, LM_ERR_FORMAT, field, "'csv' must be a file path (string)");
-    if (!json_is_string(col) && !json_is_integer(col))
-        return fail(ld, LM_ERR_FORMAT, field, "'column' must be a column name or number");
+    if (!json_is_string(col) &&
+        !(json_is_integer(col) && json_integer_value(col) >= 1 && json_integer_value(col) <= 100000))
+        return fail(ld, LM_ERR_FORMAT, field, "'column' must be a column name or number "
+                    "(1..100000)");
     const char *rel = json_string_value(csv);
     snprintf(path, sizeof path, "%s%s%s", rel[0] == '/' ? "" : ld->dir, rel[0] == '/' ? "" : "/",
              rel);
@@ -140,10 +162,12 @@ static lm_status spectrum_csv(loader *ld, json_t *v, const char *field, float *o
     if (!bins) st = fail(ld, LM_ERR_NOMEM, field, "out of memory");
     else st = lm_spectrum_bin(&sp, s->grid_start, s->grid_step, s->nbins, bins, &e);
     for (int b = 0; st == LM_OK && b < s->nbins; b++) {
-        out[b] = (float)(bins[b] / s->grid_step);
-        if (out[b] < 0)
-            st = fail(ld, LM_ERR_FORMAT, field, "negative value in the %g nm bin of '%s'",
-                      s->grid_start + s->grid_step * b, path);
+        double x = bins[b] / s->grid_step;
+        out[b] = (float)x;
+        if (!(x >= 0 && x <= MAX_SPECTRUM))
+            st = fail(ld, LM_ERR_FORMAT, field, "%s value (%g) in the %g nm bin of '%s' (spectra "
+                      "must be in 0..%g)", x < 0 ? "negative" : "out-of-range", x,
+                      s->grid_start + s->grid_step * b, path, MAX_SPECTRUM);
     }
     *peak = lm_spectrum_peak(&sp);
     free(bins);
@@ -173,8 +197,8 @@ static lm_status parse_grid(loader *ld, json_t *root)
     if (g) {
         if (!json_is_object(g)) return fail(ld, LM_ERR_FORMAT, "grid", "must be an object");
         lm_status st = check_keys(ld, g, "grid.", keys);
-        if (!st) st = get_number(ld, g, "grid.", "start_nm", 1, 0, 0, &start);
-        if (!st) st = get_number(ld, g, "grid.", "step_nm", 1, 0, 1e-9, &step);
+        if (!st) st = get_number(ld, g, "grid.", "start_nm", 1, 0, 0, 1e5, &start);
+        if (!st) st = get_number(ld, g, "grid.", "step_nm", 1, 0, 1e-3, 1e4, &step);
         if (!st) st = get_int(ld, g, "grid.", "count", 1, 0, 1, 128, &s->nbins);
         if (st) return st;
     }
@@ -202,9 +226,10 @@ static lm_status parse_sensor(loader *ld, json_t *root)
 static lm_status parse_timing(loader *ld, json_t *root)
 {
     lm_system *s = ld->sys;
-    lm_status st = get_number(ld, root, "", "subframe_us", 1, 0, 1e-9, &s->subframe_us);
-    if (!st) st = get_number(ld, root, "", "readout_us", 0, 0, 0, &s->readout_us);
-    if (!st) st = get_number(ld, root, "", "frame_period_us", 0, 1e6 / 30, 1e-9,
+    /* a sub-frame of at most 1 s, a frame period of at most 1000 s */
+    lm_status st = get_number(ld, root, "", "subframe_us", 1, 0, 1e-9, 1e6, &s->subframe_us);
+    if (!st) st = get_number(ld, root, "", "readout_us", 0, 0, 0, 1e9, &s->readout_us);
+    if (!st) st = get_number(ld, root, "", "frame_period_us", 0, 1e6 / 30, 1e-9, 1e9,
                              &s->frame_period_us);
     return st;
 }
@@ -235,7 +260,7 @@ static lm_status parse_led(loader *ld, json_t *o, int i)
     snprintf(f, sizeof f, "leds[%d].emission", i);
     if (!st) st = parse_spectrum(ld, json_object_get(o, "emission"), f, led->emission,
                                  &led->peak_nm);
-    if (!st) st = get_number(ld, o, pre, "peak_nm", 0, led->peak_nm, 0, &led->peak_nm);
+    if (!st) st = get_number(ld, o, pre, "peak_nm", 0, led->peak_nm, 0, 1e5, &led->peak_nm);
     return st;
 }
 
@@ -288,10 +313,12 @@ static lm_status parse_gains(loader *ld, json_t *root, double *gains)
     s->equal_white = 0;
     for (int i = 0; i < s->nleds; i++) {
         json_t *e = json_array_get(g, (size_t)i);
-        if (!json_is_number(e) || !isfinite(json_number_value(e)) || json_number_value(e) < 0) {
-            char f[32];
+        double x = json_number_value(e);
+        if (!json_is_number(e) || !(x >= 0 && x <= MAX_GAIN)) {
+            char f[32], g[48];
             snprintf(f, sizeof f, "gains[%d]", i);
-            return fail(ld, LM_ERR_FORMAT, f, "must be a non-negative number");
+            return fail(ld, LM_ERR_FORMAT, f, "must be a non-negative number of at most %g%s",
+                        MAX_GAIN, got(e, g, sizeof g));
         }
         gains[i] = json_number_value(e);
     }
@@ -434,6 +461,9 @@ static lm_status compute_responses(loader *ld, double *gains)
     }
     if (!(best > 0.0))
         return fail(ld, LM_ERR_FORMAT, "gains", "every LED's response to white is zero");
+    if (!isfinite(best)) /* not reachable within the ranges above; never a silent zero */
+        return fail(ld, LM_ERR_FORMAT, "gains", "the responses overflow (gains, emission and "
+                    "timing too large together)");
     s->scale = 1.0 / best;
     for (int l = 0; l < s->nleds; l++) {
         lm_led *led = &s->leds[l];

@@ -271,9 +271,13 @@ static lm_status load_root(json_t *r, lm_auto_calib *a, const char **what)
         return LM_ERR_FORMAT;
     if ((*what = "measure (grad|relgrad)"), meas < 0) return LM_ERR_FORMAT;
     a->measure = (lm_auto_measure)meas;
-    if ((*what = "window / stride [h, w]"), get_reals(r, "window", win, 2, 2) < 0 ||
-        get_reals(r, "stride", str, 2, 2) < 0)
+    if ((*what = "window / stride [h, w] (integers in 1..4096)"),
+        get_reals(r, "window", win, 2, 2) < 0 || get_reals(r, "stride", str, 2, 2) < 0)
         return LM_ERR_FORMAT;
+    for (int k = 0; k < 2; k++) /* in range before they become ints */
+        if (!(win[k] >= 1 && win[k] <= 4096 && str[k] >= 1 && str[k] <= 4096) ||
+            win[k] != floor(win[k]) || str[k] != floor(str[k]))
+            return LM_ERR_FORMAT;
     a->win_h = (int)win[0], a->win_w = (int)win[1], a->stride_y = (int)str[0],
     a->stride_x = (int)str[1];
     *what = "edges (up to 31 numbers) / windows (one count per bin)";
@@ -281,7 +285,8 @@ static lm_status load_root(json_t *r, lm_auto_calib *a, const char **what)
     if (ne < 0 || get_reals(r, "windows", cnt, ne + 1, LM_AUTO_MAX_BINS) < 0)
         return LM_ERR_FORMAT;
     a->nbins = ne + 1;
-    for (int b = 0; b < a->nbins; b++) a->windows[b] = cnt[b] > 0 ? (long)cnt[b] : 0;
+    for (int b = 0; b < a->nbins; b++) /* counts: NaN and negatives as 0, at most 1e15 */
+        a->windows[b] = cnt[b] > 0 ? (long)fmin(cnt[b], 1e15) : 0;
     json_t *ml = json_object_get(r, "models");
     *what = "models (1..8 objects with model, cost_s_per_window, psnr per bin)";
     if (!json_is_array(ml) || json_array_size(ml) < 1 || json_array_size(ml) > LM_AUTO_MAX_MODELS)

@@ -67,46 +67,59 @@ lm_status lm_params_save(const lm_params *p, const char *path, const char *const
     return LM_OK;
 }
 
-/* Read the header JSON and the data start offset. */
-static json_t *read_header(FILE *f, const char *path, long *data_start, long *file_size,
+/* Read the header JSON and the data start offset. Every size and offset read from the file is
+ * range-checked before any arithmetic on it (a hostile header must not overflow). */
+static json_t *read_header(FILE *f, const char *path, int64_t *data_start, int64_t *file_size,
                            lm_err *err)
 {
     unsigned char len8[8];
-    fseek(f, 0, SEEK_END);
-    *file_size = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    if (fread(len8, 1, 8, f) != 8) {
+    long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
+    if (size < 0 || fseek(f, 0, SEEK_SET) != 0) {
+        lm_err_set(err, LM_ERR_IO, "%s: cannot read: %s", path, strerror(errno));
+        return NULL;
+    }
+    *file_size = size;
+    if (size < 8 || fread(len8, 1, 8, f) != 8) {
         lm_err_set(err, LM_ERR_FORMAT, "%s: not a safetensors file (too short)", path);
         return NULL;
     }
     uint64_t n = 0;
     for (int i = 7; i >= 0; i--) n = (n << 8) | len8[i];
-    if (n == 0 || n > 100u * 1024 * 1024 || (long)(8 + n) > *file_size) {
-        lm_err_set(err, LM_ERR_FORMAT, "%s: not a safetensors file (header length %llu)", path,
-                   (unsigned long long)n);
+    if (n == 0 || n > 100u * 1024 * 1024 || n > (uint64_t)(size - 8)) {
+        lm_err_set(err, LM_ERR_FORMAT, "%s: not a safetensors file (header length %llu, file "
+                   "size %ld)", path, (unsigned long long)n, size);
         return NULL;
     }
-    char *buf = malloc(n + 1);
+    char *buf = malloc(n);
     if (!buf || fread(buf, 1, n, f) != n) {
         free(buf);
-        lm_err_set(err, LM_ERR_FORMAT, "%s: truncated safetensors header", path);
+        lm_err_set(err, buf ? LM_ERR_FORMAT : LM_ERR_NOMEM, "%s: %s", path,
+                   buf ? "truncated safetensors header" : "out of memory for the header");
         return NULL;
     }
-    buf[n] = 0;
     json_error_t je;
-    json_t *h = json_loads(buf, 0, &je);
+    json_t *h = json_loadb(buf, n, 0, &je);
     free(buf);
     if (!h || !json_is_object(h)) {
+        lm_err_set(err, LM_ERR_FORMAT, "%s: bad safetensors header: %s", path,
+                   !h ? je.text : "not a JSON object");
         json_decref(h);
-        lm_err_set(err, LM_ERR_FORMAT, "%s: bad safetensors header: %s", path, je.text);
         return NULL;
     }
-    *data_start = (long)(8 + n);
+    *data_start = (int64_t)(8 + n);
     return h;
 }
 
-static lm_status load_one(lm_param *e, json_t *ent, FILE *f, long data_start, long file_size,
-                          const char *path, lm_err *err)
+/* A data offset: a JSON integer >= 0. */
+static int get_offset(json_t *v, int64_t *out)
+{
+    if (!json_is_integer(v) || json_integer_value(v) < 0) return 0;
+    *out = (int64_t)json_integer_value(v);
+    return 1;
+}
+
+static lm_status load_one(lm_param *e, json_t *ent, FILE *f, int64_t data_start,
+                          int64_t file_size, const char *path, lm_err *err)
 {
     const char *dtype = json_string_value(json_object_get(ent, "dtype"));
     json_t *shape = json_object_get(ent, "shape"), *offs = json_object_get(ent, "data_offsets");
@@ -121,13 +134,27 @@ static lm_status load_one(lm_param *e, json_t *ent, FILE *f, long data_start, lo
         return lm_err_set(err, LM_ERR_SHAPE, "%s: tensor %s has another shape than the model's %s",
                           path, e->name, lm_shape_str(&e->t, sb, sizeof sb));
     }
-    long a = (long)json_integer_value(json_array_get(offs, 0));
-    long b = (long)json_integer_value(json_array_get(offs, 1));
     size_t cnt = (size_t)lm_tensor_numel(&e->t);
-    if (b - a != (long)(cnt * 4) || a < 0 || data_start + b > file_size)
-        return lm_err_set(err, LM_ERR_FORMAT, "%s: tensor %s: data offsets [%ld, %ld) invalid or "
-                          "past the end of the file", path, e->name, a, b);
-    if (fseek(f, data_start + a, SEEK_SET) != 0 || fread(e->t.data, 4, cnt, f) != cnt)
+    json_t *ja = json_array_get(offs, 0), *jb = json_array_get(offs, 1);
+    int64_t a = 0, b = 0, end = 0;
+    const char *why = NULL;
+    /* checked before any arithmetic: a, b >= 0 and a <= b, so b - a cannot overflow */
+    if (!json_is_integer(ja) || !json_is_integer(jb)) why = "are not integers";
+    else if (!get_offset(ja, &a) || !get_offset(jb, &b) || b < a ||
+             (uint64_t)(b - a) != (uint64_t)cnt * 4)
+        why = "do not span the tensor's bytes";
+    else if (__builtin_add_overflow(data_start, b, &end) || end > file_size)
+        why = "run past the end of the file";
+    if (why) {
+        char sa[32] = "?", sb[32] = "?";
+        if (json_is_integer(ja))
+            snprintf(sa, sizeof sa, "%" JSON_INTEGER_FORMAT, json_integer_value(ja));
+        if (json_is_integer(jb))
+            snprintf(sb, sizeof sb, "%" JSON_INTEGER_FORMAT, json_integer_value(jb));
+        return lm_err_set(err, LM_ERR_FORMAT, "%s: tensor %s: data offsets [%s, %s) %s (%zu "
+                          "bytes)", path, e->name, sa, sb, why, cnt * 4);
+    }
+    if (fseek(f, (long)(data_start + a), SEEK_SET) != 0 || fread(e->t.data, 4, cnt, f) != cnt)
         return lm_err_set(err, LM_ERR_IO, "%s: tensor %s: read failed", path, e->name);
     return LM_OK;
 }
@@ -136,9 +163,9 @@ lm_status lm_params_load(lm_params *p, const char *path, int allow_extra, lm_err
 {
     FILE *f = fopen(path, "rb");
     if (!f) return lm_err_set(err, LM_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
-    long data_start = 0, file_size = 0;
+    int64_t data_start = 0, file_size = 0;
     json_t *h = read_header(f, path, &data_start, &file_size, err);
-    lm_status st = h ? LM_OK : LM_ERR_FORMAT;
+    lm_status st = h ? LM_OK : err ? err->status : LM_ERR_FORMAT;
     for (int i = 0; st == LM_OK && i < p->n; i++) {
         json_t *ent = json_object_get(h, p->items[i]->name);
         if (!ent) st = lm_err_set(err, LM_ERR_FORMAT, "%s: tensor %s missing", path, p->items[i]->name);
@@ -167,7 +194,7 @@ char *lm_safetensors_meta(const char *path, const char *key, lm_err *err)
         lm_err_set(err, LM_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
         return NULL;
     }
-    long ds, fs;
+    int64_t ds, fs;
     json_t *h = read_header(f, path, &ds, &fs, err);
     fclose(f);
     const char *v = h ? json_string_value(json_object_get(json_object_get(h, "__metadata__"), key)) : NULL;

@@ -67,18 +67,18 @@ static lm_status size_field(json_t *root, const char *where, const char *name, i
 {
     json_t *v = json_object_get(root, name);
     if (!v) return LM_OK;
-    int a = 0, b = 0;
+    long long a = 0, b = 0; /* range-checked below, before they become ints */
     char tail = 0;
     if (json_is_string(v)) {
-        if (sscanf(json_string_value(v), "%dx%d%c", &a, &b, &tail) != 2) a = 0;
+        if (sscanf(json_string_value(v), "%6lldx%6lld%c", &a, &b, &tail) != 2) a = 0;
     } else if (json_is_array(v) && json_array_size(v) == 2 &&
                json_is_integer(json_array_get(v, 0)) && json_is_integer(json_array_get(v, 1))) {
-        a = (int)json_integer_value(json_array_get(v, 0));
-        b = (int)json_integer_value(json_array_get(v, 1));
+        a = json_integer_value(json_array_get(v, 0));
+        b = json_integer_value(json_array_get(v, 1));
     }
     if (a < 1 || b < 1 || a > 8192 || b > 8192)
         BAD("%s: field '%s': must be \"HxW\" or [H, W] (1..8192)", where, name);
-    *h = a, *w = b;
+    *h = (int)a, *w = (int)b;
     return LM_OK;
 }
 
@@ -292,8 +292,10 @@ static lm_status extra_fields(lm_study_cfg *cfg, json_t *root, const char *w, lm
     if (!d) return LM_OK;
     json_t *a = json_object_get(d, "after_minutes"), *b = json_object_get(d, "behind_db");
     if (!json_is_object(d) || !json_is_number(a) || !json_is_number(b) ||
-        !(json_number_value(a) > 0) || !(json_number_value(b) >= 0))
-        BAD("%s: field 'drop': must be {\"after_minutes\": M > 0, \"behind_db\": D >= 0}", w);
+        !(json_number_value(a) > 0 && json_number_value(a) <= 1e6) ||
+        !(json_number_value(b) >= 0 && json_number_value(b) <= 1000))
+        BAD("%s: field 'drop': must be {\"after_minutes\": M in (0, 1e6], \"behind_db\": D in "
+            "[0, 1000]}", w);
     cfg->drop_minutes = (float)json_number_value(a);
     cfg->drop_db = (float)json_number_value(b);
     return LM_OK;

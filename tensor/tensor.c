@@ -15,6 +15,7 @@ lm_backend *lm_backend_cpu(void) { return &cpu_backend; }
 int lm_ctx_init(lm_ctx *c, int nthreads)
 {
     memset(c, 0, sizeof *c);
+    if (nthreads > LM_MAX_THREADS) return LM_ERR_ARG;
     if (lm_arena_init(&c->arena, 0) != 0) return LM_ERR_NOMEM;
     c->grad_enabled = 1;
     c->grad_reuse = 1;

@@ -126,8 +126,12 @@ struct lm_ctx {
     int grad_reuse;
 };
 
-/* Initialise a context: CPU backend, grad enabled, nthreads (0 = all cores), fast kernel
- * paths, gradient reuse on. */
+/* The most threads a context takes (every command's --threads and the run config's "threads"
+ * are checked against it: OpenMP fails on absurd team sizes). */
+#define LM_MAX_THREADS 1024
+
+/* Initialise a context: CPU backend, grad enabled, nthreads (0 = all cores; at most
+ * LM_MAX_THREADS, else LM_ERR_ARG), fast kernel paths, gradient reuse on. */
 int lm_ctx_init(lm_ctx *c, int nthreads);
 void lm_ctx_free(lm_ctx *c);
 /* End of a step: drop the tape and everything allocated in the arena. Keeps the error. */

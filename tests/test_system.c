@@ -321,6 +321,37 @@ static void test_validation_errors_schedule_and_spectra(void)
     expect_error("\"name\": \"small\"", "\"name\": \"small\", \"name\": \"twice\"", F, "line 1");
 }
 
+/* Every number is range-checked: values that overflow or make no physical sense are errors
+ * naming the field and the range, never an inf that turns every frame into zeros (issue 16). */
+static void test_numeric_ranges(void)
+{
+    const lm_status F = LM_ERR_FORMAT;
+    expect_error("\"gains\": [1, 2]", "\"gains\": [1e308, 2]", F,
+                 "gains[0]: must be a non-negative number of at most 1e+12 (got 1e+308)");
+    expect_error("\"gains\": [1, 2]", "\"gains\": [1, 1e13]", F, "gains[1]: must be");
+    expect_error("\"emission\": [0, 1, 2, 1, 0]", "\"emission\": [0, 1, 1e308, 1, 0]", F,
+                 "leds[0].emission: value 2 must be a non-negative number of at most 1e+12");
+    expect_error("\"qe\": [1, 1, 1, 1, 0.5]", "\"qe\": [1, 1, 1, 1, 1e300]", F,
+                 "sensor.qe: value 4 must be");
+    expect_error("\"subframe_us\": 100", "\"subframe_us\": 1e308", F,
+                 "subframe_us: must be a positive number of at most 1e+06 (got 1e+308)");
+    expect_error("\"readout_us\": 50", "\"readout_us\": 1e308", F,
+                 "readout_us: must be a number in 0..1e+09");
+    expect_error("\"readout_us\": 50", "\"readout_us\": 50, \"frame_period_us\": 1e300", F,
+                 "frame_period_us: must be a positive number of at most 1e+09");
+    expect_error("\"start_nm\": 500", "\"start_nm\": 1e300", F, "grid.start_nm: must be a number "
+                 "in 0..100000");
+    expect_error("\"step_nm\": 20", "\"step_nm\": 1e-300", F, "grid.step_nm: must be a positive");
+    expect_error("\"subframes\": 2,", "\"subframes\": 2, \"peak_nm\": 1e308,", F,
+                 "leds[0].peak_nm: must be a number in 0..100000");
+    expect_error("\"subframes\": 2,", "\"subframes\": 4294967298,", F,
+                 "leds[0].subframes: must be a positive integer");
+    expect_error("\"width\": 8, ", "\"width\": 4294967304, ", F, "sensor.width: must be a positive");
+    expect_error("\"emission\": [0, 1, 2, 1, 0]", "\"emission\": {\"csv\": \"x.csv\", "
+                 "\"column\": 4294967297}", F, "leds[0].emission: 'column' must be a column name "
+                 "or number (1..100000)");
+}
+
 static void test_csv_errors_through_system(void)
 {
     char csv[256], json[2048];
@@ -367,6 +398,7 @@ int main(void)
     RUN(test_validation_errors);
     RUN(test_validation_errors_schedule_and_spectra);
     RUN(test_csv_errors_through_system);
+    RUN(test_numeric_ranges);
     char cmd[128];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
     if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmpdir);

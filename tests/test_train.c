@@ -315,6 +315,14 @@ static void test_config_validation(void)
     expect_cfg_error("{\"version\": 1, \"data\": [3]}", "data[0]");
     expect_cfg_error("{\"version\": 1, \"accum_steps\": 0}", "accum_steps");
     expect_cfg_error("{\"version\": 1, \"step_every\": 0, \"schedule\": \"step\"}", "step_every");
+    /* issue 16: values that do not fit are errors, never wrapped, infinite or endless */
+    expect_cfg_error("{\"version\": 1, \"patch\": [4294967362, 64]}", "patch");
+    expect_cfg_error("{\"version\": 1, \"val_patches\": 2147483647}", "val_patches");
+    expect_cfg_error("{\"version\": 1, \"lr\": 1e39}", "lr");
+    expect_cfg_error("{\"version\": 1, \"threads\": 100000}", "threads");
+    expect_cfg_error("{\"version\": 1, \"iterations\": 9223372036854775807}", "iterations");
+    expect_cfg_error("{\"version\": 1, \"workers\": 65}", "workers");
+    expect_cfg_error("{\"version\": 1, \"res_init\": 1e300}", "res_init");
     /* no scenes and not all-synthetic */
     lm_train_cfg c;
     lm_train_cfg_default(&c);
@@ -328,6 +336,13 @@ static void test_config_validation(void)
     CHECK(lm_train_cfg_set(&c, "patch", "30x32", &e) == LM_OK && c.patch_h == 30 && c.patch_w == 32);
     CHECK(lm_train_cfg_set(&c, "noise", "0.05,0.1", &e) == LM_OK && c.noise_max == 0.1f);
     CHECK(lm_train_cfg_set(&c, "seed", "-3", &e) != LM_OK && strstr(e.msg, "'seed'"));
+    lm_err_clear(&e);
+    CHECK(lm_train_cfg_set(&c, "patch", "4294967362x64", &e) != LM_OK &&
+          strstr(e.msg, "4294967362 is out of range (1..4096)") && c.patch_h == 30);
+    lm_err_clear(&e);
+    c.val_patches = 1 << 30; /* set in code: validate checks the same ranges */
+    CHECK(lm_train_cfg_validate(&c, &e) != LM_OK && strstr(e.msg, "'val_patches'"));
+    c.val_patches = 64;
     lm_err_clear(&e);
     CHECK(lm_train_cfg_set(&c, "nope", "1", &e) != LM_OK && strstr(e.msg, "'nope'"));
     CHECK(lm_train_cfg_has("val-interval") && !lm_train_cfg_has("nope"));

@@ -12,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
+#include "data/dataset.h"
 
 typedef enum ftype { F_INT, F_LONG, F_U64, F_FLOAT, F_STR, F_LIST, F_PATCH, F_NOISE } ftype;
 
@@ -21,51 +22,71 @@ typedef struct field {
     size_t off;
     size_t size;      /* strings: buffer size */
     const char *arg, *help;
+    double lo, hi;    /* numbers (each of a pair): the allowed range, checked before any
+                       * conversion (a value that does not fit is an error, never wrapped) */
 } field;
 
-#define FLD(n, t, m, a, h) {n, t, offsetof(lm_train_cfg, m), sizeof(((lm_train_cfg *)0)->m), a, h}
+/* Upper bounds: what a run on one machine can use; far above any real run, low enough that
+ * nothing downstream overflows (sizes multiply up to batch x 41 x patch_h x patch_w) or runs
+ * for ever (every validation evaluates val_patches samples). */
+#define MAX_COUNT 1e9      /* iterations and intervals */
+#define MAX_PATCH 4096     /* each side of a patch */
+#define MAX_BATCH 4096     /* as infer/eval --batch */
+#define MAX_VAL_PATCHES 100000
+
+#define FLD(n, t, m, a, h, lo, hi)                                                            \
+    {n, t, offsetof(lm_train_cfg, m), sizeof(((lm_train_cfg *)0)->m), a, h, lo, hi}
 static const field fields[] = {
-    FLD("version", F_INT, version, "N", "config format version (1)"),
-    FLD("model", F_STR, model, "NAME", "model preset (lumosaic info --list)"),
-    FLD("system", F_STR, system, "FILE", "system description (default: bundled)"),
-    FLD("data", F_LIST, data, "PATH", "scene file or folder (repeatable)"),
-    FLD("synth_fraction", F_FLOAT, synth_fraction, "F", "share of synthetic samples [0,1]"),
-    FLD("patch", F_PATCH, patch_h, "HxW", "patch size, multiples of the tile (66x64)"),
-    FLD("batch", F_INT, batch, "N", "samples per forward pass (14)"),
-    FLD("accum_steps", F_INT, accum_steps, "N", "batches accumulated per update (2)"),
-    FLD("iterations", F_LONG, iterations, "N", "optimizer updates (50000)"),
-    FLD("lr", F_FLOAT, lr, "F", "learning rate (1e-4)"),
-    FLD("schedule", F_STR, schedule, "S", "constant | cosine | step"),
-    FLD("lr_min", F_FLOAT, lr_min, "F", "cosine: final learning rate"),
-    FLD("warmup", F_LONG, warmup, "N", "linear warm-up updates"),
-    FLD("step_every", F_LONG, step_every, "N", "step schedule: decay period"),
-    FLD("step_gamma", F_FLOAT, step_gamma, "F", "step schedule: decay factor"),
-    FLD("weight_decay", F_FLOAT, weight_decay, "F", "Adam L2 weight decay"),
-    FLD("noise", F_NOISE, noise_min, "MIN,MAX", "noise level range k (0,0.15)"),
-    FLD("val_noise", F_FLOAT, val_noise, "F", "noise level of validation samples"),
-    FLD("seed", F_U64, seed, "N", "random seed (init, data)"),
-    FLD("threads", F_INT, threads, "N", "compute threads (0 = all cores)"),
-    FLD("device", F_STR, device, "NAME", "cpu | opencl (default: $LM_DEVICE, else cpu)"),
-    FLD("workers", F_INT, workers, "N", "data preparation threads"),
-    FLD("val_interval", F_LONG, val_interval, "N", "updates between validations (0 = end)"),
-    FLD("val_patches", F_INT, val_patches, "N", "fixed validation samples"),
-    FLD("checkpoint_interval", F_LONG, checkpoint_interval, "N", "updates between checkpoints"),
-    FLD("log_interval", F_LONG, log_interval, "N", "updates between progress lines (no tty)"),
-    FLD("output", F_STR, output, "DIR", "run folder (checkpoints, log.csv)"),
-    FLD("fit", F_STR, fit, "M", "auto | closed | sgd (auto: closed form for lmmse presets)"),
-    FLD("fit_patches", F_LONG, fit_patches, "N", "closed form: training patches (4096)"),
+    FLD("version", F_INT, version, "N", "config format version (1)", 1, 1),
+    FLD("model", F_STR, model, "NAME", "model preset (lumosaic info --list)", 0, 0),
+    FLD("system", F_STR, system, "FILE", "system description (default: bundled)", 0, 0),
+    FLD("data", F_LIST, data, "PATH", "scene file or folder (repeatable)", 0, 0),
+    FLD("synth_fraction", F_FLOAT, synth_fraction, "F", "share of synthetic samples", 0, 1),
+    FLD("patch", F_PATCH, patch_h, "HxW", "patch size, multiples of the tile (66x64)", 1,
+        MAX_PATCH),
+    FLD("batch", F_INT, batch, "N", "samples per forward pass (14)", 1, MAX_BATCH),
+    FLD("accum_steps", F_INT, accum_steps, "N", "batches accumulated per update (2)", 1, 1024),
+    FLD("iterations", F_LONG, iterations, "N", "optimizer updates (50000)", 1, MAX_COUNT),
+    FLD("lr", F_FLOAT, lr, "F", "learning rate (1e-4)", 0, 10),
+    FLD("schedule", F_STR, schedule, "S", "constant | cosine | step", 0, 0),
+    FLD("lr_min", F_FLOAT, lr_min, "F", "cosine: final learning rate", 0, 10),
+    FLD("warmup", F_LONG, warmup, "N", "linear warm-up updates", 0, MAX_COUNT),
+    FLD("step_every", F_LONG, step_every, "N", "step schedule: decay period", 0, MAX_COUNT),
+    FLD("step_gamma", F_FLOAT, step_gamma, "F", "step schedule: decay factor", 0, 1),
+    FLD("weight_decay", F_FLOAT, weight_decay, "F", "Adam L2 weight decay", 0, 10),
+    FLD("noise", F_NOISE, noise_min, "MIN,MAX", "noise level range k (0,0.15)", 0, 1),
+    FLD("val_noise", F_FLOAT, val_noise, "F", "noise level of validation samples", 0, 1),
+    FLD("seed", F_U64, seed, "N", "random seed (init, data)", 0, 0),
+    FLD("threads", F_INT, threads, "N", "compute threads (0 = all cores)", 0, LM_MAX_THREADS),
+    FLD("device", F_STR, device, "NAME", "cpu | opencl (default: $LM_DEVICE, else cpu)", 0, 0),
+    FLD("workers", F_INT, workers, "N", "data preparation threads", 0, LM_DATASET_MAX_WORKERS),
+    FLD("val_interval", F_LONG, val_interval, "N", "updates between validations (0 = end)", 0,
+        MAX_COUNT),
+    FLD("val_patches", F_INT, val_patches, "N", "fixed validation samples", 0, MAX_VAL_PATCHES),
+    FLD("checkpoint_interval", F_LONG, checkpoint_interval, "N", "updates between checkpoints",
+        0, MAX_COUNT),
+    FLD("log_interval", F_LONG, log_interval, "N", "updates between progress lines (no tty)", 1,
+        MAX_COUNT),
+    FLD("output", F_STR, output, "DIR", "run folder (checkpoints, log.csv)", 0, 0),
+    FLD("fit", F_STR, fit, "M", "auto | closed | sgd (auto: closed form for lmmse presets)", 0,
+        0),
+    FLD("fit_patches", F_LONG, fit_patches, "N", "closed form: training patches (4096)", 1, 1e6),
     FLD("fit_synth", F_FLOAT, fit_synth, "F", "closed form: synthetic share of the statistics, "
-        "0..1 (-1: chosen on the validation split)"),
-    FLD("base", F_STR, base, "RUN", "train as a residual on this run's model (e.g. an lmmse fit)"),
-    FLD("base_trainable", F_INT, base_trainable, "0|1", "fine-tune the base with the net (0)"),
-    FLD("res_init", F_FLOAT, res_init, "F", "residual: initial gates on the net's output (1; the net's output layers start at 0)"),
+        "0..1 (-1: chosen on the validation split)", -1, 1),
+    FLD("base", F_STR, base, "RUN", "train as a residual on this run's model (e.g. an lmmse "
+        "fit)", 0, 0),
+    FLD("base_trainable", F_INT, base_trainable, "0|1", "fine-tune the base with the net (0)", 0,
+        1),
+    FLD("res_init", F_FLOAT, res_init, "F", "residual: initial gates on the net's output (1; "
+        "the net's output layers start at 0)", -1000, 1000),
     FLD("sensor_clip", F_INT, sensor_clip, "0|1", "clip noisy samples to [0, 1] as a 16-bit "
-        "PNG frame holds them (0)"),
-    FLD("sensor_bits", F_INT, sensor_bits, "N", "quantise samples to N bits (0 = off; 16 = PNG)"),
+        "PNG frame holds them (0)", 0, 1),
+    FLD("sensor_bits", F_INT, sensor_bits, "N", "quantise samples to N bits (0 = off; 16 = PNG)",
+        0, 24),
     FLD("snapshots", F_STR, snapshots, "M,M,...", "weights at these minutes of training into "
-        "<output>/snapshots/<M>min/"),
+        "<output>/snapshots/<M>min/", 0, 0),
     FLD("minutes", F_FLOAT, minutes, "M", "time budget in minutes (0 = none; the schedule "
-        "spans it)"),
+        "spans it)", 0, 1e6),
 };
 #define NFIELDS (int)(sizeof fields / sizeof fields[0])
 
@@ -118,12 +139,45 @@ static int parse_long(const char *s, long long *v)
     return errno == 0 && end != s && *end == 0;
 }
 
-static int parse_float(const char *s, float *v)
+static int parse_double(const char *s, double *v)
 {
     char *end;
-    double d = strtod(s, &end);
-    *v = (float)d;
-    return end != s && *end == 0 && isfinite(d);
+    errno = 0;
+    *v = strtod(s, &end);
+    return end != s && *end == 0 && isfinite(*v);
+}
+
+/* "lo..hi" of a field. */
+static const char *range_text(const field *f, char *buf, size_t n)
+{
+    snprintf(buf, n, "%.15g..%.15g", f->lo, f->hi);
+    return buf;
+}
+
+static int is_integer(const field *f) { return f->type != F_FLOAT && f->type != F_NOISE; }
+
+/* "<where>: field '<name>': <v> is out of range (lo..hi)"; integers as given (`text`, or v). */
+static lm_status out_of_range(const field *f, double v, const char *text, const char *where,
+                              lm_err *err)
+{
+    char r[64], num[64];
+    if (is_integer(f) && text) snprintf(num, sizeof num, "%s", text);
+    else snprintf(num, sizeof num, is_integer(f) ? "%.0f" : "%.9g", v);
+    return lm_err_set(err, LM_ERR_ARG, "%s: field '%s': %s is out of range (%s)", where,
+                      f->name, num, range_text(f, r, sizeof r));
+}
+
+/* One number of field f from text, range-checked before it is converted: 1, or 0 if the text
+ * is not a number of the field's kind (error set: out of range). */
+static int number(const field *f, const char *s, double *v, const char *where, lm_err *err)
+{
+    long long l;
+    int integer = is_integer(f);
+    if (integer ? !parse_long(s, &l) : !parse_double(s, v)) return 0;
+    if (integer) *v = (double)l;
+    if (integer ? l < f->lo || l > f->hi : !(*v >= f->lo && *v <= f->hi))
+        return out_of_range(f, *v, s, where, err), -1;
+    return 1;
 }
 
 static lm_status put_string(lm_train_cfg *c, const field *f, const char *v, const char *where,
@@ -153,52 +207,49 @@ static lm_status set_text(lm_train_cfg *c, const field *f, const char *v, const 
                           lm_err *err)
 {
     void *dst = (char *)c + f->off;
-    long long l;
-    float a, b;
+    double a = 0, b = 0;
+    int ok = 0;
     switch (f->type) {
     case F_INT:
-        if (!parse_long(v, &l) || l < INT_MIN || l > INT_MAX) break;
-        *(int *)dst = (int)l;
-        return LM_OK;
     case F_LONG:
-        if (!parse_long(v, &l)) break;
-        *(long *)dst = (long)l;
-        return LM_OK;
+    case F_FLOAT:
+        ok = number(f, v, &a, where, err);
+        if (ok == 1 && f->type == F_INT) *(int *)dst = (int)a;
+        else if (ok == 1 && f->type == F_LONG) *(long *)dst = (long)a;
+        else if (ok == 1) *(float *)dst = (float)a;
+        break;
     case F_U64: {
         char *end;
         errno = 0;
         unsigned long long u = strtoull(v, &end, 10);
-        if (errno || end == v || *end || v[0] == '-') break;
-        *(uint64_t *)dst = u;
-        return LM_OK;
+        ok = !errno && end != v && !*end && v[0] != '-';
+        if (ok) *(uint64_t *)dst = u;
+        break;
     }
-    case F_FLOAT:
-        if (!parse_float(v, &a)) break;
-        *(float *)dst = a;
-        return LM_OK;
     case F_STR:
     case F_LIST: return put_string(c, f, v, where, err);
-    case F_PATCH: {
-        int h, w;
-        char extra;
-        if (sscanf(v, "%dx%d%c", &h, &w, &extra) != 2) break;
-        c->patch_h = h, c->patch_w = w;
-        return LM_OK;
-    }
+    case F_PATCH:
     case F_NOISE: {
-        char buf[64], *comma;
+        char buf[64], *sep;
         snprintf(buf, sizeof buf, "%s", v);
-        if (!(comma = strchr(buf, ','))) break;
-        *comma = 0;
-        if (!parse_float(buf, &a) || !parse_float(comma + 1, &b)) break;
-        c->noise_min = a, c->noise_max = b;
-        return LM_OK;
+        if (!(sep = strchr(buf, f->type == F_PATCH ? 'x' : ','))) break;
+        *sep = 0;
+        ok = number(f, buf, &a, where, err);
+        if (ok == 1) ok = number(f, sep + 1, &b, where, err);
+        if (ok == 1 && f->type == F_PATCH) c->patch_h = (int)a, c->patch_w = (int)b;
+        else if (ok == 1) c->noise_min = (float)a, c->noise_max = (float)b;
+        break;
     }
     }
-    static const char *what[] = {"an integer", "an integer", "a non-negative integer", "a number",
-                                 "a string", "a path", "HxW (e.g. 66x64)", "MIN,MAX (e.g. 0,0.15)"};
-    return lm_err_set(err, LM_ERR_ARG, "%s: field '%s': must be %s (got '%s')", where, f->name,
-                      what[f->type], v);
+    if (ok == 1) return LM_OK;
+    if (ok < 0) return err->status;
+    static const char *what[] = {"an integer", "an integer", "a non-negative integer",
+                                 "a finite number", "a string", "a path",
+                                 "HxW (integers, e.g. 66x64)", "MIN,MAX (numbers, e.g. 0,0.15)"};
+    char r[64] = "";
+    if (f->type != F_U64) snprintf(r, sizeof r, " in %.15g..%.15g", f->lo, f->hi);
+    return lm_err_set(err, LM_ERR_ARG, "%s: field '%s': must be %s%s (got '%s')", where, f->name,
+                      what[f->type], r, v);
 }
 
 lm_status lm_train_cfg_set(lm_train_cfg *c, const char *key, const char *value, lm_err *err)
@@ -267,9 +318,10 @@ static lm_status set_json(lm_train_cfg *c, const field *f, json_t *v, const char
         ok = json_is_array(v) && json_array_size(v) == 2;
         for (size_t i = 0; ok && i < 2; i++)
             ok = patch ? json_is_integer(json_array_get(v, i)) : json_is_number(json_array_get(v, i));
-        if (ok && patch)
-            snprintf(buf, sizeof buf, "%dx%d", (int)json_integer_value(json_array_get(v, 0)),
-                     (int)json_integer_value(json_array_get(v, 1)));
+        if (ok && patch) /* the full values: set_text checks the range */
+            snprintf(buf, sizeof buf, "%" JSON_INTEGER_FORMAT "x%" JSON_INTEGER_FORMAT,
+                     json_integer_value(json_array_get(v, 0)),
+                     json_integer_value(json_array_get(v, 1)));
         else if (ok)
             snprintf(buf, sizeof buf, "%.9g,%.9g", json_number_value(json_array_get(v, 0)),
                      json_number_value(json_array_get(v, 1)));
@@ -344,62 +396,53 @@ lm_status lm_train_cfg_load(lm_train_cfg *c, const char *path, lm_err *err)
     return st;
 }
 
+/* The numbers of field f in cfg (0, 1 or 2 of them). */
+static int field_values(const lm_train_cfg *c, const field *f, double v[2])
+{
+    const void *src = (const char *)c + f->off;
+    switch (f->type) {
+    case F_INT: v[0] = *(const int *)src; return 1;
+    case F_LONG: v[0] = (double)*(const long *)src; return 1;
+    case F_FLOAT: v[0] = *(const float *)src; return 1;
+    case F_PATCH: v[0] = c->patch_h, v[1] = c->patch_w; return 2;
+    case F_NOISE: v[0] = c->noise_min, v[1] = c->noise_max; return 2;
+    default: return 0;
+    }
+}
+
 #define BAD(fmt, ...) return lm_err_set(err, LM_ERR_ARG, "config: field " fmt, __VA_ARGS__)
 lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
 {
     if (!lm_model_preset_known(c->model)) BAD("'model': unknown preset '%s' (see lumosaic info --list)", c->model);
-    if (c->version != LM_TRAIN_CFG_VERSION) BAD("'version': must be %d", LM_TRAIN_CFG_VERSION);
-    if (c->batch < 1) BAD("'batch': must be >= 1 (got %d)", c->batch);
-    if (c->accum_steps < 1) BAD("'accum_steps': must be >= 1 (got %d)", c->accum_steps);
-    if (c->iterations < 1) BAD("'iterations': must be >= 1 (got %ld)", c->iterations);
-    if (c->patch_h < 1 || c->patch_w < 1)
-        BAD("'patch': must be positive (got %dx%d)", c->patch_h, c->patch_w);
+    for (int i = 0; i < NFIELDS; i++) { /* every number in its field's range (NaN is not) */
+        double v[2];
+        int n = field_values(c, &fields[i], v);
+        for (int k = 0; k < n; k++)
+            if (!(v[k] >= fields[i].lo && v[k] <= fields[i].hi))
+                return out_of_range(&fields[i], v[k], NULL, "config", err);
+    }
     if (!(c->lr > 0)) BAD("'lr': must be > 0 (got %g)", c->lr);
-    if (c->lr_min < 0 || c->lr_min > c->lr) BAD("'lr_min': must be in [0, lr] (got %g)", c->lr_min);
+    if (c->lr_min > c->lr) BAD("'lr_min': must be in [0, lr] (got %g)", c->lr_min);
     if (strcmp(c->schedule, "constant") && strcmp(c->schedule, "cosine") &&
         strcmp(c->schedule, "step"))
         BAD("'schedule': must be constant, cosine or step (got '%s')", c->schedule);
-    if (c->warmup < 0) BAD("'warmup': must be >= 0 (got %ld)", c->warmup);
     if (!strcmp(c->schedule, "step") && c->step_every < 1)
         BAD("'step_every': must be >= 1 with the step schedule (got %ld)", c->step_every);
-    if (!(c->step_gamma > 0 && c->step_gamma <= 1))
-        BAD("'step_gamma': must be in (0, 1] (got %g)", c->step_gamma);
-    if (c->weight_decay < 0) BAD("'weight_decay': must be >= 0 (got %g)", c->weight_decay);
-    if (!(c->synth_fraction >= 0 && c->synth_fraction <= 1))
-        BAD("'synth_fraction': must be in [0, 1] (got %g)", c->synth_fraction);
-    if (!(c->noise_min >= 0 && c->noise_min <= c->noise_max && c->noise_max <= 1))
+    if (!(c->step_gamma > 0)) BAD("'step_gamma': must be in (0, 1] (got %g)", c->step_gamma);
+    if (c->noise_min > c->noise_max)
         BAD("'noise': need 0 <= min <= max <= 1 (got %g,%g)", c->noise_min, c->noise_max);
-    if (!(c->val_noise >= 0 && c->val_noise <= 1))
-        BAD("'val_noise': must be in [0, 1] (got %g)", c->val_noise);
-    if (c->threads < 0) BAD("'threads': must be >= 0 (got %d)", c->threads);
     if (strcmp(c->device, "cpu") && strcmp(c->device, "opencl"))
         BAD("'device': must be cpu or opencl (got '%s'; --device, the config or $LM_DEVICE)",
             c->device);
-    if (c->workers < 0) BAD("'workers': must be >= 0 (got %d)", c->workers);
-    if (c->val_interval < 0) BAD("'val_interval': must be >= 0 (got %ld)", c->val_interval);
-    if (c->val_patches < 0) BAD("'val_patches': must be >= 0 (got %d)", c->val_patches);
-    if (c->checkpoint_interval < 0)
-        BAD("'checkpoint_interval': must be >= 0 (got %ld)", c->checkpoint_interval);
-    if (c->log_interval < 1) BAD("'log_interval': must be >= 1 (got %ld)", c->log_interval);
     if (!c->output[0]) BAD("'output': must name a folder%s", "");
     if (strcmp(c->fit, "auto") && strcmp(c->fit, "closed") && strcmp(c->fit, "sgd"))
         BAD("'fit': must be auto, closed or sgd (got '%s')", c->fit);
-    if (c->fit_patches < 1) BAD("'fit_patches': must be >= 1 (got %ld)", c->fit_patches);
     if (!(c->fit_synth == -1.0f || (c->fit_synth >= 0.0f && c->fit_synth <= 1.0f)))
         BAD("'fit_synth': must be -1 (chosen on validation) or in [0, 1] (got %g)",
             (double)c->fit_synth);
-    if (c->base_trainable != 0 && c->base_trainable != 1)
-        BAD("'base_trainable': must be 0 or 1 (got %d)", c->base_trainable);
-    if (!(c->minutes >= 0 && c->minutes <= 1e6))
-        BAD("'minutes': must be in [0, 1e6] (got %g)", c->minutes);
     for (const char *p = c->snapshots; *p; p++)
         if (!strchr("0123456789.,", *p))
             BAD("'snapshots': must be minutes separated by commas (got '%s')", c->snapshots);
-    if (c->sensor_clip != 0 && c->sensor_clip != 1)
-        BAD("'sensor_clip': must be 0 or 1 (got %d)", c->sensor_clip);
-    if (c->sensor_bits < 0 || c->sensor_bits > 24)
-        BAD("'sensor_bits': must be 0..24 (got %d)", c->sensor_bits);
-    if (!isfinite(c->res_init)) BAD("'res_init': must be finite (got %g)", c->res_init);
     if (c->ndata == 0 && c->synth_fraction < 1)
         BAD("'data': no scenes given (add --data PATH, or set synth_fraction to 1)%s", "");
     return LM_OK;
@@ -453,7 +496,10 @@ void lm_train_cfg_print_help(FILE *f)
         for (char *p = flag; *p; p++)
             if (*p == '_') *p = '-';
         snprintf(opt, sizeof opt, "--%s %s", flag, fields[i].arg);
-        fprintf(f, "  %-30s %s\n", opt, fields[i].help);
+        char r[64] = "";
+        if (fields[i].type != F_STR && fields[i].type != F_LIST && fields[i].type != F_U64)
+            snprintf(r, sizeof r, " [%.15g..%.15g]", fields[i].lo, fields[i].hi);
+        fprintf(f, "  %-30s %s%s\n", opt, fields[i].help, r);
     }
 }
 

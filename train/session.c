@@ -191,11 +191,10 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
 }
 
 
-lm_status lm_train_session(const lm_train_cfg *cfg, const lm_train_opts *opts_in,
-                           lm_train_result *res, lm_err *err)
+/* The run of a validated configuration with absolute paths. */
+static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_result *res,
+                         lm_err *err)
 {
-    lm_train_opts opts = opts_in ? *opts_in : (lm_train_opts){0};
-    if (lm_train_cfg_validate(cfg, err)) return err->status;
     lm_system sys;
     char syspath[LM_TRAIN_PATH_LEN];
     if (cfg->system[0]) snprintf(syspath, sizeof syspath, "%s", cfg->system);
@@ -236,5 +235,36 @@ lm_status lm_train_session(const lm_train_cfg *cfg, const lm_train_opts *opts_in
     lm_dataset_close(d);
     lm_model_free(m);
     lm_system_free(&sys);
+    return st;
+}
+
+/* Paths of the run (data, system, base) made absolute, so that config.json means the same
+ * from any working directory: `train --resume RUN` reads them relative to RUN otherwise. A path
+ * that does not resolve (missing) is kept; opening it reports it. */
+static void absolute_paths(lm_train_cfg *c)
+{
+    char *paths[LM_TRAIN_MAX_PATHS + 2];
+    int n = 0;
+    for (int i = 0; i < c->ndata; i++) paths[n++] = c->data[i];
+    paths[n++] = c->system;
+    paths[n++] = c->base;
+    for (int i = 0; i < n; i++) {
+        char *abs = paths[i][0] ? realpath(paths[i], NULL) : NULL;
+        if (abs && strlen(abs) < LM_TRAIN_PATH_LEN) strcpy(paths[i], abs);
+        free(abs);
+    }
+}
+
+lm_status lm_train_session(const lm_train_cfg *cfg_in, const lm_train_opts *opts_in,
+                           lm_train_result *res, lm_err *err)
+{
+    lm_train_opts opts = opts_in ? *opts_in : (lm_train_opts){0};
+    if (lm_train_cfg_validate(cfg_in, err)) return err->status;
+    lm_train_cfg *cfg = malloc(sizeof *cfg);
+    if (!cfg) return lm_err_set(err, LM_ERR_NOMEM, "train: out of memory");
+    *cfg = *cfg_in;
+    absolute_paths(cfg);
+    lm_status st = session(cfg, opts, res, err);
+    free(cfg);
     return st;
 }
