@@ -108,6 +108,28 @@ static void png_write_grey(const char *path, int w, int h, int depth, const uint
     free(comp);
 }
 
+/* A 16-bit greyscale PNG header claiming w x h, with one zero row of pixel data: a tiny file
+ * whose header asks for a large image. */
+static void png_write_claim(const char *path, int w, int h)
+{
+    size_t row = 1 + 2 * (size_t)w;
+    unsigned char *raw = calloc(row, 1), ihdr[13] = {0};
+    uLongf clen = compressBound(row);
+    unsigned char *comp = malloc(clen);
+    compress2(comp, &clen, raw, row, 9);
+    put32(ihdr, (uint32_t)w);
+    put32(ihdr + 4, (uint32_t)h);
+    ihdr[8] = 16;
+    FILE *f = fopen(path, "wb");
+    fwrite("\x89PNG\r\n\x1a\n", 1, 8, f);
+    png_chunk(f, "IHDR", ihdr, 13);
+    png_chunk(f, "IDAT", comp, (uint32_t)clen);
+    png_chunk(f, "IEND", NULL, 0);
+    fclose(f);
+    free(raw);
+    free(comp);
+}
+
 static int paeth(int a, int b, int c)
 {
     int p = a + b - c, pa = abs(p - a), pb = abs(p - b), pc = abs(p - c);
@@ -310,6 +332,21 @@ static void test_cave_errors(void)
     lm_err_clear(&e);
     CHECK(lm_cube_read_cave(p, &c, &e) == LM_ERR_IO); /* a file where a folder is expected */
     CHECK_ERR(e, LM_ERR_IO, "bad_ms_17.png", "folder");
+    lm_err_clear(&e);
+    /* band headers claiming large images, refused before their pixels are allocated: over the
+     * size of band 01, over a cube's size, more than the file holds */
+    png_write_claim(p, 8000, 8000);
+    CHECK(lm_cube_read(d, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "bad_ms_17.png", "limit of 12 pixels");
+    lm_err_clear(&e);
+    snprintf(q, sizeof q, "%s/bad_ms_01.png", d);
+    png_write_claim(q, 8000, 8000);
+    CHECK(lm_cube_read(d, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "bad_ms_01.png", "8000 x 8000");
+    lm_err_clear(&e);
+    png_write_claim(q, 2900, 2900);
+    CHECK(lm_cube_read(d, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "bad_ms_01.png", "can hold");
     lm_err_clear(&e);
     mkdir(tpath(q, "two"), 0755); /* two scenes one level down: ambiguous */
     make_scene(tpath(q, "two/a"), "a", 2, 2, 8);
@@ -528,7 +565,7 @@ static void test_exr_round_trip(void)
     lm_cube_free(&r);
     /* an independent reader (OpenImageIO / C++ OpenEXR) sees the same values per channel */
     lm_image im;
-    CHECK_MSG(lm_image_read(p, &im, &e) == LM_OK, "%s", e.msg);
+    CHECK_MSG(lm_image_read(p, NULL, &im, &e) == LM_OK, "%s", e.msg);
     CHECK(im.channels == 31 && im.width == 23 && im.height == 37 && im.is_float);
     for (int ch = 0; ch < im.channels && im.channels == 31; ch++) {
         double nm = 0;
@@ -639,6 +676,22 @@ static void test_exr_half_channels(void)
     lm_cube_free(&r);
 }
 
+/* Copy an EXR with its dataWindow attribute changed to (0, 0) .. (w - 1, h - 1). 0 on success. */
+static int claim_window(const char *src, const char *dst, int w, int h)
+{
+    static unsigned char buf[1 << 20];
+    FILE *f = fopen(src, "rb");
+    size_t n = f ? fread(buf, 1, sizeof buf, f) : 0;
+    if (f) fclose(f);
+    const char key[] = "dataWindow\0box2i\0";
+    unsigned char *at = memmem(buf, n, key, sizeof key - 1);
+    if (!at || at + sizeof key - 1 + 4 + 16 > buf + n) return -1;
+    int32_t box[4] = {0, 0, w - 1, h - 1}; /* little-endian host, as the file */
+    memcpy(at + sizeof key - 1 + 4, box, sizeof box);
+    write_bytes(dst, (const char *)buf, n);
+    return 0;
+}
+
 static void test_exr_bad_files(void)
 {
     char p[1024], q[1024];
@@ -672,6 +725,17 @@ static void test_exr_bad_files(void)
     lm_err_clear(&e);
     CHECK(lm_cube_read(p, &(lm_cube){0}, &e) == LM_ERR_UNSUPPORTED);
     CHECK_ERR(e, LM_ERR_UNSUPPORTED, "cube.txt", "unknown cube format");
+    lm_err_clear(&e);
+    /* a data window claiming a large cube: refused from the header, before the allocation */
+    int wins[3][2] = {{2900, 2900}, {8000, 8000}, {70000, 3}};
+    const char *why[3] = {"can hold", "31 x 8000 x 8000 cube is over the limit", "70000 x 3"};
+    for (int i = 0; i < 3; i++) {
+        lm_cube r;
+        CHECK(claim_window(q, tpath(p, "claim.exr"), wins[i][0], wins[i][1]) == 0);
+        CHECK(lm_cube_read(p, &r, &e) == LM_ERR_FORMAT && r.data == NULL);
+        CHECK_ERR(e, LM_ERR_FORMAT, "claim.exr", why[i]);
+        lm_err_clear(&e);
+    }
     lm_cube_free(&c);
 }
 
