@@ -14,6 +14,8 @@
  *     `T.<wavelength>nm` (reflective, comma or dot decimal separator), sorted by wavelength;
  *     if a file has no `T.` channel, the emissive `S0.<wavelength>nm` channels are read
  *     instead. Other channels are ignored. HALF or FLOAT channels, scanline storage.
+ *     A .mat file's structure is checked first (a truncated file, or a variable whose data
+ *     do not cover its dimensions, is LM_ERR_FORMAT).
  * Every cube read is validated: each value must be finite and >= 0, else LM_ERR_NUMERIC
  * naming the file, the band and the pixel. Readers and the writer may run concurrently on
  * different files (.mat reads are serialised internally: matio/HDF5 are not thread-safe).

@@ -2,9 +2,12 @@
  * What it is: read the cube variable H x W x B (MATLAB column-major: element (y, x, b) at
  * y + H*(x + W*b); an HDF5 tool shows the same data as B x W x H), convert it to the band-major
  * lm_cube without transposing the image, apply the dataset's scaling (KAUST counts / 4095) and
- * band selection, and validate the values. See cube_io.h for the exact rules.
+ * band selection, and validate the values. See cube_io.h for the exact rules. The file's
+ * structure is checked first (mat_check.c: a truncated file, a v5 variable whose data do not
+ * cover its dimensions), because matio reads those with zeros where data are missing.
  * What it is not: a writer, or a reader of other keys / struct or cell variables. */
 #include "data/cube_io.h"
+#include "data/mat_check.h"
 #include <matio.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -211,9 +214,13 @@ lm_status lm_cube_read_mat(const char *path, lm_cube *cube, lm_err *e)
     if (stat(path, &st) != 0) return lm_err_set(e, LM_ERR_IO, "%s: no such file", path);
     if (S_ISDIR(st.st_mode))
         return lm_err_set(e, LM_ERR_IO, "%s: is a directory, expected a .mat file", path);
+    static const char *const keys[] = {"cube", "hsi", NULL};
+    lm_mat_kind kind;
+    long long bytes;
+    lm_status s = lm_mat_check(path, keys, &kind, &bytes, e);
+    if (s != LM_OK) return s;
     pthread_mutex_lock(&mat_lock);
     mat_log_setup();
-    lm_status s;
     mat_t *m = Mat_Open(path, MAT_ACC_RDONLY);
     if (!m) {
         s = lm_err_set(e, LM_ERR_FORMAT, "%s: not a readable MATLAB .mat file (corrupt or "

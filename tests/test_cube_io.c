@@ -459,6 +459,60 @@ static void test_mat_kaust_v5(void)
     lm_cube_free(&c);
 }
 
+/* KAUST-like v5 file: `hsi` H x W x B uint16, plain or zlib-compressed. */
+static void write_kaust(const char *path, int H, int W, int B, int zip)
+{
+    uint16_t *d = malloc(sizeof(uint16_t) * H * W * B);
+    for (int i = 0; i < H * W * B; i++) d[i] = (uint16_t)((i * 2654435761u) >> 20);
+    mat_t *m = Mat_CreateVer(path, NULL, MAT_FT_MAT5);
+    size_t dims[3] = {(size_t)H, (size_t)W, (size_t)B};
+    matvar_t *v = Mat_VarCreate("hsi", MAT_C_UINT16, MAT_T_UINT16, 3, dims, d, 0);
+    Mat_VarWrite(m, v, zip ? MAT_COMPRESSION_ZLIB : MAT_COMPRESSION_NONE);
+    Mat_VarFree(v);
+    Mat_Close(m);
+    free(d);
+}
+
+/* A v5 file cut short (plain or compressed) used to read its missing bands as zeros. */
+static void test_mat_truncated_v5(void)
+{
+    char p[1024], q[1024];
+    lm_cube c;
+    lm_err e = {0};
+    for (int zip = 0; zip < 2; zip++) {
+        write_kaust(tpath(q, zip ? "kz.mat" : "kp.mat"), 20, 16, 34, zip);
+        CHECK_MSG(lm_cube_read(q, &c, &e) == LM_OK, "%s", e.msg);
+        lm_cube_free(&c);
+        long n = file_size(q), keep[5] = {n - 1, n - 8, n * 2 / 3, n / 2, 140};
+        for (int i = 0; i < 5; i++) {
+            truncate_copy(q, tpath(p, "cut5.mat"), keep[i]);
+            CHECK_MSG(lm_cube_read(p, &c, &e) == LM_ERR_FORMAT && c.data == NULL,
+                      "zip %d, kept %ld of %ld: %s", zip, keep[i], n, e.msg);
+            CHECK_ERR(e, LM_ERR_FORMAT, "cut5.mat", "truncated");
+            lm_err_clear(&e);
+        }
+    }
+    /* dimensions patched to claim more values than the data holds (plain file: the dims
+     * element's first value is at byte 128 + 8 + 16 + 8) */
+    write_kaust(tpath(p, "dims.mat"), 3, 6, 34, 0);
+    FILE *f = fopen(p, "r+b");
+    CHECK(f && fseek(f, 160, SEEK_SET) == 0 && fputc(4, f) == 4);
+    if (f) fclose(f);
+    CHECK(lm_cube_read(p, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "dims.mat", "holds 1224 bytes of data for 816 values");
+    lm_err_clear(&e);
+    /* a compressed stream damaged in its middle, the file's size unchanged */
+    write_kaust(tpath(p, "zbad.mat"), 20, 16, 34, 1);
+    f = fopen(p, "r+b");
+    long mid = file_size(p) / 2;
+    CHECK(f && fseek(f, mid, SEEK_SET) == 0);
+    for (int i = 0; f && i < 16; i++) fputc(0xA5 ^ i, f);
+    if (f) fclose(f);
+    CHECK(lm_cube_read(p, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "zbad.mat", "hsi");
+    lm_err_clear(&e);
+}
+
 static void test_mat_errors(void)
 {
     char p[1024], q[1024];
@@ -491,7 +545,7 @@ static void test_mat_errors(void)
     for (int i = 0; i < 3; i++) {
         truncate_copy(q, tpath(p, "trunc.mat"), sizes[i]);
         CHECK_MSG(lm_cube_read(p, &c, &e) != LM_OK && c.data == NULL, "kept %ld", sizes[i]);
-        CHECK_ERR(e, LM_ERR_FORMAT, "trunc.mat", "corrupt");
+        CHECK_ERR(e, LM_ERR_FORMAT, "trunc.mat", "truncated");
         lm_err_clear(&e);
     }
     write_bytes(tpath(p, "garbage.mat"), "MATLAB 5.0 MAT-file, garbage follows \x01\x02", 40);
@@ -783,6 +837,7 @@ int main(void)
     RUN(test_mat_arad_v73);
     RUN(test_mat_kaust_v5);
     RUN(test_mat_errors);
+    RUN(test_mat_truncated_v5);
     RUN(test_channel_names);
     RUN(test_exr_round_trip);
     RUN(test_exr_written_by_another_library);
