@@ -513,6 +513,23 @@ static void test_mat_truncated_v5(void)
     lm_err_clear(&e);
 }
 
+/* Regression inputs of tests/fuzz/regress/mat: the reliability file whose corrupt attribute
+ * makes libhdf5 read out of bounds (SEGV, depending on the heap: see cli_hostile, which runs
+ * it with glibc.malloc.top_pad=0 where it always faulted), and a 200-byte v5 struct whose
+ * field-name tag claims 3.4 GB (matio tried malloc(3.4 GB) and calloc(27 GB)). */
+static void test_mat_hostile(void)
+{
+    const char *files[2] = {"tests/fuzz/regress/mat/mat-hdf5-corrupt-byte.mat",
+                            "tests/fuzz/regress/mat/mat5-struct-huge-fields.mat"};
+    for (int i = 0; i < 2; i++) {
+        lm_cube c;
+        lm_err e = {0};
+        CHECK_MSG(lm_cube_read(files[i], &c, &e) == LM_ERR_FORMAT && c.data == NULL, "%s: %s",
+                  files[i], e.msg);
+        CHECK_ERR(e, LM_ERR_FORMAT, files[i], NULL);
+    }
+}
+
 static void test_mat_errors(void)
 {
     char p[1024], q[1024];
@@ -838,6 +855,7 @@ int main(void)
     RUN(test_mat_kaust_v5);
     RUN(test_mat_errors);
     RUN(test_mat_truncated_v5);
+    RUN(test_mat_hostile);
     RUN(test_channel_names);
     RUN(test_exr_round_trip);
     RUN(test_exr_written_by_another_library);

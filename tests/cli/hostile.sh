@@ -5,8 +5,10 @@
 # the same command failing on a missing input — the headers are refused before any allocation.
 # Frames: `infer` on a hostile file alone and as the second frame of a sequence; cubes:
 # `render` on CAVE folders with a hostile band, on a spectral EXR claiming a large cube, and on
-# v5 .mat files cut short (plain and compressed; read with zeros for the missing bands and
-# exit 0 before).
+# .mat files: the reliability v7.3 file with one corrupt byte (libhdf5 reads out of bounds:
+# run with glibc.malloc.top_pad=0, under which the old in-process reader always crashed), a v5
+# struct claiming 3.4 GB of field names, and v5 files cut short (plain and compressed; read
+# with zeros for the missing bands and exit 0 before).
 # A relative bound works in both builds (a sanitizer's runtime has its own, larger baseline).
 # usage: hostile.sh LUMOSAIC MAKE_CUBE PEAK_RSS
 source "$(dirname "$0")/lib.sh"
@@ -60,6 +62,8 @@ bounded "CAVE band 05 claiming 15000 x 15000" render "ms_05.png" "$T/r.png" -- "
 bounded "CAVE band 01 claiming 8000 x 8000" render "ms_01.png" "$T/r.png" -- "$LM" render --input "$T/cave1" --output "$T/r.png"
 bounded "EXR claiming 31 x 2900 x 2900" render "exr-window-claim.exr: a 31 x 2900 x 2900 cube" "$T/r.png" -- "$LM" render --input "$REG/exr_cube/exr-window-claim.exr" --output "$T/r.png"
 R="$LM render --output $T/r.png --input"
+bounded "mat v7.3, one corrupt byte (top_pad=0)" render "mat-hdf5-corrupt-byte.mat" "$T/r.png" -- env GLIBC_TUNABLES=glibc.malloc.top_pad=0 $R "$REG/mat/mat-hdf5-corrupt-byte.mat"
+bounded "mat v5 struct claiming 3.4 GB" render "mat5-struct-huge-fields.mat" "$T/r.png" -- $R "$REG/mat/mat5-struct-huge-fields.mat"
 bounded "mat v5 plain, truncated" render "mat5-plain-truncated.mat: truncated" "$T/r.png" -- $R "$REG/mat/mat5-plain-truncated.mat"
 bounded "mat v5 zlib, truncated" render "mat5-zlib-truncated.mat: truncated" "$T/r.png" -- $R "$REG/mat/mat5-zlib-truncated.mat"
 finish
