@@ -1,6 +1,7 @@
 /* image_oiio.cpp — the one C++ file: a C-callable shim around OpenImageIO (see image.h).
  * What it is: open/read a PNG, TIFF or EXR image as float with its bit depth, after checking its
- * header against the caller's wishes and data/limits.h (nothing is allocated for pixels before),
+ * header against the caller's wishes and data/limits.h (nothing is allocated for pixels before;
+ * an EXR header is parsed by OpenEXR's C API first, see exr_header_ok),
  * and atomic writers for 8-bit RGB, 16-bit grey and float EXR. No exception crosses the C
  * boundary.
  * What it is not: a place for format logic (CAVE folders, frame sequences, spectral layouts
@@ -9,6 +10,7 @@
 #include "data/limits.h"
 
 #include <OpenImageIO/imageio.h>
+#include <openexr.h>
 
 #include <cmath>
 #include <cstdio>
@@ -68,6 +70,31 @@ static int png_truncated(const char *path)
     }
     fclose(f);
     return cut;
+}
+
+/* OpenEXR's C API (Core) checks every attribute's size against the file while parsing a
+ * header; the C++ library behind OpenImageIO's reader allocates what a header claims first
+ * (1.76 GB for a 66-byte file with an attribute of that declared size). So an .exr header is
+ * parsed by the C API before OpenImageIO sees the file. */
+static thread_local char exr_msg[256];
+
+static void exr_quiet(exr_const_context_t, exr_result_t, const char *msg)
+{
+    if (!exr_msg[0]) snprintf(exr_msg, sizeof exr_msg, "%s", msg ? msg : "");
+}
+
+static lm_status exr_header_ok(const char *path, lm_err *e)
+{
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = exr_quiet;
+    init.flags = EXR_CONTEXT_FLAG_DISABLE_CHUNK_RECONSTRUCTION;
+    exr_msg[0] = 0;
+    exr_context_t ctx = NULL;
+    exr_result_t rv = exr_start_read(&ctx, path, &init);
+    if (ctx) exr_finish(&ctx);
+    if (rv == EXR_ERR_SUCCESS) return LM_OK;
+    return lm_err_set(e, LM_ERR_FORMAT, "%s: not a readable OpenEXR file: %s", path,
+                      first_line(exr_msg[0] ? exr_msg : exr_get_default_error_message(rv)).c_str());
 }
 
 static void fill_header(const ImageSpec &sp, lm_image *img)
@@ -163,6 +190,7 @@ static lm_status open_input(const char *path, const lm_image_want *want,
                           ".tif, .tiff or .exr)", path);
     if (png_truncated(path))
         return lm_err_set(e, LM_ERR_FORMAT, "%s: truncated PNG (file ends before IEND)", path);
+    if (!std::strcmp(plugin, "openexr") && (s = exr_header_ok(path, e)) != LM_OK) return s;
     ImageSpec config, spec;
     config.attribute("oiio:UnassociatedAlpha", 1); /* never premultiply PNG/TIFF alpha */
     in = ImageInput::create(plugin);

@@ -51,6 +51,7 @@ bounded "tiff 1 (256 channels), frame 2" infer "f_0001.tif: has 256 channels" "$
 bounded "tiff 2 (3584 x 61452), frame 2" infer "f_0001.tif: image size 3584 x 61452" "$T/out" -- $I --input "$T/seq2"
 bounded "png 8000 x 8000 in 700 bytes, frame 2" infer "f_0001.png" "$T/out" -- $I --input "$T/seq3"
 bounded "tiff 2 alone" infer "tiff-huge-claim-2.tif" "$T/out" -- $I --input "$REG/frame/tiff-huge-claim-2.tif"
+bounded "exr attribute claiming 1.76 GB" infer "exr-attr-huge-size.exr: not a readable OpenEXR" "$T/out" -- $I --input "$REG/frame/exr-attr-huge-size.exr"
 bounded "png 15000 x 15000 alone" infer "png-huge-claim.png: image size 15000 x 15000" "$T/out" -- $I --input "$REG/frame/png-huge-claim.png"
 
 cave_with() { # cave_with DIR BAND FILE: the CAVE scene with band BAND replaced by FILE

@@ -2,8 +2,8 @@
  * every harness (fuzz_<name>_replay CORPUS_DIR REGRESS_DIR ...), built by the normal gcc build
  * in Release and with ASan/UBSan. Each file (a directory: each regular file in it, sorted) is
  * fed once to LLVMFuzzerTestOneInput; a crash, a sanitizer report or a harness check fails the
- * test. Like libFuzzer's -malloc_limit_mb, a single allocation over 2 GiB is fatal: a tiny
- * hostile file must not make a reader (or a library under it) ask for gigabytes. Without
+ * test. Like libFuzzer's -malloc_limit_mb, a single allocation over 1 GiB is fatal: a tiny
+ * hostile file must not make a reader (or a library under it) ask for a gigabyte. Without
  * ASan this is a malloc/calloc/realloc/memalign interposer over glibc's; with ASan,
  * max_allocation_size_mb.
  * What it is not: a fuzzer (no mutation, no coverage). */
@@ -19,7 +19,7 @@
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
-#define REPLAY_MALLOC_LIMIT ((size_t)2 << 30)
+#define REPLAY_MALLOC_LIMIT ((size_t)1 << 30)
 #define REPLAY_MAX_INPUT (64u << 20)
 
 #if defined(__SANITIZE_ADDRESS__)
@@ -32,7 +32,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 #ifdef REPLAY_ASAN
 const char *__asan_default_options(void);
-const char *__asan_default_options(void) { return "max_allocation_size_mb=2048"; }
+const char *__asan_default_options(void) { return "max_allocation_size_mb=1024"; }
 #else
 extern void *__libc_malloc(size_t n);
 extern void *__libc_calloc(size_t a, size_t b);
