@@ -14,9 +14,14 @@
  *     `T.<wavelength>nm` (reflective, comma or dot decimal separator), sorted by wavelength;
  *     if a file has no `T.` channel, the emissive `S0.<wavelength>nm` channels are read
  *     instead. Other channels are ignored. HALF or FLOAT channels, scanline storage.
+ *     A .mat file's structure is checked first (a truncated file, or a variable whose data
+ *     do not cover its dimensions, is LM_ERR_FORMAT), and matio reads it in a child process
+ *     with capped memory and CPU time: a fault or a runaway allocation of libmatio/libhdf5 on
+ *     a corrupt file is an error naming the file.
+ * Every reader checks the claimed size against data/limits.h before allocating the cube.
  * Every cube read is validated: each value must be finite and >= 0, else LM_ERR_NUMERIC
  * naming the file, the band and the pixel. Readers and the writer may run concurrently on
- * different files (.mat reads are serialised internally: matio/HDF5 are not thread-safe).
+ * different files.
  * What it is not: normalisation (cubes are returned in the file's units), resampling to other
  * wavelengths, or a cache (see the dataset code). */
 #ifndef LM_CUBE_IO_H

@@ -276,7 +276,7 @@ static lm_status probe_scene(scene *s, lm_err *err)
                           "%d (_ms_01 .. _ms_31)", s->path, n, hdr[0] ? "" : " and no band 01",
                           LM_CAVE_BANDS);
     lm_image im;
-    lm_status st = lm_image_info(f == LM_CUBE_FMT_CAVE ? hdr : s->path, &im, err);
+    lm_status st = lm_image_info(f == LM_CUBE_FMT_CAVE ? hdr : s->path, NULL, &im, err);
     int ok = 1, nb = st == LM_OK && f == LM_CUBE_FMT_EXR ? exr_bands_ok(&im, &ok) : 0;
     s->height = im.height;
     s->width = im.width;

@@ -1,9 +1,12 @@
 /* frames.c — coded frames: one frame in/out through the OpenImageIO shim, and sequences.
  * What it is: see frames.h (format by extension, single channel, [0, 1] for integers, atomic
- * writes; sequences from a folder, a `%0Nd` pattern, or one file).
+ * writes; sequences from a folder, a `%0Nd` pattern, or one file). Every frame's header is
+ * checked (size, channels, sample type, data/limits.h) before its pixels are allocated, and a
+ * sequence checks all its frames' headers when it is opened.
  * What it is not: image decoding (image_oiio.cpp) or any processing of the frames. */
 #include "data/frames.h"
 #include "data/image.h"
+#include "data/limits.h"
 #include <dirent.h>
 #include <math.h>
 #include <stdio.h>
@@ -41,13 +44,15 @@ static lm_status check_file(const char *path, lm_err *e)
     return kind_of(path) == FRAME_NONE ? unknown_ext(path, e) : LM_OK;
 }
 
-lm_status lm_frame_read(const char *path, lm_frame *f, lm_err *e)
+/* One frame, at most max_pixels (its header checked before any allocation). */
+static lm_status read_frame(const char *path, long long max_pixels, lm_frame *f, lm_err *e)
 {
     memset(f, 0, sizeof *f);
     lm_status s = check_file(path, e);
     if (s != LM_OK) return s;
     lm_image im;
-    s = lm_image_read(path, &im, e);
+    lm_image_want want = {1, max_pixels};
+    s = lm_image_read(path, &want, &im, e);
     if (s != LM_OK) return s;
     if (im.channels != 1)
         s = lm_err_set(e, LM_ERR_FORMAT, "%s: has %d channels, expected a single-channel frame",
@@ -69,6 +74,11 @@ lm_status lm_frame_read(const char *path, lm_frame *f, lm_err *e)
     im.data = NULL;
     lm_image_free(&im);
     return LM_OK;
+}
+
+lm_status lm_frame_read(const char *path, lm_frame *f, lm_err *e)
+{
+    return read_frame(path, LM_MAX_FRAME_PIXELS, f, e);
 }
 
 void lm_frame_free(lm_frame *f)
@@ -285,6 +295,30 @@ static lm_status list_spec(const char *spec, name_list *l, int *first, lm_err *e
     return s;
 }
 
+/* Every frame's header, before any pixel is read: a frame file, single channel, within the
+ * limits, the size of the first frame (whose size fills s). */
+static lm_status check_headers(const name_list *l, lm_frame_seq *s, lm_err *e)
+{
+    lm_image_want want = {1, LM_MAX_FRAME_PIXELS};
+    for (int i = 0; i < l->n; i++) {
+        lm_image info;
+        lm_status st = check_file(l->v[i], e);
+        if (st == LM_OK) st = lm_image_info(l->v[i], &want, &info, e);
+        if (st != LM_OK) return st;
+        if (i == 0) {
+            s->height = info.height;
+            s->width = info.width;
+        } else if (info.height != s->height || info.width != s->width) {
+            st = lm_err_set(e, LM_ERR_FORMAT, "%s: frame is %d x %d but the first frame (%s) is "
+                            "%d x %d", l->v[i], info.width, info.height, l->v[0], s->width,
+                            s->height);
+        }
+        lm_image_free(&info);
+        if (st != LM_OK) return st;
+    }
+    return LM_OK;
+}
+
 lm_status lm_frame_seq_open(const char *spec, lm_frame_seq *s, lm_err *e)
 {
     memset(s, 0, sizeof *s);
@@ -292,16 +326,7 @@ lm_status lm_frame_seq_open(const char *spec, lm_frame_seq *s, lm_err *e)
     name_list l = {0};
     int first = 0;
     lm_status st = list_spec(spec, &l, &first, e);
-    lm_image info;
-    if (st == LM_OK && (st = check_file(l.v[0], e)) == LM_OK &&
-        (st = lm_image_info(l.v[0], &info, e)) == LM_OK) {
-        if (info.channels != 1)
-            st = lm_err_set(e, LM_ERR_FORMAT, "%s: has %d channels, expected a single-channel "
-                            "frame", l.v[0], info.channels);
-        s->height = info.height;
-        s->width = info.width;
-        lm_image_free(&info);
-    }
+    if (st == LM_OK) st = check_headers(&l, s, e);
     if (st != LM_OK) {
         list_free(&l);
         memset(s, 0, sizeof *s);
@@ -319,7 +344,8 @@ lm_status lm_frame_seq_read(const lm_frame_seq *s, int i, lm_frame *f, lm_err *e
     if (!s || i < 0 || i >= s->count)
         return lm_err_set(e, LM_ERR_ARG, "frame sequence: index %d out of range (%d frames)", i,
                           s ? s->count : 0);
-    lm_status st = lm_frame_read(s->paths[i], f, e);
+    /* no more pixels than the first frame's, even if the file changed since it was opened */
+    lm_status st = read_frame(s->paths[i], (long long)s->height * s->width, f, e);
     if (st == LM_OK && (f->height != s->height || f->width != s->width)) {
         st = lm_err_set(e, LM_ERR_FORMAT, "%s: frame is %d x %d but the first frame (%s) is "
                         "%d x %d", s->paths[i], f->width, f->height, s->paths[0], s->width,

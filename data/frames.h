@@ -16,9 +16,10 @@ typedef struct lm_frame {
     float *data;  /* height * width, row-major: data[y*W + x] */
 } lm_frame;
 
-/* Read one frame (.png, .tif, .tiff, .exr; case-insensitive). On failure *f is zeroed and e
- * says "<path>: <problem>": LM_ERR_IO (missing, a directory), LM_ERR_FORMAT (corrupt,
- * truncated, not single-channel), LM_ERR_NUMERIC (NaN/inf), LM_ERR_UNSUPPORTED (extension). */
+/* Read one frame (.png, .tif, .tiff, .exr; case-insensitive). The header is checked before any
+ * allocation (see lm_frame_seq_open). On failure *f is zeroed and e says "<path>: <problem>":
+ * LM_ERR_IO (missing, a directory), LM_ERR_FORMAT (corrupt, truncated, not single-channel,
+ * over a limit), LM_ERR_NUMERIC (NaN/inf), LM_ERR_UNSUPPORTED (extension). */
 lm_status lm_frame_read(const char *path, lm_frame *f, lm_err *e);
 void lm_frame_free(lm_frame *f);
 
@@ -43,11 +44,15 @@ typedef struct lm_frame_seq {
  *    it produces, by increasing number; the numbers must be consecutive (a gap is an error
  *    naming the missing file);
  *  - a single frame file: a sequence of one.
- * The first frame's header is read to fill height/width. On failure *s is zeroed. */
+ * Every frame's header is checked (a single channel of 8/16-bit unsigned, half or float
+ * samples; at most LM_MAX_FRAME_PIXELS and no more than the file can hold, data/limits.h; the
+ * size of the first frame, which fills height/width) before any pixel is read, so a bad frame
+ * anywhere in the sequence fails here. On failure *s is zeroed. */
 lm_status lm_frame_seq_open(const char *spec, lm_frame_seq *s, lm_err *e);
 
 /* Read frame i (0-based) of the sequence; a size different from the first frame's is
- * LM_ERR_FORMAT naming the file. */
+ * LM_ERR_FORMAT naming the file (a file grown since lm_frame_seq_open is refused from its
+ * header, before its pixels are allocated). */
 lm_status lm_frame_seq_read(const lm_frame_seq *s, int i, lm_frame *f, lm_err *e);
 void lm_frame_seq_free(lm_frame_seq *s);
 

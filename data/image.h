@@ -1,6 +1,8 @@
 /* image.h — the C-callable shim around OpenImageIO (implemented in image_oiio.cpp).
- * What it is: read one image file (PNG, TIFF, EXR, ... whatever OpenImageIO reads) as float
- * samples with its bit depth and channel names; write 8-bit RGB, 16-bit single-channel and
+ * What it is: read one image file (PNG, TIFF or EXR, chosen by the extension; no other
+ * OpenImageIO reader is ever tried) as float samples with its bit depth and channel names,
+ * its header checked first (see lm_image_want, data/limits.h); write 8-bit RGB, 16-bit
+ * single-channel and
  * float EXR images. Every writer is atomic: it writes `<path>.tmp.<pid>` and renames it onto
  * `path`; on failure the temporary file is removed and `path` is left untouched.
  * What it is not: colour management (no gamma, no sRGB transfer, no alpha premultiplication is
@@ -19,7 +21,7 @@ extern "C" {
 
 typedef struct lm_image {
     int width, height, channels;
-    int bits;       /* bits per sample in the file: 8, 16 (uint16 or half), 32, 64 */
+    int bits;       /* bits per sample in the file: 8 (or fewer, packed), 16 (uint16 or half), 32 */
     int is_float;   /* 1 if the file stores floating-point samples */
     float *data;    /* height * width * channels, interleaved: data[(y*W + x)*C + c]; NULL
                      * after lm_image_info. Unsigned integers are scaled to [0, 1] exactly as
@@ -27,14 +29,25 @@ typedef struct lm_image {
     char (*names)[LM_IMAGE_NAME_LEN]; /* channel names as the file gives them (may be "") */
 } lm_image;
 
-/* Header only: sizes, channels, bits and names; img->data stays NULL. Free with lm_image_free.
- * Errors: LM_ERR_IO (missing file, a directory, unreadable) or LM_ERR_FORMAT (not an image
- * OpenImageIO can read), message "<path>: <problem>". img is zeroed on failure. */
-lm_status lm_image_info(const char *path, lm_image *img, lm_err *e);
+/* What a caller accepts, checked against the header before anything is allocated for pixels
+ * (0: no limit beyond the generic ones). */
+typedef struct lm_image_want {
+    int max_channels;
+    long long max_pixels; /* width x height */
+} lm_image_want;
 
-/* Read the first subimage entirely (see lm_image.data for the scaling). Truncated or corrupt
- * files give LM_ERR_FORMAT. img is zeroed on failure. */
-lm_status lm_image_read(const char *path, lm_image *img, lm_err *e);
+/* Header only: sizes, channels, bits and names; img->data stays NULL. Free with lm_image_free.
+ * Every header is checked (want may be NULL): width and height 1..LM_MAX_IMAGE_SIDE, width x
+ * height x channels <= LM_MAX_IMAGE_SAMPLES, samples 8/16-bit unsigned, half or float, the
+ * wishes of want, and no more samples than the file can hold (its size x the maximum ratio of
+ * its compression, data/limits.h). Errors: LM_ERR_IO (missing file, a directory, unreadable),
+ * LM_ERR_UNSUPPORTED (not .png/.tif/.tiff/.exr) or LM_ERR_FORMAT (not an image OpenImageIO can
+ * read, or a header failing a check), message "<path>: <problem>". img is zeroed on failure. */
+lm_status lm_image_info(const char *path, const lm_image_want *want, lm_image *img, lm_err *e);
+
+/* Read the first subimage entirely (see lm_image.data for the scaling), after the checks of
+ * lm_image_info. Truncated or corrupt files give LM_ERR_FORMAT. img is zeroed on failure. */
+lm_status lm_image_read(const char *path, const lm_image_want *want, lm_image *img, lm_err *e);
 void lm_image_free(lm_image *img);
 
 /* 8-bit RGB (format from path's extension, normally .png): rgb is H*W*3 interleaved in [0, 1],

@@ -1,17 +1,23 @@
 /* image_oiio.cpp — the one C++ file: a C-callable shim around OpenImageIO (see image.h).
- * What it is: open/read an image as float with its bit depth, and atomic writers for 8-bit RGB,
- * 16-bit grey and float EXR. No exception crosses the C boundary.
+ * What it is: open/read a PNG, TIFF or EXR image as float with its bit depth, after checking its
+ * header against the caller's wishes and data/limits.h (nothing is allocated for pixels before;
+ * an EXR header is parsed by OpenEXR's C API first, see exr_header_ok),
+ * and atomic writers for 8-bit RGB, 16-bit grey and float EXR. No exception crosses the C
+ * boundary.
  * What it is not: a place for format logic (CAVE folders, frame sequences, spectral layouts
  * live in C files that call this). */
 #include "data/image.h"
+#include "data/limits.h"
 
 #include <OpenImageIO/imageio.h>
+#include <openexr.h>
 
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <string>
+#include <strings.h>
 #include <sys/stat.h>
 #include <vector>
 
@@ -66,6 +72,31 @@ static int png_truncated(const char *path)
     return cut;
 }
 
+/* OpenEXR's C API (Core) checks every attribute's size against the file while parsing a
+ * header; the C++ library behind OpenImageIO's reader allocates what a header claims first
+ * (1.76 GB for a 66-byte file with an attribute of that declared size). So an .exr header is
+ * parsed by the C API before OpenImageIO sees the file. */
+static thread_local char exr_msg[256];
+
+static void exr_quiet(exr_const_context_t, exr_result_t, const char *msg)
+{
+    if (!exr_msg[0]) snprintf(exr_msg, sizeof exr_msg, "%s", msg ? msg : "");
+}
+
+static lm_status exr_header_ok(const char *path, lm_err *e)
+{
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = exr_quiet;
+    init.flags = EXR_CONTEXT_FLAG_DISABLE_CHUNK_RECONSTRUCTION;
+    exr_msg[0] = 0;
+    exr_context_t ctx = NULL;
+    exr_result_t rv = exr_start_read(&ctx, path, &init);
+    if (ctx) exr_finish(&ctx);
+    if (rv == EXR_ERR_SUCCESS) return LM_OK;
+    return lm_err_set(e, LM_ERR_FORMAT, "%s: not a readable OpenEXR file: %s", path,
+                      first_line(exr_msg[0] ? exr_msg : exr_get_default_error_message(rv)).c_str());
+}
+
 static void fill_header(const ImageSpec &sp, lm_image *img)
 {
     img->width = sp.width;
@@ -80,36 +111,106 @@ static void fill_header(const ImageSpec &sp, lm_image *img)
     }
 }
 
-static lm_status open_input(const char *path, std::unique_ptr<ImageInput> &in, lm_image *img,
-                            lm_err *e)
+/* The OpenImageIO plugin for a path's extension (case-insensitive), or NULL: only these three
+ * are ever handed a file, so a file is never tried against OpenImageIO's other readers. */
+static const char *plugin_of(const char *path)
+{
+    const char *slash = std::strrchr(path, '/'), *dot = std::strrchr(path, '.');
+    if (!dot || (slash && dot < slash)) return NULL;
+    if (!strcasecmp(dot, ".png")) return "png";
+    if (!strcasecmp(dot, ".tif") || !strcasecmp(dot, ".tiff")) return "tiff";
+    return strcasecmp(dot, ".exr") == 0 ? "openexr" : NULL;
+}
+
+static bool sample_type_ok(TypeDesc t)
+{
+    return t.basetype == TypeDesc::UINT8 || t.basetype == TypeDesc::UINT16 ||
+           t.basetype == TypeDesc::HALF || t.basetype == TypeDesc::FLOAT;
+}
+
+/* Bytes the samples take in the file's own types (bits per sample for packed integers). */
+static double decoded_bytes(const ImageSpec &sp)
+{
+    double bits = 0.0;
+    int packed = sp.get_int_attribute("oiio:BitsPerSample", 0);
+    for (int c = 0; c < sp.nchannels; c++) {
+        TypeDesc t = sp.channelformat(c);
+        bits += packed > 0 && !t.is_floating_point() ? packed : 8.0 * (double)t.size();
+    }
+    return (double)sp.width * sp.height * bits / 8.0;
+}
+
+/* Everything the header says, checked before any pixel is allocated: size, channels, sample
+ * types, what the caller accepts, and that the file can hold that many samples. */
+static lm_status check_header(const char *path, const char *plugin, const ImageSpec &sp,
+                              const lm_image_want *want, lm_err *e)
+{
+    double pixels = (double)sp.width * sp.height;
+    long long max_pixels = want && want->max_pixels > 0 ? want->max_pixels : LM_MAX_IMAGE_SAMPLES;
+    if (sp.depth > 1)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: a volume image (depth %d) is not supported",
+                          path, sp.depth);
+    if (sp.width <= 0 || sp.height <= 0 || sp.nchannels <= 0 || sp.width > LM_MAX_IMAGE_SIDE ||
+        sp.height > LM_MAX_IMAGE_SIDE)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: invalid image size %d x %d x %d (at most %d "
+                          "per side)", path, sp.width, sp.height, sp.nchannels, LM_MAX_IMAGE_SIDE);
+    if (pixels > (double)max_pixels || pixels * sp.nchannels > (double)LM_MAX_IMAGE_SAMPLES)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: image size %d x %d x %d is over the limit of "
+                          "%lld pixels (%lld samples)", path, sp.width, sp.height, sp.nchannels,
+                          max_pixels, LM_MAX_IMAGE_SAMPLES);
+    if (want && want->max_channels == 1 && sp.nchannels > 1)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: has %d channels, expected a single-channel "
+                          "image", path, sp.nchannels);
+    if (want && want->max_channels > 0 && sp.nchannels > want->max_channels)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: has %d channels, expected at most %d", path,
+                          sp.nchannels, want->max_channels);
+    for (int c = 0; c < sp.nchannels; c++)
+        if (!sample_type_ok(sp.channelformat(c)))
+            return lm_err_set(e, LM_ERR_FORMAT, "%s: channel %d has samples of type %s "
+                              "(expected 8/16-bit unsigned, half or float)", path, c,
+                              sp.channelformat(c).c_str());
+    std::string codec = std::strcmp(plugin, "png") == 0
+                            ? std::string("deflate")
+                            : std::string(sp.get_string_attribute("compression", "none"));
+    char what[96];
+    snprintf(what, sizeof what, "a %d x %d x %d image", sp.width, sp.height, sp.nchannels);
+    return lm_limit_decoded(path, what, decoded_bytes(sp), lm_file_bytes(path), codec.c_str(),
+                            lm_codec_ratio(codec.c_str()), e);
+}
+
+static lm_status open_input(const char *path, const lm_image_want *want,
+                            std::unique_ptr<ImageInput> &in, lm_image *img, lm_err *e)
 {
     std::memset(img, 0, sizeof *img);
     lm_status s = check_regular_file(path, e);
     if (s != LM_OK) return s;
+    const char *plugin = plugin_of(path);
+    if (!plugin)
+        return lm_err_set(e, LM_ERR_UNSUPPORTED, "%s: unknown image format (expected .png, "
+                          ".tif, .tiff or .exr)", path);
     if (png_truncated(path))
         return lm_err_set(e, LM_ERR_FORMAT, "%s: truncated PNG (file ends before IEND)", path);
-    ImageSpec config;
+    if (!std::strcmp(plugin, "openexr") && (s = exr_header_ok(path, e)) != LM_OK) return s;
+    ImageSpec config, spec;
     config.attribute("oiio:UnassociatedAlpha", 1); /* never premultiply PNG/TIFF alpha */
-    in = ImageInput::open(path, &config);
-    if (!in)
+    in = ImageInput::create(plugin);
+    if (!in || !in->open(path, spec, config))
         return lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read image: %s", path,
-                          first_line(OIIO::geterror()).c_str());
+                          first_line(in ? in->geterror() : OIIO::geterror()).c_str());
     const ImageSpec &sp = in->spec();
-    if (sp.depth > 1 || sp.width <= 0 || sp.height <= 0 || sp.nchannels <= 0 ||
-        (double)sp.width * sp.height * sp.nchannels > 1e9)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: unsupported image size %d x %d x %d (depth %d)",
-                          path, sp.width, sp.height, sp.nchannels, sp.depth);
+    if ((s = check_header(path, plugin, sp, want, e)) != LM_OK) return s;
     img->names = (char(*)[LM_IMAGE_NAME_LEN])calloc((size_t)sp.nchannels, LM_IMAGE_NAME_LEN);
     if (!img->names) return lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", path);
     fill_header(sp, img);
     return LM_OK;
 }
 
-extern "C" lm_status lm_image_info(const char *path, lm_image *img, lm_err *e)
+extern "C" lm_status lm_image_info(const char *path, const lm_image_want *want, lm_image *img,
+                                   lm_err *e)
 {
     try {
         std::unique_ptr<ImageInput> in;
-        lm_status s = open_input(path, in, img, e);
+        lm_status s = open_input(path, want, in, img, e);
         if (s != LM_OK) lm_image_free(img);
         return s;
     } catch (...) {
@@ -147,12 +248,13 @@ static lm_status read_pixels(const char *path, ImageInput &in, lm_image *img, lm
     return LM_OK;
 }
 
-extern "C" lm_status lm_image_read(const char *path, lm_image *img, lm_err *e)
+extern "C" lm_status lm_image_read(const char *path, const lm_image_want *want, lm_image *img,
+                                   lm_err *e)
 {
     lm_status s;
     try {
         std::unique_ptr<ImageInput> in;
-        s = open_input(path, in, img, e);
+        s = open_input(path, want, in, img, e);
         if (s == LM_OK) s = read_pixels(path, *in, img, e);
     } catch (...) {
         s = lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read image (exception)", path);

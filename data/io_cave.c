@@ -1,11 +1,13 @@
 /* io_cave.c — the CAVE reader: a folder of 31 band images `<scene>_ms_NN.png`, 400-700 nm.
  * What it is: find the bands by their `_ms_NN` suffix (in the folder, or in its single
  * sub-folder that holds bands, as CAVE zips unpack to scene/scene/), read them through the
- * OpenImageIO shim (8-bit / 255, 16-bit / 65535), check they agree in size, are greyscale
- * (see cube_io.h for multi-channel bands) and hold finite non-negative values.
+ * OpenImageIO shim (8-bit / 255, 16-bit / 65535; each header checked before its pixels are
+ * allocated: grey, grey + alpha, RGB or RGBA, within data/limits.h), check they agree in size,
+ * are greyscale (see cube_io.h for multi-channel bands) and hold finite non-negative values.
  * What it is not: a writer (cubes are written as spectral EXR). */
 #include "data/cube_io.h"
 #include "data/image.h"
+#include "data/limits.h"
 #include <dirent.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -140,11 +142,15 @@ static lm_status take_grey(const char *path, const lm_image *im, float *dst, lm_
     return LM_OK;
 }
 
+/* Band 01 may be as large as a cube allows; the others no larger than band 01 (each header is
+ * checked before its pixels are allocated). */
 static lm_status read_bands(const cave_bands *cb, lm_cube *cube, lm_err *e)
 {
     for (int b = 0; b < LM_CAVE_BANDS; b++) {
         lm_image im;
-        lm_status s = lm_image_read(cb->path[b], &im, e);
+        lm_image_want want = {4, b == 0 ? LM_MAX_CUBE_VALUES / LM_CAVE_BANDS
+                                        : (long long)cube->height * cube->width};
+        lm_status s = lm_image_read(cb->path[b], &want, &im, e);
         if (s != LM_OK) return s;
         if (b == 0) {
             s = lm_cube_alloc(cube, LM_CAVE_BANDS, im.height, im.width, 400.0f, 10.0f);

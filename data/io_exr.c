@@ -2,11 +2,13 @@
  * What it is: the reader (channels `T.<nm>nm`, else `S0.<nm>nm`, sorted by wavelength; HALF or
  * FLOAT scanline images) and the atomic writer (FLOAT `T.<nm>nm` channels with a comma and six
  * decimals, attribute spectralLayoutVersion = "1.0", ZIP level 1 scanline chunks), plus the
- * channel name helpers. OpenEXR messages are captured (nothing is printed) and quoted in errors.
+ * channel name helpers. The reader checks the claimed cube against data/limits.h (size, and
+ * what the file can hold under its compression) before allocating it. OpenEXR messages are captured (nothing is printed) and quoted in errors.
  * What it is not: RGB EXR (that is OpenImageIO, image.h), polarised (S1..S3) or tiled/deep
  * spectral images, or units other than nm. */
 #include "data/cube_io.h"
 #include "data/image.h"
+#include "data/limits.h"
 #include <math.h>
 #include <openexr.h>
 #include <stdio.h>
@@ -196,6 +198,36 @@ static lm_status decode_all(exr_context_t ctx, const char *path, const spectral_
     return LM_OK;
 }
 
+/* The cube the header claims must be within the limits and fit in the file (data/limits.h),
+ * checked before it is allocated. */
+static lm_status check_claim(exr_context_t ctx, const char *path, const spectral_chan *sc, int n,
+                             int64_t W, int64_t H, lm_err *e)
+{
+    if (W <= 0 || H <= 0 || W > LM_MAX_IMAGE_SIDE || H > LM_MAX_IMAGE_SIDE)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: invalid data window %lld x %lld (at most %d "
+                          "per side)", path, (long long)W, (long long)H, LM_MAX_IMAGE_SIDE);
+    if ((double)n * W * H > (double)LM_MAX_CUBE_VALUES)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: a %d x %lld x %lld cube is over the limit of "
+                          "%lld values", path, n, (long long)H, (long long)W, LM_MAX_CUBE_VALUES);
+    static const char *names[] = {"none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a",
+                                  "dwaa", "dwab"};
+    exr_compression_t comp = EXR_COMPRESSION_NONE;
+    exr_result_t rv = exr_get_compression(ctx, 0, &comp);
+    if (rv != EXR_ERR_SUCCESS || (int)comp < 0 || comp >= EXR_COMPRESSION_LAST_TYPE)
+        return exr_fail(e, LM_ERR_FORMAT, path, "bad compression", rv);
+    const exr_attr_chlist_t *cl;
+    if ((rv = exr_get_channels(ctx, 0, &cl)) != EXR_ERR_SUCCESS)
+        return exr_fail(e, LM_ERR_FORMAT, path, "no channel list", rv);
+    double bytes = 0.0;
+    for (int i = 0; i < cl->num_channels; i++)
+        if (band_of(sc, n, cl->entries[i].name.str) >= 0)
+            bytes += cl->entries[i].pixel_type == EXR_PIXEL_HALF ? 2.0 : 4.0;
+    char what[96];
+    snprintf(what, sizeof what, "a %d x %lld x %lld cube", n, (long long)H, (long long)W);
+    return lm_limit_decoded(path, what, bytes * (double)W * (double)H, lm_file_bytes(path),
+                            names[comp], lm_codec_ratio(names[comp]), e);
+}
+
 static lm_status read_part0(exr_context_t ctx, const char *path, lm_cube *cube, lm_err *e)
 {
     exr_storage_t storage;
@@ -211,9 +243,7 @@ static lm_status read_part0(exr_context_t ctx, const char *path, lm_cube *cube, 
     lm_status s = find_channels(ctx, path, sc, &n, e);
     if (s != LM_OK) return s;
     int64_t W = (int64_t)dw.max.x - dw.min.x + 1, H = (int64_t)dw.max.y - dw.min.y + 1;
-    if (W <= 0 || H <= 0 || W > 65536 || H > 65536)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: invalid data window %lld x %lld", path,
-                          (long long)W, (long long)H);
+    if ((s = check_claim(ctx, path, sc, n, W, H, e)) != LM_OK) return s;
     s = lm_cube_alloc(cube, n, (int)H, (int)W, 0.0f, 0.0f);
     if (s != LM_OK)
         return lm_err_set(e, s, "%s: cannot allocate a %d x %lld x %lld cube", path, n,

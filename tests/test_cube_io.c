@@ -108,6 +108,28 @@ static void png_write_grey(const char *path, int w, int h, int depth, const uint
     free(comp);
 }
 
+/* A 16-bit greyscale PNG header claiming w x h, with one zero row of pixel data: a tiny file
+ * whose header asks for a large image. */
+static void png_write_claim(const char *path, int w, int h)
+{
+    size_t row = 1 + 2 * (size_t)w;
+    unsigned char *raw = calloc(row, 1), ihdr[13] = {0};
+    uLongf clen = compressBound(row);
+    unsigned char *comp = malloc(clen);
+    compress2(comp, &clen, raw, row, 9);
+    put32(ihdr, (uint32_t)w);
+    put32(ihdr + 4, (uint32_t)h);
+    ihdr[8] = 16;
+    FILE *f = fopen(path, "wb");
+    fwrite("\x89PNG\r\n\x1a\n", 1, 8, f);
+    png_chunk(f, "IHDR", ihdr, 13);
+    png_chunk(f, "IDAT", comp, (uint32_t)clen);
+    png_chunk(f, "IEND", NULL, 0);
+    fclose(f);
+    free(raw);
+    free(comp);
+}
+
 static int paeth(int a, int b, int c)
 {
     int p = a + b - c, pa = abs(p - a), pb = abs(p - b), pc = abs(p - c);
@@ -311,6 +333,21 @@ static void test_cave_errors(void)
     CHECK(lm_cube_read_cave(p, &c, &e) == LM_ERR_IO); /* a file where a folder is expected */
     CHECK_ERR(e, LM_ERR_IO, "bad_ms_17.png", "folder");
     lm_err_clear(&e);
+    /* band headers claiming large images, refused before their pixels are allocated: over the
+     * size of band 01, over a cube's size, more than the file holds */
+    png_write_claim(p, 8000, 8000);
+    CHECK(lm_cube_read(d, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "bad_ms_17.png", "limit of 12 pixels");
+    lm_err_clear(&e);
+    snprintf(q, sizeof q, "%s/bad_ms_01.png", d);
+    png_write_claim(q, 8000, 8000);
+    CHECK(lm_cube_read(d, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "bad_ms_01.png", "8000 x 8000");
+    lm_err_clear(&e);
+    png_write_claim(q, 2900, 2900);
+    CHECK(lm_cube_read(d, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "bad_ms_01.png", "can hold");
+    lm_err_clear(&e);
     mkdir(tpath(q, "two"), 0755); /* two scenes one level down: ambiguous */
     make_scene(tpath(q, "two/a"), "a", 2, 2, 8);
     make_scene(tpath(q, "two/b"), "b", 2, 2, 8);
@@ -422,6 +459,77 @@ static void test_mat_kaust_v5(void)
     lm_cube_free(&c);
 }
 
+/* KAUST-like v5 file: `hsi` H x W x B uint16, plain or zlib-compressed. */
+static void write_kaust(const char *path, int H, int W, int B, int zip)
+{
+    uint16_t *d = malloc(sizeof(uint16_t) * H * W * B);
+    for (int i = 0; i < H * W * B; i++) d[i] = (uint16_t)((i * 2654435761u) >> 20);
+    mat_t *m = Mat_CreateVer(path, NULL, MAT_FT_MAT5);
+    size_t dims[3] = {(size_t)H, (size_t)W, (size_t)B};
+    matvar_t *v = Mat_VarCreate("hsi", MAT_C_UINT16, MAT_T_UINT16, 3, dims, d, 0);
+    Mat_VarWrite(m, v, zip ? MAT_COMPRESSION_ZLIB : MAT_COMPRESSION_NONE);
+    Mat_VarFree(v);
+    Mat_Close(m);
+    free(d);
+}
+
+/* A v5 file cut short (plain or compressed) used to read its missing bands as zeros. */
+static void test_mat_truncated_v5(void)
+{
+    char p[1024], q[1024];
+    lm_cube c;
+    lm_err e = {0};
+    for (int zip = 0; zip < 2; zip++) {
+        write_kaust(tpath(q, zip ? "kz.mat" : "kp.mat"), 20, 16, 34, zip);
+        CHECK_MSG(lm_cube_read(q, &c, &e) == LM_OK, "%s", e.msg);
+        lm_cube_free(&c);
+        long n = file_size(q), keep[5] = {n - 1, n - 8, n * 2 / 3, n / 2, 140};
+        for (int i = 0; i < 5; i++) {
+            truncate_copy(q, tpath(p, "cut5.mat"), keep[i]);
+            CHECK_MSG(lm_cube_read(p, &c, &e) == LM_ERR_FORMAT && c.data == NULL,
+                      "zip %d, kept %ld of %ld: %s", zip, keep[i], n, e.msg);
+            CHECK_ERR(e, LM_ERR_FORMAT, "cut5.mat", "truncated");
+            lm_err_clear(&e);
+        }
+    }
+    /* dimensions patched to claim more values than the data holds (plain file: the dims
+     * element's first value is at byte 128 + 8 + 16 + 8) */
+    write_kaust(tpath(p, "dims.mat"), 3, 6, 34, 0);
+    FILE *f = fopen(p, "r+b");
+    CHECK(f && fseek(f, 160, SEEK_SET) == 0 && fputc(4, f) == 4);
+    if (f) fclose(f);
+    CHECK(lm_cube_read(p, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "dims.mat", "holds 1224 bytes of data for 816 values");
+    lm_err_clear(&e);
+    /* a compressed stream damaged in its middle, the file's size unchanged */
+    write_kaust(tpath(p, "zbad.mat"), 20, 16, 34, 1);
+    f = fopen(p, "r+b");
+    long mid = file_size(p) / 2;
+    CHECK(f && fseek(f, mid, SEEK_SET) == 0);
+    for (int i = 0; f && i < 16; i++) fputc(0xA5 ^ i, f);
+    if (f) fclose(f);
+    CHECK(lm_cube_read(p, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "zbad.mat", "hsi");
+    lm_err_clear(&e);
+}
+
+/* Regression inputs of tests/fuzz/regress/mat: the reliability file whose corrupt attribute
+ * makes libhdf5 read out of bounds (SEGV, depending on the heap: see cli_hostile, which runs
+ * it with glibc.malloc.top_pad=0 where it always faulted), and a 200-byte v5 struct whose
+ * field-name tag claims 3.4 GB (matio tried malloc(3.4 GB) and calloc(27 GB)). */
+static void test_mat_hostile(void)
+{
+    const char *files[2] = {"tests/fuzz/regress/mat/mat-hdf5-corrupt-byte.mat",
+                            "tests/fuzz/regress/mat/mat5-struct-huge-fields.mat"};
+    for (int i = 0; i < 2; i++) {
+        lm_cube c;
+        lm_err e = {0};
+        CHECK_MSG(lm_cube_read(files[i], &c, &e) == LM_ERR_FORMAT && c.data == NULL, "%s: %s",
+                  files[i], e.msg);
+        CHECK_ERR(e, LM_ERR_FORMAT, files[i], NULL);
+    }
+}
+
 static void test_mat_errors(void)
 {
     char p[1024], q[1024];
@@ -454,7 +562,7 @@ static void test_mat_errors(void)
     for (int i = 0; i < 3; i++) {
         truncate_copy(q, tpath(p, "trunc.mat"), sizes[i]);
         CHECK_MSG(lm_cube_read(p, &c, &e) != LM_OK && c.data == NULL, "kept %ld", sizes[i]);
-        CHECK_ERR(e, LM_ERR_FORMAT, "trunc.mat", "corrupt");
+        CHECK_ERR(e, LM_ERR_FORMAT, "trunc.mat", "truncated");
         lm_err_clear(&e);
     }
     write_bytes(tpath(p, "garbage.mat"), "MATLAB 5.0 MAT-file, garbage follows \x01\x02", 40);
@@ -528,7 +636,7 @@ static void test_exr_round_trip(void)
     lm_cube_free(&r);
     /* an independent reader (OpenImageIO / C++ OpenEXR) sees the same values per channel */
     lm_image im;
-    CHECK_MSG(lm_image_read(p, &im, &e) == LM_OK, "%s", e.msg);
+    CHECK_MSG(lm_image_read(p, NULL, &im, &e) == LM_OK, "%s", e.msg);
     CHECK(im.channels == 31 && im.width == 23 && im.height == 37 && im.is_float);
     for (int ch = 0; ch < im.channels && im.channels == 31; ch++) {
         double nm = 0;
@@ -639,6 +747,22 @@ static void test_exr_half_channels(void)
     lm_cube_free(&r);
 }
 
+/* Copy an EXR with its dataWindow attribute changed to (0, 0) .. (w - 1, h - 1). 0 on success. */
+static int claim_window(const char *src, const char *dst, int w, int h)
+{
+    static unsigned char buf[1 << 20];
+    FILE *f = fopen(src, "rb");
+    size_t n = f ? fread(buf, 1, sizeof buf, f) : 0;
+    if (f) fclose(f);
+    const char key[] = "dataWindow\0box2i\0";
+    unsigned char *at = memmem(buf, n, key, sizeof key - 1);
+    if (!at || at + sizeof key - 1 + 4 + 16 > buf + n) return -1;
+    int32_t box[4] = {0, 0, w - 1, h - 1}; /* little-endian host, as the file */
+    memcpy(at + sizeof key - 1 + 4, box, sizeof box);
+    write_bytes(dst, (const char *)buf, n);
+    return 0;
+}
+
 static void test_exr_bad_files(void)
 {
     char p[1024], q[1024];
@@ -672,6 +796,17 @@ static void test_exr_bad_files(void)
     lm_err_clear(&e);
     CHECK(lm_cube_read(p, &(lm_cube){0}, &e) == LM_ERR_UNSUPPORTED);
     CHECK_ERR(e, LM_ERR_UNSUPPORTED, "cube.txt", "unknown cube format");
+    lm_err_clear(&e);
+    /* a data window claiming a large cube: refused from the header, before the allocation */
+    int wins[3][2] = {{2900, 2900}, {8000, 8000}, {70000, 3}};
+    const char *why[3] = {"can hold", "31 x 8000 x 8000 cube is over the limit", "70000 x 3"};
+    for (int i = 0; i < 3; i++) {
+        lm_cube r;
+        CHECK(claim_window(q, tpath(p, "claim.exr"), wins[i][0], wins[i][1]) == 0);
+        CHECK(lm_cube_read(p, &r, &e) == LM_ERR_FORMAT && r.data == NULL);
+        CHECK_ERR(e, LM_ERR_FORMAT, "claim.exr", why[i]);
+        lm_err_clear(&e);
+    }
     lm_cube_free(&c);
 }
 
@@ -719,6 +854,8 @@ int main(void)
     RUN(test_mat_arad_v73);
     RUN(test_mat_kaust_v5);
     RUN(test_mat_errors);
+    RUN(test_mat_truncated_v5);
+    RUN(test_mat_hostile);
     RUN(test_channel_names);
     RUN(test_exr_round_trip);
     RUN(test_exr_written_by_another_library);

@@ -274,14 +274,27 @@ static void test_sequence_folder(void)
     CHECK(s.first_index == 0);
     check_sequence(&s, (int[]){30, 20, 10}, 3, 0); /* a30, b20, c10 */
     lm_frame_seq_free(&s);
-    /* a frame of another size is reported when read */
-    write_numbered(d, "d%d.png", 50, 2, 2);
-    CHECK(lm_frame_seq_open(d, &s, &e) == LM_OK && s.count == 4);
+    /* a frame of another size is reported when read, if it changed after the sequence was
+     * opened (smaller: read, then refused; larger: refused from its header) */
+    CHECK(lm_frame_seq_open(d, &s, &e) == LM_OK && s.count == 3);
+    write_numbered(d, "c%d.tif", 10, 2, 2);
     lm_frame f;
-    CHECK(lm_frame_seq_read(&s, 3, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
-    CHECK_ERR(e, LM_ERR_FORMAT, "d50.png", "first frame");
+    CHECK(lm_frame_seq_read(&s, 2, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "c10.tif", "first frame");
+    lm_err_clear(&e);
+    write_numbered(d, "c%d.tif", 10, 4, 2);
+    CHECK(lm_frame_seq_read(&s, 2, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "c10.tif", "limit of 6 pixels");
     lm_err_clear(&e);
     lm_frame_seq_free(&s);
+    write_numbered(d, "c%d.tif", 10, 3, 2);
+    /* ... and when it is there already, by lm_frame_seq_open from the headers */
+    write_numbered(d, "d%d.png", 50, 2, 2);
+    CHECK(lm_frame_seq_open(d, &s, &e) == LM_ERR_FORMAT && s.count == 0);
+    CHECK_ERR(e, LM_ERR_FORMAT, "d50.png", "first frame");
+    lm_err_clear(&e);
+    snprintf(p, sizeof p, "%s/d50.png", d);
+    remove(p);
     /* one file is a sequence of one */
     snprintf(p, sizeof p, "%s/a30.png", d);
     CHECK(lm_frame_seq_open(p, &s, &e) == LM_OK && s.count == 1 && s.width == 3);
@@ -292,6 +305,62 @@ static void test_sequence_folder(void)
     lm_err_clear(&e);
     CHECK(lm_frame_seq_open(tpath(p, "absent.png"), &s, &e) == LM_ERR_IO);
     CHECK_ERR(e, LM_ERR_IO, "absent.png", NULL);
+}
+
+/* Copy a regression input of tests/fuzz/regress/frame (paths from the checkout root, the tests'
+ * working directory) to dst. */
+static void copy_regress(const char *name, const char *dst)
+{
+    char src[512];
+    snprintf(src, sizeof src, "tests/fuzz/regress/frame/%s", name);
+    truncate_copy(src, dst, 1L << 20);
+    CHECK_MSG(file_size(dst) > 0, "%s missing", src);
+}
+
+/* Tiny files whose headers claim huge images: refused from the header (before any pixel is
+ * allocated), and for a sequence whichever frame they are. Peak memory is checked end to end
+ * by tests/cli/hostile.sh. */
+static void test_hostile_headers(void)
+{
+    char d[1024], p[1200];
+    lm_err e = {0};
+    lm_frame f;
+    lm_frame_seq s;
+    /* 256 channels of 32520 x 12 in 182 bytes: the second frame of a sequence */
+    mkdir(tpath(d, "hostile1"), 0755);
+    write_numbered(d, "f_%04d.png", 0, 3, 2);
+    snprintf(p, sizeof p, "%s/f_0001.tif", d);
+    copy_regress("tiff-huge-claim-1.tif", p);
+    CHECK(lm_frame_seq_open(d, &s, &e) == LM_ERR_FORMAT && s.count == 0);
+    CHECK_ERR(e, LM_ERR_FORMAT, "f_0001.tif", "256 channels");
+    lm_err_clear(&e);
+    CHECK(lm_frame_read(p, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "f_0001.tif", "256 channels");
+    lm_err_clear(&e);
+    /* 3584 x 61452 in 227 bytes (the old reader decoded all 220 M pixels) */
+    copy_regress("tiff-huge-claim-2.tif", tpath(p, "claim2.tif"));
+    CHECK(lm_frame_read(p, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "claim2.tif", "3584 x 61452");
+    lm_err_clear(&e);
+    /* a 16-bit 15000 x 15000 PNG in 1243 bytes: over the frame size limit */
+    copy_regress("png-huge-claim.png", tpath(p, "claim.png"));
+    CHECK(lm_frame_read(p, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "claim.png", "15000 x 15000");
+    lm_err_clear(&e);
+    /* 8000 x 8000 in 700 bytes: within the size limit, but deflate cannot expand 700 bytes to
+     * 128 MB */
+    copy_regress("png-ratio-claim.png", tpath(p, "ratio.png"));
+    CHECK(lm_frame_read(p, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "ratio.png", "can hold");
+    lm_err_clear(&e);
+    CHECK(lm_frame_seq_open(p, &s, &e) == LM_ERR_FORMAT);
+    CHECK_ERR(e, LM_ERR_FORMAT, "ratio.png", "can hold");
+    lm_err_clear(&e);
+    /* a 66-byte EXR whose attribute claims 1.76 GB (found by fuzz_frame): OpenEXR's C API
+     * refuses the header before the C++ library under OpenImageIO allocates it */
+    copy_regress("exr-attr-huge-size.exr", tpath(p, "attr.exr"));
+    CHECK(lm_frame_read(p, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "attr.exr: not a readable OpenEXR file", "Invalid size");
 }
 
 int main(void)
@@ -307,6 +376,7 @@ int main(void)
     RUN(test_writes_are_atomic);
     RUN(test_sequence_pattern);
     RUN(test_sequence_folder);
+    RUN(test_hostile_headers);
     fixture_cleanup();
     return check_summary();
 }

@@ -144,12 +144,18 @@ static inline void group_of(const wgrid *g, long t, int *b, int *ty, int *tx0)
  * four 4-float groups a, b, c, d of half h. Its own inverse. */
 static inline void transpose4x2(lm_vf8 a, lm_vf8 b, lm_vf8 c, lm_vf8 d, lm_vf8 r[4])
 {
-    const lm_vi8 lo = {0, 8, 1, 9, 4, 12, 5, 13}, hi = {2, 10, 3, 11, 6, 14, 7, 15};
-    const lm_vi8 ml = {0, 1, 8, 9, 4, 5, 12, 13}, mh = {2, 3, 10, 11, 6, 7, 14, 15};
-    lm_vf8 t0 = __builtin_shuffle(a, b, lo), t1 = __builtin_shuffle(a, b, hi);
-    lm_vf8 t2 = __builtin_shuffle(c, d, lo), t3 = __builtin_shuffle(c, d, hi);
-    r[0] = __builtin_shuffle(t0, t2, ml), r[1] = __builtin_shuffle(t0, t2, mh);
-    r[2] = __builtin_shuffle(t1, t3, ml), r[3] = __builtin_shuffle(t1, t3, mh);
+#define LO 0, 8, 1, 9, 4, 12, 5, 13
+#define HI 2, 10, 3, 11, 6, 14, 7, 15
+#define ML 0, 1, 8, 9, 4, 5, 12, 13
+#define MH 2, 3, 10, 11, 6, 7, 14, 15
+    lm_vf8 t0 = LM_SHUFFLE8(a, b, LO), t1 = LM_SHUFFLE8(a, b, HI);
+    lm_vf8 t2 = LM_SHUFFLE8(c, d, LO), t3 = LM_SHUFFLE8(c, d, HI);
+    r[0] = LM_SHUFFLE8(t0, t2, ML), r[1] = LM_SHUFFLE8(t0, t2, MH);
+    r[2] = LM_SHUFFLE8(t1, t3, ML), r[3] = LM_SHUFFLE8(t1, t3, MH);
+#undef LO
+#undef HI
+#undef ML
+#undef MH
 }
 
 /* Stage rows 4 ty - ph .. +5 of every channel of image b, zero-padded: st[c][r][u] = x[b, c,

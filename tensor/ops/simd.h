@@ -1,4 +1,4 @@
-/* simd.h — GCC vector types shared by the CPU conv kernels (conv2d_direct.c,
+/* simd.h — GCC vector types (also clang's) shared by the CPU conv kernels (conv2d_direct.c,
  * conv2d_depthwise.c, conv2d_winograd.c, sgemm_panel.c): a native-width float vector (16 lanes
  * with AVX-512, else 8) for kernels that only need "as wide as the machine", and a fixed 8-lane
  * one for kernels whose data layout is built around 8 lanes (Winograd tile groups, the 6 x 16
@@ -16,6 +16,15 @@
 typedef float lm_vfn __attribute__((vector_size(LM_VLN * sizeof(float))));
 typedef float lm_vf8 __attribute__((vector_size(8 * sizeof(float))));
 typedef int lm_vi8 __attribute__((vector_size(8 * sizeof(int))));
+
+/* Lanes of a and b (0..7 from a, 8..15 from b) picked by eight constant indices (the
+ * variadic part; it may be a macro naming them): GCC's __builtin_shuffle takes a mask vector,
+ * clang (the fuzz build) has __builtin_shufflevector; both compile to the same permutes. */
+#if defined(__clang__)
+#define LM_SHUFFLE8(a, b, ...) __builtin_shufflevector(a, b, __VA_ARGS__)
+#else
+#define LM_SHUFFLE8(a, b, ...) __builtin_shuffle(a, b, (lm_vi8){__VA_ARGS__})
+#endif
 
 /* All 8 lanes = x (one broadcast; (lm_vf8){0} + x would add first: -0 + x is not x). */
 #define LM_SPLAT8(x) ((lm_vf8){(x), (x), (x), (x), (x), (x), (x), (x)})
