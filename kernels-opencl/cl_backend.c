@@ -5,6 +5,7 @@
  * tensor/transfer.c and tensor/mirror.c (tensor/device.h). */
 #include "kernels-opencl/cl_backend.h"
 #include "kernels-opencl/cl_impl.h"
+#include "tensor/op_params.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -101,15 +102,29 @@ static int cmp_kernel(const void *a, const void *b)
     return strcmp(((const lm_cl_kernel *)a)->name, ((const lm_cl_kernel *)b)->name);
 }
 
+/* The build options: the OpenCL C version, then every size and enum value the .cl sources
+ * name, as -D NAME=value from their C definitions (cl_impl.h, LM_OP_ENUMS of op_params.h). */
+static void build_options(char *buf, size_t n)
+{
+    size_t len = (size_t)snprintf(buf, n, "-cl-std=CL1.2 -DWG=%d -DCHUNK=%d -DLM_CL_SUM_PLAIN=%d",
+                                  LM_CL_WG, LM_CL_CHUNK, (int)LM_CL_SUM_PLAIN);
+#define LM_DEFINE_OPTION(name)                                                                \
+    if (len < n) len += (size_t)snprintf(buf + len, n - len, " -D" #name "=%d", (int)(name));
+    LM_OP_ENUMS(LM_DEFINE_OPTION)
+#undef LM_DEFINE_OPTION
+}
+
 /* Compile sources into *prog for the backend's device; prints the build log on failure. */
 static lm_status compile(lm_cl *b, int n, const char *const *src, cl_program *prog, lm_err *e)
 {
     cl_int err;
+    char options[1024];
+    build_options(options, sizeof options);
     *prog = clCreateProgramWithSource(b->context, (cl_uint)n, (const char **)src, NULL, &err);
     if (err != CL_SUCCESS)
         return lm_err_set(e, LM_ERR_BACKEND, "opencl: clCreateProgramWithSource: %s",
                           lm_cl_error_str(err));
-    err = clBuildProgram(*prog, 1, &b->device, "-cl-std=CL1.2", NULL, NULL);
+    err = clBuildProgram(*prog, 1, &b->device, options, NULL, NULL);
     if (err != CL_SUCCESS) {
         print_build_log(b, *prog, e);
         return lm_err_set(e, LM_ERR_BACKEND, "opencl: clBuildProgram: %s", lm_cl_error_str(err));

@@ -4,7 +4,7 @@
  * mosaic_upsample.c ("mosaic_upsample_fwd/bwd"). Permute, shuffle, concat and split are all
  * one kernel (view_copy) over views built here: same shape, source and destination strides. */
 #include "kernels-opencl/cl_impl.h"
-#include "kernels-opencl/cl_params.h"
+#include "tensor/op_params.h"
 
 int lm_cl_view_copy(lm_cl *b, lm_ctx *c, const lm_tensor *src, const lm_tensor *dst, int add)
 {
@@ -38,7 +38,7 @@ static lm_tensor view5(const lm_tensor *t, const int *shape, const ptrdiff_t *st
 
 /* ---- permute ------------------------------------------------------------------------------ */
 /* x viewed in y's order: shape of y, strides x.stride[perm[d]]. */
-static lm_tensor permuted(const lm_tensor *x, const lm_tensor *y, const cl_permute_params *p)
+static lm_tensor permuted(const lm_tensor *x, const lm_tensor *y, const lm_permute_params *p)
 {
     lm_tensor v = *x;
     for (int d = 0; d < y->ndim; d++) {
@@ -93,7 +93,7 @@ static int launch_unshuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt
                                 const void *pp)
 {
     (void)nt;
-    const cl_shuffle_params *p = pp;
+    const lm_shuffle_params *p = pp;
     lm_tensor vb, vs;
     shuffle_views(t[0], t[1], p->fy, p->fx, 0, &vb, &vs);
     return lm_cl_view_copy(b, c, &vb, &vs, 0);
@@ -104,7 +104,7 @@ static int launch_unshuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt
                                 const void *pp)
 {
     (void)nt;
-    const cl_shuffle_params *p = pp;
+    const lm_shuffle_params *p = pp;
     lm_tensor vb, vs;
     shuffle_views(t[0], t[1], p->fy, p->fx, 0, &vb, &vs);
     return lm_cl_view_copy(b, c, &vs, &vb, 1);
@@ -114,7 +114,7 @@ static int launch_unshuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt
 static int launch_shuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_shuffle_params *p = pp;
+    const lm_shuffle_params *p = pp;
     lm_tensor vb, vs;
     shuffle_views(t[1], t[0], p->fy, p->fx, 1, &vb, &vs);
     return lm_cl_view_copy(b, c, &vs, &vb, 0);
@@ -124,7 +124,7 @@ static int launch_shuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, 
 static int launch_shuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_shuffle_params *p = pp;
+    const lm_shuffle_params *p = pp;
     lm_tensor vb, vs;
     shuffle_views(t[1], t[0], p->fy, p->fx, 1, &vb, &vs);
     return lm_cl_view_copy(b, c, &vb, &vs, 1);
@@ -143,7 +143,7 @@ static lm_tensor band_of(const lm_tensor *whole, const lm_tensor *part, int dim,
 /* t = {x_0 .. x_{nt-2}, y}: y = concat along dim. */
 static int launch_concat_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
-    const cl_band_params *p = pp;
+    const lm_band_params *p = pp;
     int start = p->start;
     for (int i = 0; i < nt - 1; i++) {
         lm_tensor v = band_of(t[nt - 1], t[i], p->dim, start);
@@ -157,7 +157,7 @@ static int launch_concat_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 static int launch_concat_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_band_params *p = pp;
+    const lm_band_params *p = pp;
     lm_tensor v = band_of(t[1], t[0], p->dim, p->start);
     return lm_cl_view_copy(b, c, &v, t[0], 1);
 }
@@ -166,7 +166,7 @@ static int launch_concat_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 static int launch_split_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_band_params *p = pp;
+    const lm_band_params *p = pp;
     lm_tensor v = band_of(t[0], t[1], p->dim, p->start);
     return lm_cl_view_copy(b, c, &v, t[1], 0);
 }
@@ -175,14 +175,14 @@ static int launch_split_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, co
 static int launch_split_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_band_params *p = pp;
+    const lm_band_params *p = pp;
     lm_tensor v = band_of(t[0], t[1], p->dim, p->start);
     return lm_cl_view_copy(b, c, t[1], &v, 1);
 }
 
 /* ---- pad ---------------------------------------------------------------------------------- */
 /* fwd t = {x, y}; bwd t = {gx, gy}: (small, big) either way. */
-static int run_pad(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const cl_pad_params *p, int bwd)
+static int run_pad(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const lm_pad_params *p, int bwd)
 {
     const lm_tensor *x = t[0], *y = t[1];
     int n = (int)lm_tensor_numel(bwd ? x : y);
@@ -216,17 +216,11 @@ static int launch_pad_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 }
 
 /* ---- resize ------------------------------------------------------------------------------- */
-/* The CPU's source-coordinate scale of one axis (resize.c axis_table). */
-static float resize_scale(int in, int out, int ac)
-{
-    return ac ? (out > 1 ? (float)(in - 1) / (float)(out - 1) : 0.0f) : (float)in / (float)out;
-}
-
 /* t = {x, y} */
 static int launch_resize_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    int ac = ((const cl_resize_params *)pp)->align_corners;
+    int ac = ((const lm_resize_params *)pp)->align_corners;
     const lm_tensor *x = t[0], *y = t[1];
     int H = x->shape[2], W = x->shape[3], oh = y->shape[2], ow = y->shape[3];
     int n = (int)lm_tensor_numel(y);
@@ -238,8 +232,8 @@ static int launch_resize_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     lm_cl_arg_int(&a, W);
     lm_cl_arg_int(&a, oh);
     lm_cl_arg_int(&a, ow);
-    lm_cl_arg_float(&a, resize_scale(H, oh, ac));
-    lm_cl_arg_float(&a, resize_scale(W, ow, ac));
+    lm_cl_arg_float(&a, lm_resize_scale(H, oh, ac));
+    lm_cl_arg_float(&a, lm_resize_scale(W, ow, ac));
     lm_cl_arg_int(&a, ac);
     lm_cl_arg_int(&a, n);
     return lm_cl_run_1d(&a, (size_t)n);
@@ -249,7 +243,7 @@ static int launch_resize_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 static int launch_resize_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    int ac = ((const cl_resize_params *)pp)->align_corners;
+    int ac = ((const lm_resize_params *)pp)->align_corners;
     const lm_tensor *gx = t[0], *gy = t[1];
     int H = gx->shape[2], W = gx->shape[3], oh = gy->shape[2], ow = gy->shape[3];
     int rows = gx->shape[0] * gx->shape[1] * oh;
@@ -261,7 +255,7 @@ static int launch_resize_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     lm_cl_arg_tensor(&a, tmp);
     lm_cl_arg_int(&a, W);
     lm_cl_arg_int(&a, ow);
-    lm_cl_arg_float(&a, resize_scale(W, ow, ac));
+    lm_cl_arg_float(&a, lm_resize_scale(W, ow, ac));
     lm_cl_arg_int(&a, ac);
     lm_cl_arg_int(&a, rows * W);
     if (lm_cl_run_1d(&a, (size_t)rows * W)) return c->status;
@@ -272,7 +266,7 @@ static int launch_resize_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     lm_cl_arg_int(&a, H);
     lm_cl_arg_int(&a, W);
     lm_cl_arg_int(&a, oh);
-    lm_cl_arg_float(&a, resize_scale(H, oh, ac));
+    lm_cl_arg_float(&a, lm_resize_scale(H, oh, ac));
     lm_cl_arg_int(&a, ac);
     lm_cl_arg_int(&a, n);
     return lm_cl_run_1d(&a, (size_t)n);
@@ -281,11 +275,11 @@ static int launch_resize_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 /* ---- mosaic upsampling -------------------------------------------------------------------- */
 /* fwd t = {raw, y}; bwd t = {graw, gy}. The per-channel phases (up to 2 x 64 ints, too many
  * for kernel arguments) go to the device in one small blocking write per launch. */
-static int run_mosaic(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const cl_mosaic_params *p,
+static int run_mosaic(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const lm_mosaic_params *p,
                       int bwd)
 {
     int nch = p->nch, H = t[0]->shape[2], W = t[0]->shape[3];
-    int ph[2 * CL_MOSAIC_MAX_CH];
+    int ph[2 * LM_MOSAIC_UPSAMPLE_MAX_CH];
     for (int k = 0; k < nch; k++) {
         ph[k] = p->py[k];
         ph[nch + k] = p->px[k];

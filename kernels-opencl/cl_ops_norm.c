@@ -2,7 +2,7 @@
  * "softmax_bwd"), layer_norm.c ("layer_norm_channels_fwd", "_bwd_x", "_bwd_wb") and
  * l2_normalize.c ("l2_normalize_fwd", "l2_normalize_bwd"). */
 #include "kernels-opencl/cl_impl.h"
-#include "kernels-opencl/cl_params.h"
+#include "tensor/op_params.h"
 
 /* outer x len x inner of t around axis */
 static void split_axis(const lm_tensor *t, int axis, int *outer, int *len, int *inner)
@@ -35,21 +35,21 @@ static int run_columns(lm_cl *b, lm_ctx *c, const char *kname, lm_tensor *const 
 static int launch_softmax_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    return run_columns(b, c, "softmax_fwd", t, 2, ((const cl_softmax_params *)pp)->axis, NULL);
+    return run_columns(b, c, "softmax_fwd", t, 2, ((const lm_softmax_params *)pp)->axis, NULL);
 }
 
 /* t = {y, gy, gx} */
 static int launch_softmax_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    return run_columns(b, c, "softmax_bwd", t, 3, ((const cl_softmax_params *)pp)->axis, NULL);
+    return run_columns(b, c, "softmax_bwd", t, 3, ((const lm_softmax_params *)pp)->axis, NULL);
 }
 
 /* t = {x, y} */
 static int launch_l2_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_l2_params *p = pp;
+    const lm_l2_params *p = pp;
     return run_columns(b, c, "l2_fwd", t, 2, p->axis, &p->eps);
 }
 
@@ -57,7 +57,7 @@ static int launch_l2_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const
 static int launch_l2_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_l2_params *p = pp;
+    const lm_l2_params *p = pp;
     return run_columns(b, c, "l2_bwd", t, 3, p->axis, &p->eps);
 }
 
@@ -65,7 +65,7 @@ static int launch_l2_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const
 static int launch_ln_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_ln_params *p = pp;
+    const lm_ln_params *p = pp;
     int C = t[0]->shape[1], HW = t[0]->shape[2] * t[0]->shape[3], npix = t[0]->shape[0] * HW;
     lm_cl_args a;
     if (lm_cl_begin(&a, b, c, "ln_fwd")) return c->status;
@@ -85,7 +85,7 @@ static int launch_ln_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const
 static int launch_ln_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_ln_params *p = pp;
+    const lm_ln_params *p = pp;
     int C = t[0]->shape[1], HW = t[0]->shape[2] * t[0]->shape[3], npix = t[0]->shape[0] * HW;
     lm_cl_args a;
     if (lm_cl_begin(&a, b, c, "ln_bwd_x")) return c->status;

@@ -2,7 +2,7 @@
  * "reduce_sum_bwd", "global_avg_pool_fwd", "global_avg_pool_bwd") and loss.c
  * ("l1_mse_loss_fwd", "l1_mse_loss_bwd"). Backward broadcasts use eltwise.cl's bcast_add. */
 #include "kernels-opencl/cl_impl.h"
-#include "kernels-opencl/cl_params.h"
+#include "tensor/op_params.h"
 
 #define LONG_SUM 65536  /* a single long sum is split into chunks first */
 #define CHUNK_MIN 4096
@@ -46,7 +46,8 @@ static int run_rows(lm_cl *b, lm_ctx *c, const lm_tensor *x, const red_space *s,
     return lm_cl_reduce(b, c, x, s, y, k, 0);
 }
 
-/* y[0] = k * sum of f(p, q) over n contiguous elements (kind 0: p, 1: |p-q|, 2: (p-q)^2):
+/* y[0] = k * sum of f(p, q) over n contiguous elements (kind LM_CL_SUM_PLAIN: p, LM_LOSS_L1:
+ * |p-q|, LM_LOSS_MSE: (p-q)^2):
  * chunk sums in a device scratch, then one work-group adds them. */
 static int run_long_sum(lm_cl *b, lm_ctx *c, const lm_tensor *p, const lm_tensor *q, long n,
                         int kind, lm_tensor *y, float k)
@@ -113,11 +114,11 @@ static void sum_space(const lm_tensor *x, unsigned mask, red_space *s)
 static int launch_sum_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_reduce_params *p = pp;
+    const lm_reduce_params *p = pp;
     red_space s;
     sum_space(t[0], p->mask, &s);
     if (s.ny == 1 && s.nr >= LONG_SUM)
-        return run_long_sum(b, c, t[0], t[0], s.nr, 0, t[1], p->scale);
+        return run_long_sum(b, c, t[0], t[0], s.nr, LM_CL_SUM_PLAIN, t[1], p->scale);
     return run_rows(b, c, t[0], &s, t[1], p->scale);
 }
 
@@ -125,7 +126,7 @@ static int launch_sum_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 static int launch_sum_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_reduce_params *p = pp;
+    const lm_reduce_params *p = pp;
     const lm_tensor *gx = t[1];
     cl_int8 shp, st, unused;
     lm_cl_shape8(gx, &shp, &unused);
@@ -172,16 +173,16 @@ static int launch_gap_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 static int launch_loss_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_loss_params *p = pp;
+    const lm_loss_params *p = pp;
     long n = lm_tensor_numel(t[0]);
-    return run_long_sum(b, c, t[0], t[1], n, p->kind + 1, t[2], (float)(1.0 / (double)n));
+    return run_long_sum(b, c, t[0], t[1], n, p->kind, t[2], (float)(1.0 / (double)n));
 }
 
 /* t = {pred, target, gy {1}, gd}: gd += sign dloss/dpred. */
 static int launch_loss_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_loss_bwd_params *p = pp;
+    const lm_loss_bwd_params *p = pp;
     int n = (int)lm_tensor_numel(t[0]);
     lm_cl_args a;
     if (lm_cl_begin(&a, b, c, "loss_bwd")) return c->status;

@@ -6,18 +6,17 @@
  * (fixed order, double accumulation), so gradients do not depend on the thread count.
  * What it is not: LayerNorm over the last dim (use a permute first), nor batch/group norm. */
 #include "tensor/ops.h"
+#include "tensor/op_params.h"
 #include <math.h>
 
 enum { LN_BLOCK = 64 };
-
-typedef struct ln_params { float eps; int has_w, has_b; } ln_params;
 
 /* forward: t[0] = x, t[1] = y (B x C x H x W), t[2] = stats (B x 2 x H x W), t[3] = w or NULL,
  * t[4] = b or NULL (C); y =, stats = */
 static int ln_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const ln_params *p = params;
+    const lm_ln_params *p = params;
     const int B = t[0]->shape[0], C = t[0]->shape[1];
     const long HW = (long)t[0]->shape[2] * t[0]->shape[3], nblk = (HW + LN_BLOCK - 1) / LN_BLOCK;
     const float *w = p->has_w ? t[3]->data : NULL, *bias = p->has_b ? t[4]->data : NULL;
@@ -60,7 +59,7 @@ static int ln_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params
 static int ln_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const ln_params *p = params;
+    const lm_ln_params *p = params;
     const int B = t[0]->shape[0], C = t[0]->shape[1];
     const long HW = (long)t[0]->shape[2] * t[0]->shape[3], nblk = (HW + LN_BLOCK - 1) / LN_BLOCK;
     const float *w = p->has_w ? t[4]->data : NULL;
@@ -179,7 +178,7 @@ lm_tensor *lm_layer_norm_channels(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tens
     int ss[4] = {x->shape[0], 2, x->shape[2], x->shape[3]};
     lm_tensor *st = y ? lm_tensor_new(c, 4, ss) : NULL;
     if (!st) return NULL;
-    ln_params p = {eps, w != NULL, b != NULL};
+    lm_ln_params p = {eps, w != NULL, b != NULL};
     lm_tensor *t[5] = {x, y, st, w, b};
     if (lm_kernel_run(c, &K_LN_FWD, t, 5, &p)) return NULL;
     lm_tensor *in[4] = {x, w, b, st};

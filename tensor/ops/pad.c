@@ -6,8 +6,7 @@
  * input, so the backward runs one plane per job, each in a fixed order.
  * What it is not: replicate/circular padding, negative (cropping) pads. */
 #include "tensor/ops.h"
-
-typedef struct pad_params { int top, bottom, left, right, mode; } pad_params;
+#include "tensor/op_params.h"
 
 /* Source index of each of the n + lo + hi output positions (-1 = zero). */
 static void pad_table(int *tab, int n, int lo, int hi, int mode)
@@ -24,7 +23,7 @@ static void pad_table(int *tab, int n, int lo, int hi, int mode)
 }
 
 /* Row and column tables in the ctx arena; NULL on allocation failure. */
-static int *pad_tables(lm_ctx *c, const pad_params *p, int H, int W)
+static int *pad_tables(lm_ctx *c, const lm_pad_params *p, int H, int W)
 {
     const int Ho = H + p->top + p->bottom, Wo = W + p->left + p->right;
     int *tab = lm_ctx_alloc(c, (size_t)(Ho + Wo) * sizeof *tab);
@@ -96,7 +95,7 @@ static void pad_backward(lm_ctx *c, lm_node *n)
 }
 
 /* Returns nonzero when the arguments are valid for x. */
-static int pad_check(lm_ctx *c, const lm_tensor *x, const pad_params *p)
+static int pad_check(lm_ctx *c, const lm_tensor *x, const lm_pad_params *p)
 {
     char sb[64];
     if (x->ndim != 4) {
@@ -128,7 +127,7 @@ lm_tensor *lm_pad2d(lm_ctx *c, lm_tensor *x, int top, int bottom, int left, int 
                     lm_pad_mode mode)
 {
     if (!lm_check_inputs(c, "pad2d", 1, x)) return NULL;
-    pad_params p = {top, bottom, left, right, (int)mode};
+    lm_pad_params p = {top, bottom, left, right, (int)mode};
     if (!pad_check(c, x, &p)) return NULL;
     x = lm_contiguous(c, x);
     if (!x) return NULL;

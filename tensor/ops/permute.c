@@ -4,8 +4,7 @@
  * What it is not: a view (PyTorch's permute is a view; ours always copies, so later ops see
  * contiguous memory). */
 #include "tensor/ops.h"
-
-typedef struct permute_params { int ndim; int perm[LM_MAX_DIMS]; } permute_params;
+#include "tensor/op_params.h"
 
 /* x: contiguous source (or gradient of the source), y: contiguous, y.shape[d] =
  * x.shape[perm[d]]. add == 0: y = x gathered; add: x += y scattered. The map is a bijection:
@@ -44,14 +43,14 @@ static void permute_move(lm_ctx *c, const lm_tensor *x, const lm_tensor *y, cons
 static int permute_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    permute_move(c, t[0], t[1], ((const permute_params *)params)->perm, 0);
+    permute_move(c, t[0], t[1], ((const lm_permute_params *)params)->perm, 0);
     return 0;
 }
 /* backward: t[0] = gx, t[1] = gy; gx += */
 static int permute_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    permute_move(c, t[0], t[1], ((const permute_params *)params)->perm, 1);
+    permute_move(c, t[0], t[1], ((const lm_permute_params *)params)->perm, 1);
     return 0;
 }
 static const lm_kernel K_PERMUTE_FWD = {"permute_fwd", permute_fwd_cpu};
@@ -70,7 +69,7 @@ static lm_tensor *permute_run(lm_ctx *c, const char *op, lm_tensor *x, const int
 {
     x = lm_contiguous(c, x);
     if (!x) return NULL;
-    permute_params p = {x->ndim, {0, 0, 0, 0, 0}};
+    lm_permute_params p = {x->ndim, {0, 0, 0, 0, 0}};
     int s[LM_MAX_DIMS];
     for (int d = 0; d < x->ndim; d++) {
         p.perm[d] = perm[d];

@@ -9,8 +9,7 @@
  * fixed band of columns per job, rows in order.
  * What it is not: antialiased downsampling, nearest/bicubic modes, scale-factor arguments. */
 #include "tensor/ops.h"
-
-typedef struct resize_params { int align_corners; } resize_params;
+#include "tensor/op_params.h"
 
 typedef struct axis_tab { int *i0, *i1; float *l; } axis_tab;
 
@@ -21,8 +20,7 @@ static int axis_table(lm_ctx *c, int in, int out, int ac, axis_tab *t)
     t->l = t->i0 ? lm_ctx_alloc(c, (size_t)out * sizeof(float)) : NULL;
     if (!t->l) return -1;
     t->i1 = t->i0 + out;
-    float scale = ac ? (out > 1 ? (float)(in - 1) / (float)(out - 1) : 0.0f)
-                     : (float)in / (float)out;
+    float scale = lm_resize_scale(in, out, ac);
     for (int o = 0; o < out; o++) {
         float s = ac ? scale * (float)o : scale * ((float)o + 0.5f) - 0.5f;
         if (s < 0.0f) s = 0.0f;
@@ -40,7 +38,7 @@ static int axis_table(lm_ctx *c, int in, int out, int ac, axis_tab *t)
 static int resize_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const resize_params *p = params;
+    const lm_resize_params *p = params;
     const lm_tensor *x = t[0], *y = t[1];
     const int H = x->shape[2], W = x->shape[3], oh = y->shape[2], ow = y->shape[3];
     axis_tab ty, tx;
@@ -70,7 +68,7 @@ static int resize_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
 {
     (void)nt;
     enum { BAND = 64 };
-    const resize_params *p = params;
+    const lm_resize_params *p = params;
     const lm_tensor *gx = t[0], *gy = t[1];
     const int H = gx->shape[2], W = gx->shape[3], oh = gy->shape[2], ow = gy->shape[3];
     const long planes = (long)gx->shape[0] * gx->shape[1], rows = planes * oh;
@@ -138,7 +136,7 @@ lm_tensor *lm_resize_bilinear(lm_ctx *c, lm_tensor *x, int oh, int ow, int align
     int s[4] = {x->shape[0], x->shape[1], oh, ow};
     lm_tensor *y = lm_tensor_new(c, 4, s);
     if (!y) return NULL;
-    resize_params p = {align_corners ? 1 : 0};
+    lm_resize_params p = {align_corners ? 1 : 0};
     lm_tensor *t[2] = {x, y};
     if (lm_kernel_run(c, &K_RESIZE_FWD, t, 2, &p)) return NULL;
     lm_record(c, "resize_bilinear", resize_backward, y, &x, 1, &p, sizeof p);
