@@ -10,11 +10,23 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Every launcher table; a kernel name must appear once in all of them. */
-static const lm_cl_entry *const all_tables[] = {lm_cl_entries_view, lm_cl_entries_eltwise,
-                                                lm_cl_entries_reduce, lm_cl_entries_norm,
-                                                lm_cl_entries_move, lm_cl_entries_gemm,
-                                                lm_cl_entries_conv};
+/* The launcher table, generated from LM_OP_LIST (tensor/op_list.h): row i is the launcher of
+ * the list's kernel i, under the same name as its CPU twin lm_kernel_<name>. */
+#define LM_CL_ENTRY(name) {#name, lm_cl_launch_##name},
+static const lm_cl_entry launchers[LM_OP_COUNT] = {LM_OP_LIST(LM_CL_ENTRY)};
+#undef LM_CL_ENTRY
+
+const lm_cl_entry *lm_cl_launcher_at(int id)
+{
+    return id >= 0 && id < LM_OP_COUNT ? &launchers[id] : NULL;
+}
+
+const lm_cl_entry *lm_cl_find_launcher(const char *name)
+{
+    for (int i = 0; name && i < LM_OP_COUNT; i++)
+        if (launchers[i].name && !strcmp(launchers[i].name, name)) return &launchers[i];
+    return NULL;
+}
 
 int lm_cl_platform_count(void)
 {
@@ -181,17 +193,14 @@ static int cmp_entry(const void *a, const void *b)
     return strcmp((*(const lm_cl_entry *const *)a)->name, (*(const lm_cl_entry *const *)b)->name);
 }
 
-/* Collect every table and sort by name; a name registered twice is a programming error
- * reported at creation. */
+/* The launcher table sorted by name; a name listed twice is a programming error reported at
+ * creation. */
 static lm_status build_table(lm_cl *b, lm_err *e)
 {
-    int n = 0, nt = (int)(sizeof all_tables / sizeof all_tables[0]);
-    for (int t = 0; t < nt; t++)
-        for (const lm_cl_entry *p = all_tables[t]; p->name; p++) n++;
-    b->entries = malloc((size_t)(n ? n : 1) * sizeof *b->entries);
+    int n = LM_OP_COUNT;
+    b->entries = malloc((size_t)n * sizeof *b->entries);
     if (!b->entries) return lm_err_set(e, LM_ERR_NOMEM, "opencl: out of memory");
-    for (int t = 0; t < nt; t++)
-        for (const lm_cl_entry *p = all_tables[t]; p->name; p++) b->entries[b->nentries++] = p;
+    for (int i = 0; i < n; i++) b->entries[b->nentries++] = &launchers[i];
     qsort(b->entries, (size_t)n, sizeof *b->entries, cmp_entry);
     for (int i = 1; i < n; i++)
         if (!strcmp(b->entries[i]->name, b->entries[i - 1]->name))

@@ -75,7 +75,7 @@ static int batched(lm_cl *b, lm_ctx *c, int batch, int M, int N, int K, lm_cl_ma
 }
 
 /* t = {a, b, y}: y_i = op(a_i) op(b_i) */
-static int launch_mm_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_matmul_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     lm_mm_params p = lm_mm_folded(pp);
@@ -85,7 +85,7 @@ static int launch_mm_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const
 }
 
 /* t = {dy, b, da}: da_i += dy_i op(b_i)^T (transposed back if ta) */
-static int launch_mm_bwd_a(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_matmul_bwd_a(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     lm_mm_params p = lm_mm_folded(pp);
@@ -98,7 +98,7 @@ static int launch_mm_bwd_a(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, con
 }
 
 /* t = {dy, a, db}: db_i += op(a_i)^T dy_i (transposed back if tb) */
-static int launch_mm_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_matmul_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     lm_mm_params p = lm_mm_folded(pp);
@@ -112,7 +112,7 @@ static int launch_mm_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, con
 
 /* ---- linear ------------------------------------------------------------------------------ */
 /* t = {x (R x in), w (out x in), y (R x out)[, bias]}: y = x w^T + bias */
-static int launch_linear_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_linear_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     const lm_linear_params *p = pp;
     if (nt > 3) { /* y = bias broadcast over rows, then the GEMM adds */
@@ -129,7 +129,7 @@ static int launch_linear_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 }
 
 /* t = {dy (R x out), w, dx (R x in)}: dx += dy w */
-static int launch_linear_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_linear_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_linear_params *p = pp;
@@ -138,7 +138,7 @@ static int launch_linear_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
 }
 
 /* t = {dy (R x out), x (R x in), dw (out x in)}: dw += dy^T x */
-static int launch_linear_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_linear_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_linear_params *p = pp;
@@ -147,8 +147,7 @@ static int launch_linear_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
 }
 
 /* t = {dy (R x out), db (out)}: db[o] += sum over rows */
-static int launch_linear_bwd_bias(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
-                                  const void *pp)
+int lm_cl_launch_linear_bwd_bias(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_linear_params *p = pp;
@@ -158,14 +157,3 @@ static int launch_linear_bwd_bias(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int 
     r.rshp.s[4] = p->R, r.rst.s[4] = p->out, r.nr = p->R;
     return lm_cl_reduce(b, c, t[0], &r, t[1], 1.0f, 1);
 }
-
-const lm_cl_entry lm_cl_entries_gemm[] = {
-    {"linear_bwd_bias", launch_linear_bwd_bias},
-    {"linear_bwd_w", launch_linear_bwd_w},
-    {"linear_bwd_x", launch_linear_bwd_x},
-    {"linear_fwd", launch_linear_fwd},
-    {"matmul_bwd_a", launch_mm_bwd_a},
-    {"matmul_bwd_b", launch_mm_bwd_b},
-    {"matmul_fwd", launch_mm_fwd},
-    {NULL, NULL},
-};

@@ -1,9 +1,9 @@
 /* cl_impl.h — private to kernels-opencl/: the OpenCL backend state, the launcher table
  * interface and the argument/enqueue helpers every typed launcher uses.
  *
- * What it is: a launcher is `int fn(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
- * const void *params)` registered under the lm_kernel name it implements; it reads the op's
- * params struct (tensor/op_params.h), sets the OpenCL kernel arguments in order and
+ * What it is: a launcher is `int lm_cl_launch_<name>(lm_cl *b, lm_ctx *c, lm_tensor *const *t,
+ * int nt, const void *params)` for each kernel name of LM_OP_LIST (tensor/op_list.h); it reads
+ * the op's params struct (tensor/op_params.h), sets the OpenCL kernel arguments in order and
  * enqueues. Tensors are passed to kernels as (buffer, element offset) pairs: device tensors
  * live at an offset inside one big cl_mem per arena block.
  * What it is not: public API (see cl_backend.h). */
@@ -14,6 +14,7 @@
 #endif
 #include <CL/cl.h>
 #include "tensor/tensor.h"
+#include "tensor/op_list.h"
 
 typedef struct lm_cl lm_cl;
 typedef int (*lm_cl_launch_fn)(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
@@ -50,14 +51,16 @@ struct lm_cl {
     char device_name[128];
 };
 
-/* Launcher tables, one per group of ops (each ends with {NULL, NULL}). */
-extern const lm_cl_entry lm_cl_entries_view[];
-extern const lm_cl_entry lm_cl_entries_eltwise[];
-extern const lm_cl_entry lm_cl_entries_reduce[];
-extern const lm_cl_entry lm_cl_entries_norm[];
-extern const lm_cl_entry lm_cl_entries_move[];
-extern const lm_cl_entry lm_cl_entries_gemm[];
-extern const lm_cl_entry lm_cl_entries_conv[];
+/* The launcher of every kernel of LM_OP_LIST, lm_cl_launch_<name> (cl_ops_*.c, cl_gemm.c);
+ * a missing one fails to link, as the launcher table (cl_backend.c) is generated from the list. */
+#define LM_CL_LAUNCH_DECL(name)                                                               \
+    int lm_cl_launch_##name(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *params);
+LM_OP_LIST(LM_CL_LAUNCH_DECL)
+#undef LM_CL_LAUNCH_DECL
+/* The launcher table (no backend needed): the row of list index id (0 <= id < LM_OP_COUNT),
+ * and the row of a kernel name (NULL when no launcher has it). */
+const lm_cl_entry *lm_cl_launcher_at(int id);
+const lm_cl_entry *lm_cl_find_launcher(const char *name);
 
 /* Work-group size of the kernels that reduce in local memory (WG in the .cl sources). */
 #define LM_CL_WG 64

@@ -257,25 +257,24 @@ static int bias_grad(lm_cl *b, lm_ctx *c, const lm_tensor *dy, lm_tensor *db, in
 
 /* ---- conv2d ------------------------------------------------------------------------------ */
 /* t = {x, w, y[, bias]} */
-static int launch_conv2d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv2d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     return conv2d_run(b, c, pp, 0, t[0], NULL, t[1], nt > 3 ? t[3] : NULL, t[2], 0);
 }
 /* t = {dy, w, dx} */
-static int launch_conv2d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv2d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     return conv2d_run(b, c, pp, 1, t[0], NULL, t[1], NULL, t[2], 1);
 }
 /* t = {dy, x, dw} */
-static int launch_conv2d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv2d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     return conv2d_run(b, c, pp, 2, t[0], t[1], NULL, NULL, t[2], 1);
 }
 /* t = {dy, db} */
-static int launch_conv2d_bwd_bias(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
-                                  const void *pp)
+int lm_cl_launch_conv2d_bwd_bias(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_conv_geom *g = pp;
@@ -292,7 +291,8 @@ static lm_conv_geom adjoint_geom(const lm_convt_params *p)
 }
 
 /* t = {x, w, y[, bias]}: y = bias (or 0), then y += conv2d input gradient of x. */
-static int launch_convt_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv_transpose2d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                      const void *pp)
 {
     const lm_convt_params *p = pp;
     lm_conv_geom g = adjoint_geom(p);
@@ -311,7 +311,8 @@ static int launch_convt_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, co
     return conv2d_run(b, c, &g, 1, t[0], NULL, t[1], NULL, t[2], 1);
 }
 /* t = {dy, w, dx}: dx += conv2d(dy, w) */
-static int launch_convt_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv_transpose2d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                        const void *pp)
 {
     (void)nt;
     lm_conv_geom g = adjoint_geom(pp);
@@ -319,14 +320,16 @@ static int launch_convt_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, 
 }
 /* t = {x, dy, dw}: dw += conv2d weight gradient with dy as the input and x as the output
  * gradient */
-static int launch_convt_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv_transpose2d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                        const void *pp)
 {
     (void)nt;
     lm_conv_geom g = adjoint_geom(pp);
     return conv2d_run(b, c, &g, 2, t[0], t[1], NULL, NULL, t[2], 1);
 }
 /* t = {dy, db} */
-static int launch_convt_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv_transpose2d_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                        const void *pp)
 {
     (void)nt;
     const lm_convt_params *p = pp;
@@ -352,7 +355,7 @@ static int run_conv3d(lm_cl *b, lm_ctx *c, const char *kname, lm_tensor *const *
 }
 
 /* t = {x, w, y[, bias]} */
-static int launch_conv3d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv3d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     lm_conv3d_params p = *(const lm_conv3d_params *)pp;
     p.has_bias = nt > 3;
@@ -360,38 +363,22 @@ static int launch_conv3d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     return run_conv3d(b, c, "conv3d_fwd", ts, 4, &p, lm_tensor_numel(t[2]) / p.Wo, 0, p.Wo);
 }
 /* t = {dy, w, dx} */
-static int launch_conv3d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv3d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_conv3d_params *p = pp;
     return run_conv3d(b, c, "conv3d_bwd_x", t, 3, p, lm_tensor_numel(t[2]) / p->W, 0, p->W);
 }
 /* t = {x, dy, dw} */
-static int launch_conv3d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv3d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     return run_conv3d(b, c, "conv3d_bwd_w", t, 3, pp, lm_tensor_numel(t[2]), 1, 0);
 }
 /* t = {dy, db} */
-static int launch_conv3d_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv3d_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_conv3d_params *p = pp;
     return bias_grad(b, c, t[0], t[1], p->B, p->Cout, (long)p->Do * p->Ho * p->Wo);
 }
-
-const lm_cl_entry lm_cl_entries_conv[] = {
-    {"conv2d_bwd_bias", launch_conv2d_bwd_bias},
-    {"conv2d_bwd_w", launch_conv2d_bwd_w},
-    {"conv2d_bwd_x", launch_conv2d_bwd_x},
-    {"conv2d_fwd", launch_conv2d_fwd},
-    {"conv3d_bwd_b", launch_conv3d_bwd_b},
-    {"conv3d_bwd_w", launch_conv3d_bwd_w},
-    {"conv3d_bwd_x", launch_conv3d_bwd_x},
-    {"conv3d_fwd", launch_conv3d_fwd},
-    {"conv_transpose2d_bwd_b", launch_convt_bwd_b},
-    {"conv_transpose2d_bwd_w", launch_convt_bwd_w},
-    {"conv_transpose2d_bwd_x", launch_convt_bwd_x},
-    {"conv_transpose2d_fwd", launch_convt_fwd},
-    {NULL, NULL},
-};

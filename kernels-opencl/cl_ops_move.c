@@ -49,7 +49,7 @@ static lm_tensor permuted(const lm_tensor *x, const lm_tensor *y, const lm_permu
 }
 
 /* t = {x, y}: y = x permuted. */
-static int launch_permute_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_permute_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     lm_tensor v = permuted(t[0], t[1], pp);
@@ -57,7 +57,7 @@ static int launch_permute_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, 
 }
 
 /* t = {gx, gy}: gx += gy moved back. */
-static int launch_permute_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_permute_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     lm_tensor v = permuted(t[0], t[1], pp);
@@ -89,8 +89,8 @@ static void shuffle_views(const lm_tensor *big, const lm_tensor *small, int fy, 
 }
 
 /* t = {x big, y small}: y = unshuffle(x) */
-static int launch_unshuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
-                                const void *pp)
+int lm_cl_launch_pixel_unshuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
     const lm_shuffle_params *p = pp;
@@ -100,8 +100,8 @@ static int launch_unshuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt
 }
 
 /* t = {gx big, gy small}: gx += */
-static int launch_unshuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
-                                const void *pp)
+int lm_cl_launch_pixel_unshuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
     const lm_shuffle_params *p = pp;
@@ -111,7 +111,7 @@ static int launch_unshuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt
 }
 
 /* t = {x small, y big}: y = shuffle(x) */
-static int launch_shuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_pixel_shuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_shuffle_params *p = pp;
@@ -121,7 +121,7 @@ static int launch_shuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, 
 }
 
 /* t = {gx small, gy big}: gx += */
-static int launch_shuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_pixel_shuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_shuffle_params *p = pp;
@@ -141,7 +141,7 @@ static lm_tensor band_of(const lm_tensor *whole, const lm_tensor *part, int dim,
 }
 
 /* t = {x_0 .. x_{nt-2}, y}: y = concat along dim. */
-static int launch_concat_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_concat_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     const lm_band_params *p = pp;
     int start = p->start;
@@ -154,7 +154,7 @@ static int launch_concat_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 }
 
 /* t = {gx_i, gy}: gx_i += its band of gy */
-static int launch_concat_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_concat_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_band_params *p = pp;
@@ -163,7 +163,7 @@ static int launch_concat_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 }
 
 /* t = {x, part}: part = band */
-static int launch_split_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_split_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_band_params *p = pp;
@@ -172,7 +172,7 @@ static int launch_split_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, co
 }
 
 /* t = {gx, gpart}: band of gx += gpart */
-static int launch_split_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_split_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_band_params *p = pp;
@@ -203,13 +203,13 @@ static int run_pad(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const lm_pad_params
     return lm_cl_run_1d(&a, (size_t)n);
 }
 
-static int launch_pad_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_pad2d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     return run_pad(b, c, t, pp, 0);
 }
 
-static int launch_pad_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_pad2d_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     return run_pad(b, c, t, pp, 1);
@@ -217,7 +217,8 @@ static int launch_pad_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 
 /* ---- resize ------------------------------------------------------------------------------- */
 /* t = {x, y} */
-static int launch_resize_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_resize_bilinear_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
     int ac = ((const lm_resize_params *)pp)->align_corners;
@@ -240,7 +241,8 @@ static int launch_resize_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 }
 
 /* t = {gx, gy}: rows gathered along x into a device scratch, then along y into gx. */
-static int launch_resize_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_resize_bilinear_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
     int ac = ((const lm_resize_params *)pp)->align_corners;
@@ -301,34 +303,16 @@ static int run_mosaic(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const lm_mosaic_
     return lm_cl_run_1d(&a, (size_t)n);
 }
 
-static int launch_mosaic_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_mosaic_upsample_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
     return run_mosaic(b, c, t, pp, 0);
 }
 
-static int launch_mosaic_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_mosaic_upsample_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
     return run_mosaic(b, c, t, pp, 1);
 }
-
-const lm_cl_entry lm_cl_entries_move[] = {
-    {"concat_bwd", launch_concat_bwd},
-    {"concat_fwd", launch_concat_fwd},
-    {"mosaic_upsample_bwd", launch_mosaic_bwd},
-    {"mosaic_upsample_fwd", launch_mosaic_fwd},
-    {"pad2d_bwd", launch_pad_bwd},
-    {"pad2d_fwd", launch_pad_fwd},
-    {"permute_bwd", launch_permute_bwd},
-    {"permute_fwd", launch_permute_fwd},
-    {"pixel_shuffle_bwd", launch_shuffle_bwd},
-    {"pixel_shuffle_fwd", launch_shuffle_fwd},
-    {"pixel_unshuffle_bwd", launch_unshuffle_bwd},
-    {"pixel_unshuffle_fwd", launch_unshuffle_fwd},
-    {"resize_bilinear_bwd", launch_resize_bwd},
-    {"resize_bilinear_fwd", launch_resize_fwd},
-    {"split_bwd", launch_split_bwd},
-    {"split_fwd", launch_split_fwd},
-    {NULL, NULL},
-};

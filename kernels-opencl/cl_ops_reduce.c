@@ -111,7 +111,7 @@ static void sum_space(const lm_tensor *x, unsigned mask, red_space *s)
 }
 
 /* t = {x, y}: y = scale * sum over the masked dims. */
-static int launch_sum_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_reduce_sum_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_reduce_params *p = pp;
@@ -123,7 +123,7 @@ static int launch_sum_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 }
 
 /* t = {gy, gx}: gx += scale * gy broadcast over the reduced dims. */
-static int launch_sum_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_reduce_sum_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_reduce_params *p = pp;
@@ -142,7 +142,8 @@ static int launch_sum_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 
 /* ---- global average pooling --------------------------------------------------------------- */
 /* t = {x (B x C x H x W), y (B x C x 1 x 1)}: y = mean over H W. */
-static int launch_gap_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_global_avg_pool_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt, (void)pp;
     const lm_tensor *x = t[0];
@@ -159,7 +160,8 @@ static int launch_gap_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 }
 
 /* t = {gy, gx}: gx += gy / (H W). */
-static int launch_gap_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_global_avg_pool_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt, (void)pp;
     const lm_tensor *gx = t[1];
@@ -170,7 +172,7 @@ static int launch_gap_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 
 /* ---- losses ------------------------------------------------------------------------------- */
 /* t = {pred, target, y {1}}: y = mean |p - t| (L1) or (p - t)^2 (MSE). */
-static int launch_loss_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_l1_mse_loss_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_loss_params *p = pp;
@@ -179,7 +181,7 @@ static int launch_loss_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, con
 }
 
 /* t = {pred, target, gy {1}, gd}: gd += sign dloss/dpred. */
-static int launch_loss_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_l1_mse_loss_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_loss_bwd_params *p = pp;
@@ -192,13 +194,3 @@ static int launch_loss_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, con
     lm_cl_arg_float(&a, p->sign);
     return lm_cl_run_1d(&a, (size_t)n);
 }
-
-const lm_cl_entry lm_cl_entries_reduce[] = {
-    {"global_avg_pool_bwd", launch_gap_bwd},
-    {"global_avg_pool_fwd", launch_gap_fwd},
-    {"l1_mse_loss_bwd", launch_loss_bwd},
-    {"l1_mse_loss_fwd", launch_loss_fwd},
-    {"reduce_sum_bwd", launch_sum_bwd},
-    {"reduce_sum_fwd", launch_sum_fwd},
-    {NULL, NULL},
-};

@@ -12,6 +12,7 @@
  * as their reference).
  * What it is not: parametric activations (PReLU with a learned slope), approximate GELU. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 #include "tensor/ops/op_paths.h"
 #include <math.h>
@@ -203,15 +204,15 @@ static int act_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *param
     return 0;
 }
 
-static const lm_kernel K_ACT_FWD = {"activation_fwd", act_fwd_cpu};
-static const lm_kernel K_ACT_BWD = {"activation_bwd", act_bwd_cpu};
+LM_KERNEL(activation_fwd, act_fwd_cpu);
+LM_KERNEL(activation_bwd, act_bwd_cpu);
 
 static void act_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[4] = {x, n->out, n->out->grad, lm_grad(c, x)};
-    if (t[3]) lm_kernel_run(c, &K_ACT_BWD, t, 4, n->params);
+    if (t[3]) lm_kernel_run(c, &lm_kernel_activation_bwd, t, 4, n->params);
 }
 
 static lm_tensor *activation(lm_ctx *c, lm_tensor *x, int kind, float slope)
@@ -227,7 +228,7 @@ static lm_tensor *activation(lm_ctx *c, lm_tensor *x, int kind, float slope)
     if (!y) return NULL;
     lm_act_params p = {kind, slope};
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_ACT_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_activation_fwd, t, 2, &p)) return NULL;
     lm_record(c, name, act_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

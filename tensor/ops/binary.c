@@ -11,6 +11,7 @@
  * temporary that lm_sum() (double accumulation, fixed order) reduces over the broadcast dims.
  * What it is not: scalar operands (scalar.c), in-place ops, type promotion. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 #include <assert.h>
 
@@ -225,9 +226,9 @@ static int grad_acc_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *para
     return 0;
 }
 
-static const lm_kernel K_BINARY_FWD = {"binary_fwd", binary_fwd_cpu};
-static const lm_kernel K_BINARY_BWD = {"binary_bwd", binary_bwd_cpu};
-static const lm_kernel K_GRAD_ACC = {"binary_grad_acc", grad_acc_cpu};
+LM_KERNEL(binary_fwd, binary_fwd_cpu);
+LM_KERNEL(binary_bwd, binary_bwd_cpu);
+LM_KERNEL(binary_grad_acc, grad_acc_cpu);
 
 /* ---- backward ---------------------------------------------------------------------------- */
 /* Dims of the output g along which operand x was broadcast (x right-aligned). */
@@ -249,7 +250,7 @@ static void binary_grad_input(lm_ctx *c, lm_node *n, int op, int which)
     lm_binary_bwd_params bp = {op, which, 1};
     if (lm_tensor_numel(x) == lm_tensor_numel(g)) { /* not broadcast: add in place */
         lm_tensor *t[4] = {g, n->in[0], n->in[1], gx};
-        lm_kernel_run(c, &K_BINARY_BWD, t, 4, &bp);
+        lm_kernel_run(c, &lm_kernel_binary_bwd, t, 4, &bp);
         return;
     }
     lm_tensor *src = g; /* add / sub: the contribution is +-g itself */
@@ -259,12 +260,12 @@ static void binary_grad_input(lm_ctx *c, lm_node *n, int op, int which)
         if (!src) return;
         bp.accumulate = 0;
         lm_tensor *t[4] = {g, n->in[0], n->in[1], src};
-        if (lm_kernel_run(c, &K_BINARY_BWD, t, 4, &bp)) return;
+        if (lm_kernel_run(c, &lm_kernel_binary_bwd, t, 4, &bp)) return;
     }
     lm_tensor *s = lm_sum(c, src, bc_reduce_mask(x, g), 1);
     if (!s) return;
     lm_tensor *t2[2] = {gx, s};
-    lm_kernel_run(c, &K_GRAD_ACC, t2, 2, &ap);
+    lm_kernel_run(c, &lm_kernel_binary_grad_acc, t2, 2, &ap);
 }
 
 static void binary_backward(lm_ctx *c, lm_node *n)
@@ -292,7 +293,7 @@ static lm_tensor *binary(lm_ctx *c, int op, lm_tensor *a, lm_tensor *b)
     if (!y) return NULL;
     lm_binary_params p = {op};
     lm_tensor *t[3] = {a, b, y};
-    if (lm_kernel_run(c, &K_BINARY_FWD, t, 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_binary_fwd, t, 3, &p)) return NULL;
     lm_tensor *in[2] = {a, b};
     lm_record(c, name, binary_backward, y, in, 2, &p, sizeof p);
     return y;

@@ -16,6 +16,7 @@
  * What it is not: a strided or dilated 3-D conv, nor an im2col/GEMM conv (the channel counts
  * this project uses are tiny; a many-channel 3-D conv would want GEMM). */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 #include <omp.h>
 #include <string.h>
@@ -309,10 +310,10 @@ static int conv3d_bwd_b_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
     return 0;
 }
 
-static const lm_kernel K_CONV3D_FWD = {"conv3d_fwd", conv3d_fwd_cpu};
-static const lm_kernel K_CONV3D_BWD_X = {"conv3d_bwd_x", conv3d_bwd_x_cpu};
-static const lm_kernel K_CONV3D_BWD_W = {"conv3d_bwd_w", conv3d_bwd_w_cpu};
-static const lm_kernel K_CONV3D_BWD_B = {"conv3d_bwd_b", conv3d_bwd_b_cpu};
+LM_KERNEL(conv3d_fwd, conv3d_fwd_cpu);
+LM_KERNEL(conv3d_bwd_x, conv3d_bwd_x_cpu);
+LM_KERNEL(conv3d_bwd_w, conv3d_bwd_w_cpu);
+LM_KERNEL(conv3d_bwd_b, conv3d_bwd_b_cpu);
 
 /* in = {x, w [, bias]} */
 static void conv3d_backward(lm_ctx *c, lm_node *n)
@@ -322,15 +323,15 @@ static void conv3d_backward(lm_ctx *c, lm_node *n)
     lm_tensor *dy = n->out->grad;
     if (lm_requires_grad(x)) {
         lm_tensor *t[3] = {dy, w, lm_grad(c, x)};
-        if (t[2]) lm_kernel_run(c, &K_CONV3D_BWD_X, t, 3, p);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_conv3d_bwd_x, t, 3, p);
     }
     if (lm_requires_grad(w)) {
         lm_tensor *t[3] = {x, dy, lm_grad(c, w)};
-        if (t[2]) lm_kernel_run(c, &K_CONV3D_BWD_W, t, 3, p);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_conv3d_bwd_w, t, 3, p);
     }
     if (lm_requires_grad(bias)) {
         lm_tensor *t[2] = {dy, lm_grad(c, bias)};
-        if (t[1]) lm_kernel_run(c, &K_CONV3D_BWD_B, t, 2, p);
+        if (t[1]) lm_kernel_run(c, &lm_kernel_conv3d_bwd_b, t, 2, p);
     }
 }
 
@@ -382,7 +383,7 @@ lm_tensor *lm_conv3d(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor *bias, int
     lm_tensor *y = lm_tensor_new(c, 5, s);
     if (!y) return NULL;
     lm_tensor *t[4] = {x, w, y, bias};
-    if (lm_kernel_run(c, &K_CONV3D_FWD, t, bias ? 4 : 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_conv3d_fwd, t, bias ? 4 : 3, &p)) return NULL;
     lm_tensor *in[3] = {x, w, bias};
     lm_record(c, "conv3d", conv3d_backward, y, in, bias ? 3 : 2, &p, sizeof p);
     return y;

@@ -13,6 +13,7 @@
  * What it is not: conv2d (tensor/ops/conv2d.c), nor an output-size-inferring layer: the
  * caller passes output_padding explicitly. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 #include "tensor/ops/gemm_internal.h"
 #include <omp.h>
@@ -225,10 +226,10 @@ static int convt_bwd_b_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p
     return 0;
 }
 
-static const lm_kernel K_CONVT_FWD = {"conv_transpose2d_fwd", convt_fwd_cpu};
-static const lm_kernel K_CONVT_BWD_X = {"conv_transpose2d_bwd_x", convt_bwd_x_cpu};
-static const lm_kernel K_CONVT_BWD_W = {"conv_transpose2d_bwd_w", convt_bwd_w_cpu};
-static const lm_kernel K_CONVT_BWD_B = {"conv_transpose2d_bwd_b", convt_bwd_b_cpu};
+LM_KERNEL(conv_transpose2d_fwd, convt_fwd_cpu);
+LM_KERNEL(conv_transpose2d_bwd_x, convt_bwd_x_cpu);
+LM_KERNEL(conv_transpose2d_bwd_w, convt_bwd_w_cpu);
+LM_KERNEL(conv_transpose2d_bwd_b, convt_bwd_b_cpu);
 
 /* in = {x, w [, bias]} */
 static void convt_backward(lm_ctx *c, lm_node *n)
@@ -238,15 +239,15 @@ static void convt_backward(lm_ctx *c, lm_node *n)
     lm_tensor *dy = n->out->grad;
     if (lm_requires_grad(x)) {
         lm_tensor *t[3] = {dy, w, lm_grad(c, x)};
-        if (t[2]) lm_kernel_run(c, &K_CONVT_BWD_X, t, 3, p);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_conv_transpose2d_bwd_x, t, 3, p);
     }
     if (lm_requires_grad(w)) {
         lm_tensor *t[3] = {x, dy, lm_grad(c, w)};
-        if (t[2]) lm_kernel_run(c, &K_CONVT_BWD_W, t, 3, p);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_conv_transpose2d_bwd_w, t, 3, p);
     }
     if (lm_requires_grad(bias)) {
         lm_tensor *t[2] = {dy, lm_grad(c, bias)};
-        if (t[1]) lm_kernel_run(c, &K_CONVT_BWD_B, t, 2, p);
+        if (t[1]) lm_kernel_run(c, &lm_kernel_conv_transpose2d_bwd_b, t, 2, p);
     }
 }
 
@@ -325,7 +326,7 @@ lm_tensor *lm_conv_transpose2d(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor 
     lm_tensor *y = lm_tensor_new4(c, p.B, p.Cout, p.Ho, p.Wo);
     if (!y) return NULL;
     lm_tensor *t[4] = {x, w, y, bias};
-    if (lm_kernel_run(c, &K_CONVT_FWD, t, bias ? 4 : 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_conv_transpose2d_fwd, t, bias ? 4 : 3, &p)) return NULL;
     lm_tensor *in[3] = {x, w, bias};
     lm_record(c, "conv_transpose2d", convt_backward, y, in, bias ? 3 : 2, &p, sizeof p);
     return y;

@@ -6,6 +6,7 @@
  * (fixed order, double accumulation), so gradients do not depend on the thread count.
  * What it is not: LayerNorm over the last dim (use a permute first), nor batch/group norm. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 #include <math.h>
 
@@ -122,9 +123,9 @@ static int ln_bwd_wb_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *par
     }
     return 0;
 }
-static const lm_kernel K_LN_FWD = {"layer_norm_channels_fwd", ln_fwd_cpu};
-static const lm_kernel K_LN_BWD_X = {"layer_norm_channels_bwd_x", ln_bwd_x_cpu};
-static const lm_kernel K_LN_BWD_WB = {"layer_norm_channels_bwd_wb", ln_bwd_wb_cpu};
+LM_KERNEL(layer_norm_channels_fwd, ln_fwd_cpu);
+LM_KERNEL(layer_norm_channels_bwd_x, ln_bwd_x_cpu);
+LM_KERNEL(layer_norm_channels_bwd_wb, ln_bwd_wb_cpu);
 
 /* in = {x, w or NULL, b or NULL, stats} */
 static void ln_backward(lm_ctx *c, lm_node *n)
@@ -133,14 +134,14 @@ static void ln_backward(lm_ctx *c, lm_node *n)
     if (lm_requires_grad(x)) {
         lm_tensor *t[5] = {lm_grad(c, x), gy, x, st, w};
         if (!t[0]) return;
-        lm_kernel_run(c, &K_LN_BWD_X, t, 5, n->params);
+        lm_kernel_run(c, &lm_kernel_layer_norm_channels_bwd_x, t, 5, n->params);
     }
     if (lm_requires_grad(w) || lm_requires_grad(b)) {
         lm_tensor *gw = lm_requires_grad(w) ? lm_grad(c, w) : NULL;
         lm_tensor *gb = lm_requires_grad(b) ? lm_grad(c, b) : NULL;
         if (c->status) return;
         lm_tensor *t[5] = {gw, gb, gy, x, st};
-        lm_kernel_run(c, &K_LN_BWD_WB, t, 5, n->params);
+        lm_kernel_run(c, &lm_kernel_layer_norm_channels_bwd_wb, t, 5, n->params);
     }
 }
 
@@ -180,7 +181,7 @@ lm_tensor *lm_layer_norm_channels(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tens
     if (!st) return NULL;
     lm_ln_params p = {eps, w != NULL, b != NULL};
     lm_tensor *t[5] = {x, y, st, w, b};
-    if (lm_kernel_run(c, &K_LN_FWD, t, 5, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_layer_norm_channels_fwd, t, 5, &p)) return NULL;
     lm_tensor *in[4] = {x, w, b, st};
     lm_record(c, "layer_norm_channels", ln_backward, y, in, 4, &p, sizeof p);
     return y;

@@ -8,6 +8,7 @@
  * and the target, if it requires grad, gets the negative of that (dt -= ...).
  * What it is not: reductions other than the mean, Charbonnier or relative losses. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 #include <math.h>
 
@@ -71,8 +72,8 @@ static int loss_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *para
     return 0;
 }
 
-static const lm_kernel K_LOSS_FWD = {"l1_mse_loss_fwd", loss_fwd_cpu};
-static const lm_kernel K_LOSS_BWD = {"l1_mse_loss_bwd", loss_bwd_cpu};
+LM_KERNEL(l1_mse_loss_fwd, loss_fwd_cpu);
+LM_KERNEL(l1_mse_loss_bwd, loss_bwd_cpu);
 
 static void loss_backward(lm_ctx *c, lm_node *n)
 {
@@ -81,7 +82,7 @@ static void loss_backward(lm_ctx *c, lm_node *n)
         if (!lm_requires_grad(n->in[i])) continue;
         lm_loss_bwd_params bp = {kind, i == 0 ? 1.0f : -1.0f};
         lm_tensor *t[4] = {n->in[0], n->in[1], n->out->grad, lm_grad(c, n->in[i])};
-        if (t[3]) lm_kernel_run(c, &K_LOSS_BWD, t, 4, &bp);
+        if (t[3]) lm_kernel_run(c, &lm_kernel_l1_mse_loss_bwd, t, 4, &bp);
     }
 }
 
@@ -101,7 +102,7 @@ static lm_tensor *loss(lm_ctx *c, int kind, lm_tensor *pred, lm_tensor *target)
     if (!y) return NULL;
     lm_loss_params p = {kind};
     lm_tensor *t[3] = {pred, target, y};
-    if (lm_kernel_run(c, &K_LOSS_FWD, t, 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_l1_mse_loss_fwd, t, 3, &p)) return NULL;
     lm_tensor *in[2] = {pred, target};
     lm_record(c, name, loss_backward, y, in, 2, &p, sizeof p);
     return y;

@@ -5,6 +5,7 @@
  * shared by a non-transposed batched left side is folded into one tall GEMM.
  * What it is not: convolution (conv2d*.c) or attention (composed in models/). */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 #include "tensor/ops/gemm_internal.h"
 #include <omp.h>
@@ -55,20 +56,20 @@ static int matmul_bwd_b_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
     return 0;
 }
 
-static const lm_kernel K_MATMUL_FWD = {"matmul_fwd", matmul_fwd_cpu};
-static const lm_kernel K_MATMUL_BWD_A = {"matmul_bwd_a", matmul_bwd_a_cpu};
-static const lm_kernel K_MATMUL_BWD_B = {"matmul_bwd_b", matmul_bwd_b_cpu};
+LM_KERNEL(matmul_fwd, matmul_fwd_cpu);
+LM_KERNEL(matmul_bwd_a, matmul_bwd_a_cpu);
+LM_KERNEL(matmul_bwd_b, matmul_bwd_b_cpu);
 
 static void matmul_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *a = n->in[0], *b = n->in[1], *dy = n->out->grad;
     if (lm_requires_grad(a)) {
         lm_tensor *t[3] = {dy, b, lm_grad(c, a)};
-        if (t[2]) lm_kernel_run(c, &K_MATMUL_BWD_A, t, 3, n->params);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_matmul_bwd_a, t, 3, n->params);
     }
     if (lm_requires_grad(b)) {
         lm_tensor *t[3] = {dy, a, lm_grad(c, b)};
-        if (t[2]) lm_kernel_run(c, &K_MATMUL_BWD_B, t, 3, n->params);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_matmul_bwd_b, t, 3, n->params);
     }
 }
 
@@ -106,7 +107,7 @@ lm_tensor *lm_matmul(lm_ctx *c, lm_tensor *a, lm_tensor *b, int trans_a, int tra
     lm_tensor *y = lm_tensor_new(c, nd, nd == 3 ? shape : shape + 1);
     if (!y) return NULL;
     lm_tensor *t[3] = {a, b, y};
-    if (lm_kernel_run(c, &K_MATMUL_FWD, t, 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_matmul_fwd, t, 3, &p)) return NULL;
     lm_tensor *in[2] = {a, b};
     lm_record(c, "matmul", matmul_backward, y, in, 2, &p, sizeof p);
     return y;
@@ -174,10 +175,10 @@ static int linear_bwd_bias_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const voi
     return 0;
 }
 
-static const lm_kernel K_LINEAR_FWD = {"linear_fwd", linear_fwd_cpu};
-static const lm_kernel K_LINEAR_BWD_X = {"linear_bwd_x", linear_bwd_x_cpu};
-static const lm_kernel K_LINEAR_BWD_W = {"linear_bwd_w", linear_bwd_w_cpu};
-static const lm_kernel K_LINEAR_BWD_BIAS = {"linear_bwd_bias", linear_bwd_bias_cpu};
+LM_KERNEL(linear_fwd, linear_fwd_cpu);
+LM_KERNEL(linear_bwd_x, linear_bwd_x_cpu);
+LM_KERNEL(linear_bwd_w, linear_bwd_w_cpu);
+LM_KERNEL(linear_bwd_bias, linear_bwd_bias_cpu);
 
 static void linear_backward(lm_ctx *c, lm_node *n)
 {
@@ -185,15 +186,15 @@ static void linear_backward(lm_ctx *c, lm_node *n)
     lm_tensor *dy = n->out->grad;
     if (lm_requires_grad(x)) {
         lm_tensor *t[3] = {dy, w, lm_grad(c, x)};
-        if (t[2]) lm_kernel_run(c, &K_LINEAR_BWD_X, t, 3, n->params);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_linear_bwd_x, t, 3, n->params);
     }
     if (lm_requires_grad(w)) {
         lm_tensor *t[3] = {dy, x, lm_grad(c, w)};
-        if (t[2]) lm_kernel_run(c, &K_LINEAR_BWD_W, t, 3, n->params);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_linear_bwd_w, t, 3, n->params);
     }
     if (lm_requires_grad(bias)) {
         lm_tensor *t[2] = {dy, lm_grad(c, bias)};
-        if (t[1]) lm_kernel_run(c, &K_LINEAR_BWD_BIAS, t, 2, n->params);
+        if (t[1]) lm_kernel_run(c, &lm_kernel_linear_bwd_bias, t, 2, n->params);
     }
 }
 
@@ -224,7 +225,7 @@ lm_tensor *lm_linear(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor *b)
     lm_tensor *y = lm_tensor_new(c, x->ndim, shape);
     if (!y) return NULL;
     lm_tensor *t[4] = {x, w, y, b};
-    if (lm_kernel_run(c, &K_LINEAR_FWD, t, b ? 4 : 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_linear_fwd, t, b ? 4 : 3, &p)) return NULL;
     lm_tensor *in[3] = {x, w, b};
     lm_record(c, "linear", linear_backward, y, in, b ? 3 : 2, &p, sizeof p);
     return y;

@@ -14,6 +14,7 @@
  * At most 64 channels: the phases travel in the kernel's plain params struct.
  * What it is not: the pixel-unshuffle (see shuffle.c), nor any learned demosaic. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 
 /* Per position: sample index pair and weight of the second sample. Per sample v: the position
@@ -170,15 +171,15 @@ static int mosaic_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     }
     return 0;
 }
-static const lm_kernel K_MOSAIC_FWD = {"mosaic_upsample_fwd", mosaic_fwd_cpu};
-static const lm_kernel K_MOSAIC_BWD = {"mosaic_upsample_bwd", mosaic_bwd_cpu};
+LM_KERNEL(mosaic_upsample_fwd, mosaic_fwd_cpu);
+LM_KERNEL(mosaic_upsample_bwd, mosaic_bwd_cpu);
 
 static void mosaic_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_MOSAIC_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_mosaic_upsample_bwd, t, 2, n->params);
 }
 
 /* Validates the arguments and fills p; returns nonzero when valid. */
@@ -226,7 +227,7 @@ lm_tensor *lm_mosaic_upsample(lm_ctx *c, lm_tensor *raw, int ty, int tx, int nch
     lm_tensor *y = lm_tensor_new(c, 4, s);
     if (!y) return NULL;
     lm_tensor *t[2] = {raw, y};
-    if (lm_kernel_run(c, &K_MOSAIC_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_mosaic_upsample_fwd, t, 2, &p)) return NULL;
     lm_record(c, "mosaic_upsample", mosaic_backward, y, &raw, 1, &p, sizeof p);
     return y;
 }

@@ -6,6 +6,7 @@
  * input, so the backward runs one plane per job, each in a fixed order.
  * What it is not: replicate/circular padding, negative (cropping) pads. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 
 /* Source index of each of the n + lo + hi output positions (-1 = zero). */
@@ -83,15 +84,15 @@ static int pad_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *param
     }
     return 0;
 }
-static const lm_kernel K_PAD_FWD = {"pad2d_fwd", pad_fwd_cpu};
-static const lm_kernel K_PAD_BWD = {"pad2d_bwd", pad_bwd_cpu};
+LM_KERNEL(pad2d_fwd, pad_fwd_cpu);
+LM_KERNEL(pad2d_bwd, pad_bwd_cpu);
 
 static void pad_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_PAD_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_pad2d_bwd, t, 2, n->params);
 }
 
 /* Returns nonzero when the arguments are valid for x. */
@@ -135,7 +136,7 @@ lm_tensor *lm_pad2d(lm_ctx *c, lm_tensor *x, int top, int bottom, int left, int 
     lm_tensor *y = lm_tensor_new(c, 4, s);
     if (!y) return NULL;
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_PAD_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_pad2d_fwd, t, 2, &p)) return NULL;
     lm_record(c, "pad2d", pad_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

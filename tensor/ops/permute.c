@@ -4,6 +4,7 @@
  * What it is not: a view (PyTorch's permute is a view; ours always copies, so later ops see
  * contiguous memory). */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 
 /* x: contiguous source (or gradient of the source), y: contiguous, y.shape[d] =
@@ -53,15 +54,15 @@ static int permute_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p
     permute_move(c, t[0], t[1], ((const lm_permute_params *)params)->perm, 1);
     return 0;
 }
-static const lm_kernel K_PERMUTE_FWD = {"permute_fwd", permute_fwd_cpu};
-static const lm_kernel K_PERMUTE_BWD = {"permute_bwd", permute_bwd_cpu};
+LM_KERNEL(permute_fwd, permute_fwd_cpu);
+LM_KERNEL(permute_bwd, permute_bwd_cpu);
 
 static void permute_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_PERMUTE_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_permute_bwd, t, 2, n->params);
 }
 
 /* Shared by permute and transpose once `perm` is known to be valid. */
@@ -78,7 +79,7 @@ static lm_tensor *permute_run(lm_ctx *c, const char *op, lm_tensor *x, const int
     lm_tensor *y = lm_tensor_new(c, x->ndim, s);
     if (!y) return NULL;
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_PERMUTE_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_permute_fwd, t, 2, &p)) return NULL;
     lm_record(c, op, permute_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

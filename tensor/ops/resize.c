@@ -9,6 +9,7 @@
  * fixed band of columns per job, rows in order.
  * What it is not: antialiased downsampling, nearest/bicubic modes, scale-factor arguments. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 
 typedef struct axis_tab { int *i0, *i1; float *l; } axis_tab;
@@ -106,15 +107,15 @@ static int resize_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     }
     return 0;
 }
-static const lm_kernel K_RESIZE_FWD = {"resize_bilinear_fwd", resize_fwd_cpu};
-static const lm_kernel K_RESIZE_BWD = {"resize_bilinear_bwd", resize_bwd_cpu};
+LM_KERNEL(resize_bilinear_fwd, resize_fwd_cpu);
+LM_KERNEL(resize_bilinear_bwd, resize_bwd_cpu);
 
 static void resize_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_RESIZE_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_resize_bilinear_bwd, t, 2, n->params);
 }
 
 lm_tensor *lm_resize_bilinear(lm_ctx *c, lm_tensor *x, int oh, int ow, int align_corners)
@@ -138,7 +139,7 @@ lm_tensor *lm_resize_bilinear(lm_ctx *c, lm_tensor *x, int oh, int ow, int align
     if (!y) return NULL;
     lm_resize_params p = {align_corners ? 1 : 0};
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_RESIZE_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_resize_bilinear_fwd, t, 2, &p)) return NULL;
     lm_record(c, "resize_bilinear", resize_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

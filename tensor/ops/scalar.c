@@ -3,6 +3,7 @@
  * What it is: one flat elementwise kernel, parallel for large tensors; backward gx += s * gy.
  * What it is not: tensor-tensor arithmetic (binary.c); s and t get no gradient. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 
 #define PAR_MIN 32768L /* below this many elements, one thread */
@@ -32,15 +33,15 @@ static int affine_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     return 0;
 }
 
-static const lm_kernel K_AFFINE_FWD = {"affine_fwd", affine_fwd_cpu};
-static const lm_kernel K_AFFINE_BWD = {"affine_bwd", affine_bwd_cpu};
+LM_KERNEL(affine_fwd, affine_fwd_cpu);
+LM_KERNEL(affine_bwd, affine_bwd_cpu);
 
 static void affine_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {n->out->grad, lm_grad(c, x)};
-    if (t[1]) lm_kernel_run(c, &K_AFFINE_BWD, t, 2, n->params);
+    if (t[1]) lm_kernel_run(c, &lm_kernel_affine_bwd, t, 2, n->params);
 }
 
 lm_tensor *lm_affine(lm_ctx *c, lm_tensor *x, float s, float t)
@@ -51,7 +52,7 @@ lm_tensor *lm_affine(lm_ctx *c, lm_tensor *x, float s, float t)
     if (!y) return NULL;
     lm_affine_params p = {s, t};
     lm_tensor *k[2] = {x, y};
-    if (lm_kernel_run(c, &K_AFFINE_FWD, k, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_affine_fwd, k, 2, &p)) return NULL;
     lm_record(c, "affine", affine_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

@@ -7,6 +7,7 @@
  * count.  Backward: gx += y * (gy - sum_L(gy * y)).
  * What it is not: log-softmax, masking, or a fused attention kernel. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/op_params.h"
 #include <math.h>
 
@@ -124,15 +125,15 @@ static int softmax_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p
     return 0;
 }
 
-static const lm_kernel K_SOFTMAX_FWD = {"softmax_fwd", softmax_fwd_cpu};
-static const lm_kernel K_SOFTMAX_BWD = {"softmax_bwd", softmax_bwd_cpu};
+LM_KERNEL(softmax_fwd, softmax_fwd_cpu);
+LM_KERNEL(softmax_bwd, softmax_bwd_cpu);
 
 static void softmax_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[3] = {n->out, n->out->grad, lm_grad(c, x)};
-    if (t[2]) lm_kernel_run(c, &K_SOFTMAX_BWD, t, 3, n->params);
+    if (t[2]) lm_kernel_run(c, &lm_kernel_softmax_bwd, t, 3, n->params);
 }
 
 lm_tensor *lm_softmax(lm_ctx *c, lm_tensor *x, int axis)
@@ -150,7 +151,7 @@ lm_tensor *lm_softmax(lm_ctx *c, lm_tensor *x, int axis)
     if (!y) return NULL;
     lm_softmax_params p = {a};
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_SOFTMAX_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_softmax_fwd, t, 2, &p)) return NULL;
     lm_record(c, "softmax", softmax_backward, y, &x, 1, &p, sizeof p);
     return y;
 }
