@@ -5,15 +5,28 @@
  * tensor/transfer.c and tensor/mirror.c (tensor/device.h). */
 #include "kernels-opencl/cl_backend.h"
 #include "kernels-opencl/cl_impl.h"
+#include "tensor/op_params.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-/* Every launcher table; a kernel name must appear once in all of them. */
-static const lm_cl_entry *const all_tables[] = {lm_cl_entries_view, lm_cl_entries_eltwise,
-                                                lm_cl_entries_reduce, lm_cl_entries_norm,
-                                                lm_cl_entries_move, lm_cl_entries_gemm,
-                                                lm_cl_entries_conv};
+/* The launcher table, generated from LM_OP_LIST (tensor/op_list.h): row i is the launcher of
+ * the list's kernel i, under the same name as its CPU twin lm_kernel_<name>. */
+#define LM_CL_ENTRY(name) {#name, lm_cl_launch_##name},
+static const lm_cl_entry launchers[LM_OP_COUNT] = {LM_OP_LIST(LM_CL_ENTRY)};
+#undef LM_CL_ENTRY
+
+const lm_cl_entry *lm_cl_launcher_at(int id)
+{
+    return id >= 0 && id < LM_OP_COUNT ? &launchers[id] : NULL;
+}
+
+const lm_cl_entry *lm_cl_find_launcher(const char *name)
+{
+    for (int i = 0; name && i < LM_OP_COUNT; i++)
+        if (launchers[i].name && !strcmp(launchers[i].name, name)) return &launchers[i];
+    return NULL;
+}
 
 int lm_cl_platform_count(void)
 {
@@ -101,15 +114,29 @@ static int cmp_kernel(const void *a, const void *b)
     return strcmp(((const lm_cl_kernel *)a)->name, ((const lm_cl_kernel *)b)->name);
 }
 
+/* The build options: the OpenCL C version, then every size and enum value the .cl sources
+ * name, as -D NAME=value from their C definitions (cl_impl.h, LM_OP_ENUMS of op_params.h). */
+static void build_options(char *buf, size_t n)
+{
+    size_t len = (size_t)snprintf(buf, n, "-cl-std=CL1.2 -DWG=%d -DCHUNK=%d -DLM_CL_SUM_PLAIN=%d",
+                                  LM_CL_WG, LM_CL_CHUNK, (int)LM_CL_SUM_PLAIN);
+#define LM_DEFINE_OPTION(name)                                                                \
+    if (len < n) len += (size_t)snprintf(buf + len, n - len, " -D" #name "=%d", (int)(name));
+    LM_OP_ENUMS(LM_DEFINE_OPTION)
+#undef LM_DEFINE_OPTION
+}
+
 /* Compile sources into *prog for the backend's device; prints the build log on failure. */
 static lm_status compile(lm_cl *b, int n, const char *const *src, cl_program *prog, lm_err *e)
 {
     cl_int err;
+    char options[1024];
+    build_options(options, sizeof options);
     *prog = clCreateProgramWithSource(b->context, (cl_uint)n, (const char **)src, NULL, &err);
     if (err != CL_SUCCESS)
         return lm_err_set(e, LM_ERR_BACKEND, "opencl: clCreateProgramWithSource: %s",
                           lm_cl_error_str(err));
-    err = clBuildProgram(*prog, 1, &b->device, "-cl-std=CL1.2", NULL, NULL);
+    err = clBuildProgram(*prog, 1, &b->device, options, NULL, NULL);
     if (err != CL_SUCCESS) {
         print_build_log(b, *prog, e);
         return lm_err_set(e, LM_ERR_BACKEND, "opencl: clBuildProgram: %s", lm_cl_error_str(err));
@@ -166,17 +193,14 @@ static int cmp_entry(const void *a, const void *b)
     return strcmp((*(const lm_cl_entry *const *)a)->name, (*(const lm_cl_entry *const *)b)->name);
 }
 
-/* Collect every table and sort by name; a name registered twice is a programming error
- * reported at creation. */
+/* The launcher table sorted by name; a name listed twice is a programming error reported at
+ * creation. */
 static lm_status build_table(lm_cl *b, lm_err *e)
 {
-    int n = 0, nt = (int)(sizeof all_tables / sizeof all_tables[0]);
-    for (int t = 0; t < nt; t++)
-        for (const lm_cl_entry *p = all_tables[t]; p->name; p++) n++;
-    b->entries = malloc((size_t)(n ? n : 1) * sizeof *b->entries);
+    int n = LM_OP_COUNT;
+    b->entries = malloc((size_t)n * sizeof *b->entries);
     if (!b->entries) return lm_err_set(e, LM_ERR_NOMEM, "opencl: out of memory");
-    for (int t = 0; t < nt; t++)
-        for (const lm_cl_entry *p = all_tables[t]; p->name; p++) b->entries[b->nentries++] = p;
+    for (int i = 0; i < n; i++) b->entries[b->nentries++] = &launchers[i];
     qsort(b->entries, (size_t)n, sizeof *b->entries, cmp_entry);
     for (int i = 1; i < n; i++)
         if (!strcmp(b->entries[i]->name, b->entries[i - 1]->name))

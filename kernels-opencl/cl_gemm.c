@@ -3,7 +3,7 @@
  * the CPU kernels, batch folding included) and "linear_fwd", "linear_bwd_x", "linear_bwd_w",
  * "linear_bwd_bias". Not here: convolutions (cl_ops_conv.c), which also use lm_cl_gemm. */
 #include "kernels-opencl/cl_impl.h"
-#include "kernels-opencl/cl_params.h"
+#include "tensor/op_params.h"
 
 #define GEMM_TILE 64
 
@@ -67,27 +67,6 @@ static lm_cl_mat mat(const lm_tensor *t, int ld, int trans, long s)
 }
 
 /* ---- matmul ----------------------------------------------------------------------------- */
-/* tensor/ops/matmul.c: mm_params (op(a) M x K, op(b) K x N per batch item) */
-typedef struct mm_params {
-    int batch, M, N, K, ta, tb, a_batched, b_batched;
-} mm_params;
-_Static_assert(sizeof(mm_params) == 32, "mm_params mirror");
-
-/* The batch folded into M when b is shared and a is not transposed (as matmul.c). */
-static mm_params mm_folded(const mm_params *p)
-{
-    mm_params q = *p;
-    if (!p->ta && p->a_batched && !p->b_batched) {
-        q.M = p->M * p->batch;
-        q.batch = 1;
-    }
-    return q;
-}
-static int lda_of(const mm_params *p) { return p->ta ? p->M : p->K; }
-static int ldb_of(const mm_params *p) { return p->tb ? p->K : p->N; }
-static long sa_of(const mm_params *p) { return p->a_batched ? (long)p->M * p->K : 0; }
-static long sb_of(const mm_params *p) { return p->b_batched ? (long)p->K * p->N : 0; }
-
 /* Batched product with the CPU kernel's lm_gemm_batched semantics: sc == 0 sums the batch. */
 static int batched(lm_cl *b, lm_ctx *c, int batch, int M, int N, int K, lm_cl_mat A,
                    lm_cl_mat B, float beta, lm_cl_mat C)
@@ -96,50 +75,46 @@ static int batched(lm_cl *b, lm_ctx *c, int batch, int M, int N, int K, lm_cl_ma
 }
 
 /* t = {a, b, y}: y_i = op(a_i) op(b_i) */
-static int launch_mm_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_matmul_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    mm_params p = mm_folded(pp);
-    return batched(b, c, p.batch, p.M, p.N, p.K, mat(t[0], lda_of(&p), p.ta, sa_of(&p)),
-                   mat(t[1], ldb_of(&p), p.tb, sb_of(&p)), 0.0f,
+    lm_mm_params p = lm_mm_folded(pp);
+    return batched(b, c, p.batch, p.M, p.N, p.K, mat(t[0], lm_mm_lda(&p), p.ta, lm_mm_sa(&p)),
+                   mat(t[1], lm_mm_ldb(&p), p.tb, lm_mm_sb(&p)), 0.0f,
                    mat(t[2], p.N, 0, (long)p.M * p.N));
 }
 
 /* t = {dy, b, da}: da_i += dy_i op(b_i)^T (transposed back if ta) */
-static int launch_mm_bwd_a(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_matmul_bwd_a(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    mm_params p = mm_folded(pp);
-    long sdy = (long)p.M * p.N, sda = sa_of(&p);
+    lm_mm_params p = lm_mm_folded(pp);
+    long sdy = (long)p.M * p.N, sda = lm_mm_sa(&p);
     if (!p.ta)
         return batched(b, c, p.batch, p.M, p.K, p.N, mat(t[0], p.N, 0, sdy),
-                       mat(t[1], ldb_of(&p), !p.tb, sb_of(&p)), 1.0f, mat(t[2], p.K, 0, sda));
-    return batched(b, c, p.batch, p.K, p.M, p.N, mat(t[1], ldb_of(&p), p.tb, sb_of(&p)),
+                       mat(t[1], lm_mm_ldb(&p), !p.tb, lm_mm_sb(&p)), 1.0f, mat(t[2], p.K, 0, sda));
+    return batched(b, c, p.batch, p.K, p.M, p.N, mat(t[1], lm_mm_ldb(&p), p.tb, lm_mm_sb(&p)),
                    mat(t[0], p.N, 1, sdy), 1.0f, mat(t[2], p.M, 0, sda));
 }
 
 /* t = {dy, a, db}: db_i += op(a_i)^T dy_i (transposed back if tb) */
-static int launch_mm_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_matmul_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    mm_params p = mm_folded(pp);
-    long sdy = (long)p.M * p.N, sdb = sb_of(&p);
+    lm_mm_params p = lm_mm_folded(pp);
+    long sdy = (long)p.M * p.N, sdb = lm_mm_sb(&p);
     if (!p.tb)
-        return batched(b, c, p.batch, p.K, p.N, p.M, mat(t[1], lda_of(&p), !p.ta, sa_of(&p)),
+        return batched(b, c, p.batch, p.K, p.N, p.M, mat(t[1], lm_mm_lda(&p), !p.ta, lm_mm_sa(&p)),
                        mat(t[0], p.N, 0, sdy), 1.0f, mat(t[2], p.N, 0, sdb));
     return batched(b, c, p.batch, p.N, p.K, p.M, mat(t[0], p.N, 1, sdy),
-                   mat(t[1], lda_of(&p), p.ta, sa_of(&p)), 1.0f, mat(t[2], p.K, 0, sdb));
+                   mat(t[1], lm_mm_lda(&p), p.ta, lm_mm_sa(&p)), 1.0f, mat(t[2], p.K, 0, sdb));
 }
 
 /* ---- linear ------------------------------------------------------------------------------ */
-/* tensor/ops/matmul.c: linear_params (R rows of x) */
-typedef struct linear_params { int R, in, out; } linear_params;
-_Static_assert(sizeof(linear_params) == 12, "linear_params mirror");
-
 /* t = {x (R x in), w (out x in), y (R x out)[, bias]}: y = x w^T + bias */
-static int launch_linear_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_linear_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
-    const linear_params *p = pp;
+    const lm_linear_params *p = pp;
     if (nt > 3) { /* y = bias broadcast over rows, then the GEMM adds */
         lm_tensor bv = *t[3], yv = *t[2];
         bv.ndim = yv.ndim = 2;
@@ -154,43 +129,31 @@ static int launch_linear_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 }
 
 /* t = {dy (R x out), w, dx (R x in)}: dx += dy w */
-static int launch_linear_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_linear_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const linear_params *p = pp;
+    const lm_linear_params *p = pp;
     return lm_cl_gemm(b, c, 1, 1, 0, p->R, p->in, p->out, 1.0f, mat(t[0], p->out, 0, 0),
                       mat(t[1], p->in, 0, 0), 1.0f, mat(t[2], p->in, 0, 0));
 }
 
 /* t = {dy (R x out), x (R x in), dw (out x in)}: dw += dy^T x */
-static int launch_linear_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_linear_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const linear_params *p = pp;
+    const lm_linear_params *p = pp;
     return lm_cl_gemm(b, c, 1, 1, 0, p->out, p->in, p->R, 1.0f, mat(t[0], p->out, 1, 0),
                       mat(t[1], p->in, 0, 0), 1.0f, mat(t[2], p->in, 0, 0));
 }
 
 /* t = {dy (R x out), db (out)}: db[o] += sum over rows */
-static int launch_linear_bwd_bias(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
-                                  const void *pp)
+int lm_cl_launch_linear_bwd_bias(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const linear_params *p = pp;
+    const lm_linear_params *p = pp;
     lm_cl_reduction r;
     lm_cl_reduction_init(&r);
     r.kshp.s[4] = p->out, r.kst.s[4] = 1, r.ny = p->out;
     r.rshp.s[4] = p->R, r.rst.s[4] = p->out, r.nr = p->R;
     return lm_cl_reduce(b, c, t[0], &r, t[1], 1.0f, 1);
 }
-
-const lm_cl_entry lm_cl_entries_gemm[] = {
-    {"linear_bwd_bias", launch_linear_bwd_bias},
-    {"linear_bwd_w", launch_linear_bwd_w},
-    {"linear_bwd_x", launch_linear_bwd_x},
-    {"linear_fwd", launch_linear_fwd},
-    {"matmul_bwd_a", launch_mm_bwd_a},
-    {"matmul_bwd_b", launch_mm_bwd_b},
-    {"matmul_fwd", launch_mm_fwd},
-    {NULL, NULL},
-};

@@ -13,23 +13,11 @@
  * gradient conv2d's with input and output exchanged. conv3d uses direct kernels (the channel
  * counts used are tiny). Bias gradients: one work-group per channel. */
 #include "kernels-opencl/cl_impl.h"
-#include "kernels-opencl/cl_params.h"
-#include "tensor/ops/gemm_internal.h"
+#include "tensor/op_params.h"
 #include <string.h>
 
 _Static_assert(sizeof(lm_conv_geom) == 16 * sizeof(int), "lm_conv_geom as int16");
-
-/* tensor/ops/conv_transpose2d.c: convt_params */
-typedef struct convt_params {
-    int B, Cin, H, W, Cout, Ho, Wo, kh, kw, sh, sw, ph, pw, dh, dw, groups, has_bias;
-} convt_params;
-_Static_assert(sizeof(convt_params) == 68, "convt_params mirror");
-
-/* tensor/ops/conv3d.c: conv3d_params */
-typedef struct conv3d_params {
-    int B, Cin, D, H, W, Cout, Do, Ho, Wo, kd, kh, kw, pd, ph, pw, has_bias;
-} conv3d_params;
-_Static_assert(sizeof(conv3d_params) == 64, "conv3d_params mirror");
+_Static_assert(sizeof(lm_conv3d_params) == 16 * sizeof(int), "lm_conv3d_params as int16");
 
 /* ---- conv2d building blocks ------------------------------------------------------------- */
 typedef struct conv_plan {
@@ -269,25 +257,24 @@ static int bias_grad(lm_cl *b, lm_ctx *c, const lm_tensor *dy, lm_tensor *db, in
 
 /* ---- conv2d ------------------------------------------------------------------------------ */
 /* t = {x, w, y[, bias]} */
-static int launch_conv2d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv2d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     return conv2d_run(b, c, pp, 0, t[0], NULL, t[1], nt > 3 ? t[3] : NULL, t[2], 0);
 }
 /* t = {dy, w, dx} */
-static int launch_conv2d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv2d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     return conv2d_run(b, c, pp, 1, t[0], NULL, t[1], NULL, t[2], 1);
 }
 /* t = {dy, x, dw} */
-static int launch_conv2d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv2d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     return conv2d_run(b, c, pp, 2, t[0], t[1], NULL, NULL, t[2], 1);
 }
 /* t = {dy, db} */
-static int launch_conv2d_bwd_bias(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
-                                  const void *pp)
+int lm_cl_launch_conv2d_bwd_bias(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     const lm_conv_geom *g = pp;
@@ -296,7 +283,7 @@ static int launch_conv2d_bwd_bias(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int 
 
 /* ---- conv_transpose2d --------------------------------------------------------------------- */
 /* The conv2d whose input gradient this transposed conv is (input and output exchanged). */
-static lm_conv_geom adjoint_geom(const convt_params *p)
+static lm_conv_geom adjoint_geom(const lm_convt_params *p)
 {
     lm_conv_geom g = {p->B, p->Cout, p->Ho, p->Wo, p->Cin, p->H, p->W, p->kh, p->kw,
                       p->sh, p->sw, p->ph, p->pw, p->dh, p->dw, p->groups};
@@ -304,9 +291,10 @@ static lm_conv_geom adjoint_geom(const convt_params *p)
 }
 
 /* t = {x, w, y[, bias]}: y = bias (or 0), then y += conv2d input gradient of x. */
-static int launch_convt_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv_transpose2d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                      const void *pp)
 {
-    const convt_params *p = pp;
+    const lm_convt_params *p = pp;
     lm_conv_geom g = adjoint_geom(p);
     if (nt > 3) {
         lm_tensor bv = *t[3], yv = *t[2];
@@ -323,7 +311,8 @@ static int launch_convt_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, co
     return conv2d_run(b, c, &g, 1, t[0], NULL, t[1], NULL, t[2], 1);
 }
 /* t = {dy, w, dx}: dx += conv2d(dy, w) */
-static int launch_convt_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv_transpose2d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                        const void *pp)
 {
     (void)nt;
     lm_conv_geom g = adjoint_geom(pp);
@@ -331,17 +320,19 @@ static int launch_convt_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, 
 }
 /* t = {x, dy, dw}: dw += conv2d weight gradient with dy as the input and x as the output
  * gradient */
-static int launch_convt_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv_transpose2d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                        const void *pp)
 {
     (void)nt;
     lm_conv_geom g = adjoint_geom(pp);
     return conv2d_run(b, c, &g, 2, t[0], t[1], NULL, NULL, t[2], 1);
 }
 /* t = {dy, db} */
-static int launch_convt_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv_transpose2d_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                        const void *pp)
 {
     (void)nt;
-    const convt_params *p = pp;
+    const lm_convt_params *p = pp;
     return bias_grad(b, c, t[0], t[1], p->B, p->Cout, (long)p->Ho * p->Wo);
 }
 
@@ -349,7 +340,7 @@ static int launch_convt_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, 
 /* Tensors in order, then the geometry, then: groups set: n work-groups (conv3d_bwd_w); else
  * n rows of width `width`, one work-item per 16 of a row (conv3d_fwd, conv3d_bwd_x). */
 static int run_conv3d(lm_cl *b, lm_ctx *c, const char *kname, lm_tensor *const *ts, int nts,
-                      const conv3d_params *p, long n, int groups, int width)
+                      const lm_conv3d_params *p, long n, int groups, int width)
 {
     cl_int16 g16;
     memcpy(&g16, p, sizeof g16);
@@ -364,46 +355,30 @@ static int run_conv3d(lm_cl *b, lm_ctx *c, const char *kname, lm_tensor *const *
 }
 
 /* t = {x, w, y[, bias]} */
-static int launch_conv3d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv3d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
-    conv3d_params p = *(const conv3d_params *)pp;
+    lm_conv3d_params p = *(const lm_conv3d_params *)pp;
     p.has_bias = nt > 3;
     lm_tensor *ts[4] = {t[0], t[1], t[2], nt > 3 ? t[3] : NULL};
     return run_conv3d(b, c, "conv3d_fwd", ts, 4, &p, lm_tensor_numel(t[2]) / p.Wo, 0, p.Wo);
 }
 /* t = {dy, w, dx} */
-static int launch_conv3d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv3d_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const conv3d_params *p = pp;
+    const lm_conv3d_params *p = pp;
     return run_conv3d(b, c, "conv3d_bwd_x", t, 3, p, lm_tensor_numel(t[2]) / p->W, 0, p->W);
 }
 /* t = {x, dy, dw} */
-static int launch_conv3d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv3d_bwd_w(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     return run_conv3d(b, c, "conv3d_bwd_w", t, 3, pp, lm_tensor_numel(t[2]), 1, 0);
 }
 /* t = {dy, db} */
-static int launch_conv3d_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_conv3d_bwd_b(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const conv3d_params *p = pp;
+    const lm_conv3d_params *p = pp;
     return bias_grad(b, c, t[0], t[1], p->B, p->Cout, (long)p->Do * p->Ho * p->Wo);
 }
-
-const lm_cl_entry lm_cl_entries_conv[] = {
-    {"conv2d_bwd_bias", launch_conv2d_bwd_bias},
-    {"conv2d_bwd_w", launch_conv2d_bwd_w},
-    {"conv2d_bwd_x", launch_conv2d_bwd_x},
-    {"conv2d_fwd", launch_conv2d_fwd},
-    {"conv3d_bwd_b", launch_conv3d_bwd_b},
-    {"conv3d_bwd_w", launch_conv3d_bwd_w},
-    {"conv3d_bwd_x", launch_conv3d_bwd_x},
-    {"conv3d_fwd", launch_conv3d_fwd},
-    {"conv_transpose2d_bwd_b", launch_convt_bwd_b},
-    {"conv_transpose2d_bwd_w", launch_convt_bwd_w},
-    {"conv_transpose2d_bwd_x", launch_convt_bwd_x},
-    {"conv_transpose2d_fwd", launch_convt_fwd},
-    {NULL, NULL},
-};

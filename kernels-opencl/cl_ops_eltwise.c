@@ -2,7 +2,7 @@
  * "binary_bwd", "binary_grad_acc"), scalar.c ("affine_fwd", "affine_bwd") and activation.c
  * ("activation_fwd", "activation_bwd"). Tensor order and params as the CPU kernels. */
 #include "kernels-opencl/cl_impl.h"
-#include "kernels-opencl/cl_params.h"
+#include "tensor/op_params.h"
 
 /* Strides of contiguous operand t broadcast to output y (right-aligned, 0 along broadcast
  * dims); *flat = 1 when t has y's size (then its offset is the output index). */
@@ -29,10 +29,10 @@ static void arg_operand(lm_cl_args *a, const lm_tensor *t, const lm_tensor *y)
 }
 
 /* t = {a, b, y}: y = a op b. */
-static int launch_binary_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_binary_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_binary_params *p = pp;
+    const lm_binary_params *p = pp;
     cl_int8 shp, unused;
     lm_cl_shape8(t[2], &shp, &unused);
     int n = (int)lm_tensor_numel(t[2]);
@@ -48,10 +48,10 @@ static int launch_binary_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 }
 
 /* t = {g, a, b, d}: d (+)= contribution of operand `which`. */
-static int launch_binary_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_binary_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_binary_bwd_params *p = pp;
+    const lm_binary_bwd_params *p = pp;
     cl_int8 shp, unused;
     lm_cl_shape8(t[0], &shp, &unused);
     int n = (int)lm_tensor_numel(t[0]);
@@ -83,17 +83,17 @@ static int run_scaled_add(lm_cl *b, lm_ctx *c, lm_tensor *d, const lm_tensor *s,
 }
 
 /* t = {d, s}: d += scale s. */
-static int launch_grad_acc(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_binary_grad_acc(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    return run_scaled_add(b, c, t[0], t[1], ((const cl_grad_acc_params *)pp)->scale);
+    return run_scaled_add(b, c, t[0], t[1], ((const lm_grad_acc_params *)pp)->scale);
 }
 
 /* t = {x, y}: y = s x + t. */
-static int launch_affine_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_affine_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_affine_params *p = pp;
+    const lm_affine_params *p = pp;
     int n = (int)lm_tensor_numel(t[0]);
     lm_cl_args a;
     if (lm_cl_begin(&a, b, c, "affine_fwd")) return c->status;
@@ -106,17 +106,17 @@ static int launch_affine_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 }
 
 /* t = {gy, gx}: gx += s gy. */
-static int launch_affine_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_affine_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    return run_scaled_add(b, c, t[1], t[0], ((const cl_affine_params *)pp)->s);
+    return run_scaled_add(b, c, t[1], t[0], ((const lm_affine_params *)pp)->s);
 }
 
 /* t = {x, y}: y = f(x). */
-static int launch_act_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_activation_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_act_params *p = pp;
+    const lm_act_params *p = pp;
     int n = (int)lm_tensor_numel(t[0]);
     lm_cl_args a;
     if (lm_cl_begin(&a, b, c, "activation_fwd")) return c->status;
@@ -129,10 +129,10 @@ static int launch_act_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 }
 
 /* t = {x, y, gy, gx}: gx += f'(x) gy. */
-static int launch_act_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_activation_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_act_params *p = pp;
+    const lm_act_params *p = pp;
     int n = (int)lm_tensor_numel(t[0]);
     lm_cl_args a;
     if (lm_cl_begin(&a, b, c, "activation_bwd")) return c->status;
@@ -142,14 +142,3 @@ static int launch_act_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
     lm_cl_arg_float(&a, p->slope);
     return lm_cl_run_chunks(&a, (size_t)n);
 }
-
-const lm_cl_entry lm_cl_entries_eltwise[] = {
-    {"activation_bwd", launch_act_bwd},
-    {"activation_fwd", launch_act_fwd},
-    {"affine_bwd", launch_affine_bwd},
-    {"affine_fwd", launch_affine_fwd},
-    {"binary_bwd", launch_binary_bwd},
-    {"binary_fwd", launch_binary_fwd},
-    {"binary_grad_acc", launch_grad_acc},
-    {NULL, NULL},
-};

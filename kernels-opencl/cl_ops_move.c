@@ -4,7 +4,7 @@
  * mosaic_upsample.c ("mosaic_upsample_fwd/bwd"). Permute, shuffle, concat and split are all
  * one kernel (view_copy) over views built here: same shape, source and destination strides. */
 #include "kernels-opencl/cl_impl.h"
-#include "kernels-opencl/cl_params.h"
+#include "tensor/op_params.h"
 
 int lm_cl_view_copy(lm_cl *b, lm_ctx *c, const lm_tensor *src, const lm_tensor *dst, int add)
 {
@@ -38,7 +38,7 @@ static lm_tensor view5(const lm_tensor *t, const int *shape, const ptrdiff_t *st
 
 /* ---- permute ------------------------------------------------------------------------------ */
 /* x viewed in y's order: shape of y, strides x.stride[perm[d]]. */
-static lm_tensor permuted(const lm_tensor *x, const lm_tensor *y, const cl_permute_params *p)
+static lm_tensor permuted(const lm_tensor *x, const lm_tensor *y, const lm_permute_params *p)
 {
     lm_tensor v = *x;
     for (int d = 0; d < y->ndim; d++) {
@@ -49,7 +49,7 @@ static lm_tensor permuted(const lm_tensor *x, const lm_tensor *y, const cl_permu
 }
 
 /* t = {x, y}: y = x permuted. */
-static int launch_permute_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_permute_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     lm_tensor v = permuted(t[0], t[1], pp);
@@ -57,7 +57,7 @@ static int launch_permute_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, 
 }
 
 /* t = {gx, gy}: gx += gy moved back. */
-static int launch_permute_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_permute_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     lm_tensor v = permuted(t[0], t[1], pp);
@@ -89,42 +89,42 @@ static void shuffle_views(const lm_tensor *big, const lm_tensor *small, int fy, 
 }
 
 /* t = {x big, y small}: y = unshuffle(x) */
-static int launch_unshuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
-                                const void *pp)
+int lm_cl_launch_pixel_unshuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
-    const cl_shuffle_params *p = pp;
+    const lm_shuffle_params *p = pp;
     lm_tensor vb, vs;
     shuffle_views(t[0], t[1], p->fy, p->fx, 0, &vb, &vs);
     return lm_cl_view_copy(b, c, &vb, &vs, 0);
 }
 
 /* t = {gx big, gy small}: gx += */
-static int launch_unshuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
-                                const void *pp)
+int lm_cl_launch_pixel_unshuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
-    const cl_shuffle_params *p = pp;
+    const lm_shuffle_params *p = pp;
     lm_tensor vb, vs;
     shuffle_views(t[0], t[1], p->fy, p->fx, 0, &vb, &vs);
     return lm_cl_view_copy(b, c, &vs, &vb, 1);
 }
 
 /* t = {x small, y big}: y = shuffle(x) */
-static int launch_shuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_pixel_shuffle_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_shuffle_params *p = pp;
+    const lm_shuffle_params *p = pp;
     lm_tensor vb, vs;
     shuffle_views(t[1], t[0], p->fy, p->fx, 1, &vb, &vs);
     return lm_cl_view_copy(b, c, &vs, &vb, 0);
 }
 
 /* t = {gx small, gy big}: gx += */
-static int launch_shuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_pixel_shuffle_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_shuffle_params *p = pp;
+    const lm_shuffle_params *p = pp;
     lm_tensor vb, vs;
     shuffle_views(t[1], t[0], p->fy, p->fx, 1, &vb, &vs);
     return lm_cl_view_copy(b, c, &vb, &vs, 1);
@@ -141,9 +141,9 @@ static lm_tensor band_of(const lm_tensor *whole, const lm_tensor *part, int dim,
 }
 
 /* t = {x_0 .. x_{nt-2}, y}: y = concat along dim. */
-static int launch_concat_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_concat_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
-    const cl_band_params *p = pp;
+    const lm_band_params *p = pp;
     int start = p->start;
     for (int i = 0; i < nt - 1; i++) {
         lm_tensor v = band_of(t[nt - 1], t[i], p->dim, start);
@@ -154,35 +154,35 @@ static int launch_concat_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 }
 
 /* t = {gx_i, gy}: gx_i += its band of gy */
-static int launch_concat_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_concat_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_band_params *p = pp;
+    const lm_band_params *p = pp;
     lm_tensor v = band_of(t[1], t[0], p->dim, p->start);
     return lm_cl_view_copy(b, c, &v, t[0], 1);
 }
 
 /* t = {x, part}: part = band */
-static int launch_split_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_split_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_band_params *p = pp;
+    const lm_band_params *p = pp;
     lm_tensor v = band_of(t[0], t[1], p->dim, p->start);
     return lm_cl_view_copy(b, c, &v, t[1], 0);
 }
 
 /* t = {gx, gpart}: band of gx += gpart */
-static int launch_split_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_split_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_band_params *p = pp;
+    const lm_band_params *p = pp;
     lm_tensor v = band_of(t[0], t[1], p->dim, p->start);
     return lm_cl_view_copy(b, c, t[1], &v, 1);
 }
 
 /* ---- pad ---------------------------------------------------------------------------------- */
 /* fwd t = {x, y}; bwd t = {gx, gy}: (small, big) either way. */
-static int run_pad(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const cl_pad_params *p, int bwd)
+static int run_pad(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const lm_pad_params *p, int bwd)
 {
     const lm_tensor *x = t[0], *y = t[1];
     int n = (int)lm_tensor_numel(bwd ? x : y);
@@ -203,30 +203,25 @@ static int run_pad(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const cl_pad_params
     return lm_cl_run_1d(&a, (size_t)n);
 }
 
-static int launch_pad_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_pad2d_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     return run_pad(b, c, t, pp, 0);
 }
 
-static int launch_pad_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_pad2d_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
     return run_pad(b, c, t, pp, 1);
 }
 
 /* ---- resize ------------------------------------------------------------------------------- */
-/* The CPU's source-coordinate scale of one axis (resize.c axis_table). */
-static float resize_scale(int in, int out, int ac)
-{
-    return ac ? (out > 1 ? (float)(in - 1) / (float)(out - 1) : 0.0f) : (float)in / (float)out;
-}
-
 /* t = {x, y} */
-static int launch_resize_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_resize_bilinear_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
-    int ac = ((const cl_resize_params *)pp)->align_corners;
+    int ac = ((const lm_resize_params *)pp)->align_corners;
     const lm_tensor *x = t[0], *y = t[1];
     int H = x->shape[2], W = x->shape[3], oh = y->shape[2], ow = y->shape[3];
     int n = (int)lm_tensor_numel(y);
@@ -238,18 +233,19 @@ static int launch_resize_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     lm_cl_arg_int(&a, W);
     lm_cl_arg_int(&a, oh);
     lm_cl_arg_int(&a, ow);
-    lm_cl_arg_float(&a, resize_scale(H, oh, ac));
-    lm_cl_arg_float(&a, resize_scale(W, ow, ac));
+    lm_cl_arg_float(&a, lm_resize_scale(H, oh, ac));
+    lm_cl_arg_float(&a, lm_resize_scale(W, ow, ac));
     lm_cl_arg_int(&a, ac);
     lm_cl_arg_int(&a, n);
     return lm_cl_run_1d(&a, (size_t)n);
 }
 
 /* t = {gx, gy}: rows gathered along x into a device scratch, then along y into gx. */
-static int launch_resize_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_resize_bilinear_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
-    int ac = ((const cl_resize_params *)pp)->align_corners;
+    int ac = ((const lm_resize_params *)pp)->align_corners;
     const lm_tensor *gx = t[0], *gy = t[1];
     int H = gx->shape[2], W = gx->shape[3], oh = gy->shape[2], ow = gy->shape[3];
     int rows = gx->shape[0] * gx->shape[1] * oh;
@@ -261,7 +257,7 @@ static int launch_resize_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     lm_cl_arg_tensor(&a, tmp);
     lm_cl_arg_int(&a, W);
     lm_cl_arg_int(&a, ow);
-    lm_cl_arg_float(&a, resize_scale(W, ow, ac));
+    lm_cl_arg_float(&a, lm_resize_scale(W, ow, ac));
     lm_cl_arg_int(&a, ac);
     lm_cl_arg_int(&a, rows * W);
     if (lm_cl_run_1d(&a, (size_t)rows * W)) return c->status;
@@ -272,7 +268,7 @@ static int launch_resize_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
     lm_cl_arg_int(&a, H);
     lm_cl_arg_int(&a, W);
     lm_cl_arg_int(&a, oh);
-    lm_cl_arg_float(&a, resize_scale(H, oh, ac));
+    lm_cl_arg_float(&a, lm_resize_scale(H, oh, ac));
     lm_cl_arg_int(&a, ac);
     lm_cl_arg_int(&a, n);
     return lm_cl_run_1d(&a, (size_t)n);
@@ -281,11 +277,11 @@ static int launch_resize_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, c
 /* ---- mosaic upsampling -------------------------------------------------------------------- */
 /* fwd t = {raw, y}; bwd t = {graw, gy}. The per-channel phases (up to 2 x 64 ints, too many
  * for kernel arguments) go to the device in one small blocking write per launch. */
-static int run_mosaic(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const cl_mosaic_params *p,
+static int run_mosaic(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const lm_mosaic_params *p,
                       int bwd)
 {
     int nch = p->nch, H = t[0]->shape[2], W = t[0]->shape[3];
-    int ph[2 * CL_MOSAIC_MAX_CH];
+    int ph[2 * LM_MOSAIC_UPSAMPLE_MAX_CH];
     for (int k = 0; k < nch; k++) {
         ph[k] = p->py[k];
         ph[nch + k] = p->px[k];
@@ -307,34 +303,16 @@ static int run_mosaic(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const cl_mosaic_
     return lm_cl_run_1d(&a, (size_t)n);
 }
 
-static int launch_mosaic_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_mosaic_upsample_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
     return run_mosaic(b, c, t, pp, 0);
 }
 
-static int launch_mosaic_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_mosaic_upsample_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt;
     return run_mosaic(b, c, t, pp, 1);
 }
-
-const lm_cl_entry lm_cl_entries_move[] = {
-    {"concat_bwd", launch_concat_bwd},
-    {"concat_fwd", launch_concat_fwd},
-    {"mosaic_upsample_bwd", launch_mosaic_bwd},
-    {"mosaic_upsample_fwd", launch_mosaic_fwd},
-    {"pad2d_bwd", launch_pad_bwd},
-    {"pad2d_fwd", launch_pad_fwd},
-    {"permute_bwd", launch_permute_bwd},
-    {"permute_fwd", launch_permute_fwd},
-    {"pixel_shuffle_bwd", launch_shuffle_bwd},
-    {"pixel_shuffle_fwd", launch_shuffle_fwd},
-    {"pixel_unshuffle_bwd", launch_unshuffle_bwd},
-    {"pixel_unshuffle_fwd", launch_unshuffle_fwd},
-    {"resize_bilinear_bwd", launch_resize_bwd},
-    {"resize_bilinear_fwd", launch_resize_fwd},
-    {"split_bwd", launch_split_bwd},
-    {"split_fwd", launch_split_fwd},
-    {NULL, NULL},
-};

@@ -2,7 +2,7 @@
  * "softmax_bwd"), layer_norm.c ("layer_norm_channels_fwd", "_bwd_x", "_bwd_wb") and
  * l2_normalize.c ("l2_normalize_fwd", "l2_normalize_bwd"). */
 #include "kernels-opencl/cl_impl.h"
-#include "kernels-opencl/cl_params.h"
+#include "tensor/op_params.h"
 
 /* outer x len x inner of t around axis */
 static void split_axis(const lm_tensor *t, int axis, int *outer, int *len, int *inner)
@@ -32,40 +32,41 @@ static int run_columns(lm_cl *b, lm_ctx *c, const char *kname, lm_tensor *const 
 }
 
 /* t = {x, y} */
-static int launch_softmax_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_softmax_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    return run_columns(b, c, "softmax_fwd", t, 2, ((const cl_softmax_params *)pp)->axis, NULL);
+    return run_columns(b, c, "softmax_fwd", t, 2, ((const lm_softmax_params *)pp)->axis, NULL);
 }
 
 /* t = {y, gy, gx} */
-static int launch_softmax_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_softmax_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    return run_columns(b, c, "softmax_bwd", t, 3, ((const cl_softmax_params *)pp)->axis, NULL);
+    return run_columns(b, c, "softmax_bwd", t, 3, ((const lm_softmax_params *)pp)->axis, NULL);
 }
 
 /* t = {x, y} */
-static int launch_l2_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_l2_normalize_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_l2_params *p = pp;
+    const lm_l2_params *p = pp;
     return run_columns(b, c, "l2_fwd", t, 2, p->axis, &p->eps);
 }
 
 /* t = {gx, gy, x} */
-static int launch_l2_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_l2_normalize_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_l2_params *p = pp;
+    const lm_l2_params *p = pp;
     return run_columns(b, c, "l2_bwd", t, 3, p->axis, &p->eps);
 }
 
 /* t = {x, y, stats, w or NULL, b or NULL} */
-static int launch_ln_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_layer_norm_channels_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                         const void *pp)
 {
     (void)nt;
-    const cl_ln_params *p = pp;
+    const lm_ln_params *p = pp;
     int C = t[0]->shape[1], HW = t[0]->shape[2] * t[0]->shape[3], npix = t[0]->shape[0] * HW;
     lm_cl_args a;
     if (lm_cl_begin(&a, b, c, "ln_fwd")) return c->status;
@@ -82,10 +83,11 @@ static int launch_ln_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const
 }
 
 /* t = {gx, gy, x, stats, w or NULL} */
-static int launch_ln_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_layer_norm_channels_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                           const void *pp)
 {
     (void)nt;
-    const cl_ln_params *p = pp;
+    const lm_ln_params *p = pp;
     int C = t[0]->shape[1], HW = t[0]->shape[2] * t[0]->shape[3], npix = t[0]->shape[0] * HW;
     lm_cl_args a;
     if (lm_cl_begin(&a, b, c, "ln_bwd_x")) return c->status;
@@ -99,7 +101,8 @@ static int launch_ln_bwd_x(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, con
 }
 
 /* t = {gw or NULL, gb or NULL, gy, x, stats} */
-static int launch_ln_bwd_wb(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_layer_norm_channels_bwd_wb(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                            const void *pp)
 {
     (void)nt, (void)pp;
     const lm_tensor *gy = t[2];
@@ -114,14 +117,3 @@ static int launch_ln_bwd_wb(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, co
     lm_cl_arg_int(&a, t[1] != NULL);
     return lm_cl_run_groups(&a, (size_t)gy->shape[1]);
 }
-
-const lm_cl_entry lm_cl_entries_norm[] = {
-    {"l2_normalize_bwd", launch_l2_bwd},
-    {"l2_normalize_fwd", launch_l2_fwd},
-    {"layer_norm_channels_bwd_wb", launch_ln_bwd_wb},
-    {"layer_norm_channels_bwd_x", launch_ln_bwd_x},
-    {"layer_norm_channels_fwd", launch_ln_fwd},
-    {"softmax_bwd", launch_softmax_bwd},
-    {"softmax_fwd", launch_softmax_fwd},
-    {NULL, NULL},
-};

@@ -2,7 +2,7 @@
  * "reduce_sum_bwd", "global_avg_pool_fwd", "global_avg_pool_bwd") and loss.c
  * ("l1_mse_loss_fwd", "l1_mse_loss_bwd"). Backward broadcasts use eltwise.cl's bcast_add. */
 #include "kernels-opencl/cl_impl.h"
-#include "kernels-opencl/cl_params.h"
+#include "tensor/op_params.h"
 
 #define LONG_SUM 65536  /* a single long sum is split into chunks first */
 #define CHUNK_MIN 4096
@@ -46,7 +46,8 @@ static int run_rows(lm_cl *b, lm_ctx *c, const lm_tensor *x, const red_space *s,
     return lm_cl_reduce(b, c, x, s, y, k, 0);
 }
 
-/* y[0] = k * sum of f(p, q) over n contiguous elements (kind 0: p, 1: |p-q|, 2: (p-q)^2):
+/* y[0] = k * sum of f(p, q) over n contiguous elements (kind LM_CL_SUM_PLAIN: p, LM_LOSS_L1:
+ * |p-q|, LM_LOSS_MSE: (p-q)^2):
  * chunk sums in a device scratch, then one work-group adds them. */
 static int run_long_sum(lm_cl *b, lm_ctx *c, const lm_tensor *p, const lm_tensor *q, long n,
                         int kind, lm_tensor *y, float k)
@@ -110,22 +111,22 @@ static void sum_space(const lm_tensor *x, unsigned mask, red_space *s)
 }
 
 /* t = {x, y}: y = scale * sum over the masked dims. */
-static int launch_sum_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_reduce_sum_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_reduce_params *p = pp;
+    const lm_reduce_params *p = pp;
     red_space s;
     sum_space(t[0], p->mask, &s);
     if (s.ny == 1 && s.nr >= LONG_SUM)
-        return run_long_sum(b, c, t[0], t[0], s.nr, 0, t[1], p->scale);
+        return run_long_sum(b, c, t[0], t[0], s.nr, LM_CL_SUM_PLAIN, t[1], p->scale);
     return run_rows(b, c, t[0], &s, t[1], p->scale);
 }
 
 /* t = {gy, gx}: gx += scale * gy broadcast over the reduced dims. */
-static int launch_sum_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_reduce_sum_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_reduce_params *p = pp;
+    const lm_reduce_params *p = pp;
     const lm_tensor *gx = t[1];
     cl_int8 shp, st, unused;
     lm_cl_shape8(gx, &shp, &unused);
@@ -141,7 +142,8 @@ static int launch_sum_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 
 /* ---- global average pooling --------------------------------------------------------------- */
 /* t = {x (B x C x H x W), y (B x C x 1 x 1)}: y = mean over H W. */
-static int launch_gap_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_global_avg_pool_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt, (void)pp;
     const lm_tensor *x = t[0];
@@ -158,7 +160,8 @@ static int launch_gap_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 }
 
 /* t = {gy, gx}: gx += gy / (H W). */
-static int launch_gap_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_global_avg_pool_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
+                                     const void *pp)
 {
     (void)nt, (void)pp;
     const lm_tensor *gx = t[1];
@@ -169,19 +172,19 @@ static int launch_gap_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, cons
 
 /* ---- losses ------------------------------------------------------------------------------- */
 /* t = {pred, target, y {1}}: y = mean |p - t| (L1) or (p - t)^2 (MSE). */
-static int launch_loss_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_l1_mse_loss_fwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_loss_params *p = pp;
+    const lm_loss_params *p = pp;
     long n = lm_tensor_numel(t[0]);
-    return run_long_sum(b, c, t[0], t[1], n, p->kind + 1, t[2], (float)(1.0 / (double)n));
+    return run_long_sum(b, c, t[0], t[1], n, p->kind, t[2], (float)(1.0 / (double)n));
 }
 
 /* t = {pred, target, gy {1}, gd}: gd += sign dloss/dpred. */
-static int launch_loss_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
+int lm_cl_launch_l1_mse_loss_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const cl_loss_bwd_params *p = pp;
+    const lm_loss_bwd_params *p = pp;
     int n = (int)lm_tensor_numel(t[0]);
     lm_cl_args a;
     if (lm_cl_begin(&a, b, c, "loss_bwd")) return c->status;
@@ -191,13 +194,3 @@ static int launch_loss_bwd(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, con
     lm_cl_arg_float(&a, p->sign);
     return lm_cl_run_1d(&a, (size_t)n);
 }
-
-const lm_cl_entry lm_cl_entries_reduce[] = {
-    {"global_avg_pool_bwd", launch_gap_bwd},
-    {"global_avg_pool_fwd", launch_gap_fwd},
-    {"l1_mse_loss_bwd", launch_loss_bwd},
-    {"l1_mse_loss_fwd", launch_loss_fwd},
-    {"reduce_sum_bwd", launch_sum_bwd},
-    {"reduce_sum_fwd", launch_sum_fwd},
-    {NULL, NULL},
-};

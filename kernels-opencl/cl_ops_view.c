@@ -4,7 +4,7 @@
 #include "kernels-opencl/cl_impl.h"
 
 /* t[0] = value (contiguous); params: const float *. */
-static int launch_fill(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
+int lm_cl_launch_fill(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
     int n = (int)lm_tensor_numel(t[0]);
@@ -17,7 +17,7 @@ static int launch_fill(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const v
 }
 
 /* t[0] += t[1], same numel, contiguous. */
-static int launch_flat_add(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
+int lm_cl_launch_flat_add(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt, (void)params;
     int n = (int)lm_tensor_numel(t[0]);
@@ -46,24 +46,14 @@ static int launch_strided(lm_cl *b, lm_ctx *c, lm_tensor *const *t, const char *
     return lm_cl_run_chunks(&a, (size_t)n);
 }
 
-static int launch_strided_copy(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
-                               const void *params)
+int lm_cl_launch_strided_copy(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt, (void)params;
     return launch_strided(b, c, t, "strided_copy");
 }
 
-static int launch_strided_add(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt,
-                              const void *params)
+int lm_cl_launch_strided_add(lm_cl *b, lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt, (void)params;
     return launch_strided(b, c, t, "strided_add");
 }
-
-const lm_cl_entry lm_cl_entries_view[] = {
-    {"fill", launch_fill},
-    {"flat_add", launch_flat_add},
-    {"strided_add", launch_strided_add},
-    {"strided_copy", launch_strided_copy},
-    {NULL, NULL},
-};

@@ -3,9 +3,10 @@
  * 1-d launches are rounded up to the work-group size, so kernels guard their index; sizes
  * and indices are int (the backend refuses tensors beyond 2^31 elements). */
 
-/* Work-group size of the kernels that reduce in local memory (a power of two; the launchers
- * use LM_CL_WG, the same value). */
-#define WG 64
+/* Defined by the build options (kernels-opencl/cl_backend.c), from the C definitions:
+ * WG, the work-group size of the kernels that reduce in local memory (LM_CL_WG, a power of
+ * two); CHUNK, the elements per work-item of CHUNK_RANGE (LM_CL_CHUNK); and every enum value
+ * a kernel names (LM_OP_ENUMS of tensor/op_params.h, LM_CL_SUM_PLAIN of cl_impl.h). */
 
 /* Element offset of the i-th element (row-major order) of a 5-d view: shape and strides
  * right-aligned into int8 (s0..s4 used; leading dims of shape 1, stride 0). A stride of 0
@@ -30,8 +31,7 @@ int view_offset(int i, int8 shp, int8 st)
 
 /* The chunked 1-d kernels: work-item g handles elements [CHUNK g, CHUNK g + CHUNK) of n in
  * one plain loop (PoCL's CPU device pays per work-item; a loop per item runs 10-25x faster than
- * one item per element). Launched with lm_cl_run_chunks (LM_CL_CHUNK, the same value). */
-#define CHUNK 16
+ * one item per element). Launched with lm_cl_run_chunks; CHUNK is LM_CL_CHUNK (build option). */
 #define CHUNK_RANGE(i0, i1, n) int i0 = get_global_id(0) * CHUNK, i1 = min((n), i0 + CHUNK)
 
 /* Offsets of a 5-d view at consecutive indices without divisions: vc_step from the offset

@@ -6,9 +6,9 @@
 float binary_apply(int op, float a, float b)
 {
     switch (op) {
-    case 0: return a + b;
-    case 1: return a - b;
-    case 2: return a * b;
+    case LM_BIN_ADD: return a + b;
+    case LM_BIN_SUB: return a - b;
+    case LM_BIN_MUL: return a * b;
     default: return a / b;
     }
 }
@@ -43,11 +43,11 @@ __kernel void binary_bwd(__global const float *g, int go,
     for (int i = i0; i < i1; i++) {
         float gv = g[go + i], av = a[ao + oa], bv = b[bo + ob], r;
         switch (op * 2 + which) {
-        case 0: case 1: case 2: r = gv; break;
-        case 3: r = -gv; break;
-        case 4: r = gv * bv; break;
-        case 5: r = gv * av; break;
-        case 6: r = gv / bv; break;
+        case LM_BIN_ADD * 2 + 0: case LM_BIN_ADD * 2 + 1: case LM_BIN_SUB * 2 + 0: r = gv; break;
+        case LM_BIN_SUB * 2 + 1: r = -gv; break;
+        case LM_BIN_MUL * 2 + 0: r = gv * bv; break;
+        case LM_BIN_MUL * 2 + 1: r = gv * av; break;
+        case LM_BIN_DIV * 2 + 0: r = gv / bv; break;
         default: r = -gv * av / (bv * bv); break;
         }
         d[dof + i] = accumulate ? d[dof + i] + r : r;
@@ -83,7 +83,7 @@ __kernel void affine_fwd(__global const float *x, int xo, __global float *y, int
     for (int i = i0; i < i1; i++) y[yo + i] = s * x[xo + i] + t;
 }
 
-/* Activations; kind: 0 relu, 1 leaky relu, 2 sigmoid, 3 tanh, 4 exact GELU. */
+/* Activations; kind: LM_ACT_* (lm_act_kind, tensor/op_params.h); GELU is the exact one. */
 float sigmoid_stable(float x)
 {
     if (x >= 0.0f) return 1.0f / (1.0f + exp(-x));
@@ -99,10 +99,10 @@ __kernel void activation_fwd(__global const float *x, int xo, __global float *y,
     for (int i = i0; i < i1; i++) {
         float v = x[xo + i], r;
         switch (kind) {
-        case 0: r = v > 0.0f ? v : 0.0f; break;
-        case 1: r = v > 0.0f ? v : slope * v; break;
-        case 2: r = sigmoid_stable(v); break;
-        case 3: r = tanh(v); break;
+        case LM_ACT_RELU: r = v > 0.0f ? v : 0.0f; break;
+        case LM_ACT_LEAKY: r = v > 0.0f ? v : slope * v; break;
+        case LM_ACT_SIGMOID: r = sigmoid_stable(v); break;
+        case LM_ACT_TANH: r = tanh(v); break;
         default: r = 0.5f * v * (1.0f + erf(v * 0.70710678118654752440f)); break;
         }
         y[yo + i] = r;
@@ -118,10 +118,10 @@ __kernel void activation_bwd(__global const float *x, int xo, __global const flo
     for (int i = i0; i < i1; i++) {
         float v = x[xo + i], yv = y[yo + i], g = gy[gyo + i], r;
         switch (kind) {
-        case 0: r = v > 0.0f ? g : 0.0f; break;
-        case 1: r = v > 0.0f ? g : slope * g; break;
-        case 2: r = g * yv * (1.0f - yv); break;
-        case 3: r = g * (1.0f - yv * yv); break;
+        case LM_ACT_RELU: r = v > 0.0f ? g : 0.0f; break;
+        case LM_ACT_LEAKY: r = v > 0.0f ? g : slope * g; break;
+        case LM_ACT_SIGMOID: r = g * yv * (1.0f - yv); break;
+        case LM_ACT_TANH: r = g * (1.0f - yv * yv); break;
         default: {
             float cdf = 0.5f * (1.0f + erf(v * 0.70710678118654752440f));
             r = g * (cdf + v * 0.39894228040143267794f * exp(-0.5f * v * v)); /* 1/sqrt(2 pi) */

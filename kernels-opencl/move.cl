@@ -22,11 +22,11 @@ __kernel void view_copy(__global const float *s, int so, int8 sst, __global floa
 }
 
 /* ---- pad ----------------------------------------------------------------------------------- */
-/* Source index of output position o (n inputs, lo before); -1 = zero. mode 1 = reflect. */
+/* Source index of output position o (n inputs, lo before); -1 = zero. mode: lm_pad_mode. */
 int pad_src(int o, int n, int lo, int mode)
 {
     int i = o - lo;
-    if (mode == 1) {
+    if (mode == LM_PAD_REFLECT) {
         if (i < 0) i = -i;
         if (i >= n) i = 2 * (n - 1) - i;
         return i;
@@ -49,10 +49,10 @@ __kernel void pad_fwd(__global const float *x, int xo, __global float *y, int yo
 int pad_readers(int i, int n, int lo, int hi, int mode, int *o)
 {
     int k = 0;
-    if (mode == 1 && i > 0 && i <= lo) o[k++] = lo - i;     /* reflected before the start */
+    if (mode == LM_PAD_REFLECT && i > 0 && i <= lo) o[k++] = lo - i; /* reflected before the start */
     o[k++] = lo + i;                                         /* itself */
     int r = 2 * (n - 1) - i;                                 /* reflected after the end */
-    if (mode == 1 && r >= n && r < n + hi) o[k++] = lo + r;
+    if (mode == LM_PAD_REFLECT && r >= n && r < n + hi) o[k++] = lo + r;
     return k;
 }
 

@@ -41,8 +41,8 @@ __kernel void reduce_rows_serial(__global const float *x, int xo, int8 kshp, int
 }
 
 /* First pass of a long sum over contiguous data: part[g] = sum of f over elements
- * [g chunk, min(n, (g + 1) chunk)); one work-group per chunk. f: kind 0 = p, 1 = |p - q|,
- * 2 = (p - q)^2. Writes =. */
+ * [g chunk, min(n, (g + 1) chunk)); one work-group per chunk. f: kind LM_CL_SUM_PLAIN = p,
+ * LM_LOSS_L1 = |p - q|, LM_LOSS_MSE = (p - q)^2. Writes =. */
 __kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
 void chunk_sums(__global const float *p, int po, __global const float *q, int qo, int n,
                 int chunk, int kind, __global float *part, int pto)
@@ -53,8 +53,8 @@ void chunk_sums(__global const float *p, int po, __global const float *q, int qo
     float s = 0.0f, c = 0.0f;
     for (int i = g * chunk + l; i < e; i += WG) {
         float v = p[po + i];
-        if (kind == 1) v = fabs(v - q[qo + i]);
-        else if (kind == 2) {
+        if (kind == LM_LOSS_L1) v = fabs(v - q[qo + i]);
+        else if (kind == LM_LOSS_MSE) {
             float d = v - q[qo + i];
             v = d * d;
         }
@@ -74,5 +74,5 @@ __kernel void loss_bwd(__global const float *p, int po, __global const float *q,
     if (i >= n) return;
     float k = sign * gy[gyo] / (float)n;
     float d = p[po + i] - q[qo + i];
-    gd[gdo + i] += kind == 0 ? k * (float)((d > 0.0f) - (d < 0.0f)) : 2.0f * k * d;
+    gd[gdo + i] += kind == LM_LOSS_L1 ? k * (float)((d > 0.0f) - (d < 0.0f)) : 2.0f * k * d;
 }

@@ -1,6 +1,7 @@
 /* tensor.c — context, tensor creation, kernel dispatch and tape recording.
  * Not here: the backward walk (autograd/tape.c) and the ops (tensor/ops/). */
 #include "tensor/tensor.h"
+#include "tensor/op_list.h"
 #include <omp.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -302,13 +303,13 @@ static int fill_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
     lm_tensor_fill(t[0], *(const float *)params);
     return 0;
 }
-static const lm_kernel K_FILL = {"fill", fill_cpu};
+LM_KERNEL(fill, fill_cpu);
 
 lm_tensor *lm_tensor_full(lm_ctx *c, int ndim, const int *shape, float v)
 {
     lm_tensor *t = lm_tensor_new(c, ndim, shape);
     if (t && t->device == LM_DEVICE_CPU) lm_tensor_fill(t, v);
-    else if (t && lm_kernel_run(c, &K_FILL, &t, 1, &v)) return NULL;
+    else if (t && lm_kernel_run(c, &lm_kernel_fill, &t, 1, &v)) return NULL;
     return t;
 }
 
@@ -417,20 +418,10 @@ lm_tensor *lm_grad(lm_ctx *c, lm_tensor *t)
     if (!g) return NULL;
     float zero = 0.0f;
     lm_tensor *a[1] = {g};
-    lm_kernel_run(c, &K_FILL, a, 1, &zero);
+    lm_kernel_run(c, &lm_kernel_fill, a, 1, &zero);
     t->grad = g;
     return g;
 }
-
-/* t[0] += t[1], same numel, contiguous (the device twin is the backend's "flat_add"). */
-static int seed_add_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
-{
-    (void)c, (void)nt, (void)params;
-    long n = lm_tensor_numel(t[0]);
-    for (long i = 0; i < n; i++) t[0]->data[i] += t[1]->data[i];
-    return 0;
-}
-static const lm_kernel K_SEED_ADD = {"flat_add", seed_add_cpu};
 
 lm_status lm_grad_seed(lm_ctx *c, lm_tensor *out, const lm_tensor *seed)
 {
@@ -450,11 +441,11 @@ lm_status lm_grad_seed(lm_ctx *c, lm_tensor *out, const lm_tensor *seed)
         if (seed) lm_tensor_write(c, s, seed->data);
         else {
             float one = 1.0f;
-            lm_kernel_run(c, &K_FILL, &s, 1, &one);
+            lm_kernel_run(c, &lm_kernel_fill, &s, 1, &one);
         }
     }
     lm_tensor *t[2] = {g, s};
-    lm_kernel_run(c, &K_SEED_ADD, t, 2, NULL);
+    lm_kernel_run(c, &lm_kernel_flat_add, t, 2, NULL); /* g += s (tensor/ops/view.c) */
     return c->status;
 }
 

@@ -12,6 +12,8 @@
  * as their reference).
  * What it is not: parametric activations (PReLU with a learned slope), approximate GELU. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 #include "tensor/ops/op_paths.h"
 #include <math.h>
 #include <stdint.h>
@@ -21,10 +23,7 @@
 #define INV_SQRT2 0.70710678118654752440f
 #define INV_SQRT2PI 0.39894228040143267794f
 
-typedef enum act_kind { ACT_RELU, ACT_LEAKY, ACT_SIGMOID, ACT_TANH, ACT_GELU } act_kind;
 static const char *const ACT_NAMES[5] = {"relu", "leaky_relu", "sigmoid", "tanh", "gelu"};
-
-typedef struct act_params { int kind; float slope; } act_params;
 
 /* e = exp(-|x|) is in (0, 1]: no overflow; sigmoid(x) = 1 / (1 + e) for x >= 0, else e / (1 + e).
  * Written as a select, not a branch (the sign of activations is unpredictable). */
@@ -143,16 +142,16 @@ static void leaky_bwd(const float *restrict x, const float *restrict gy, float *
 static int act_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const act_params *p = params;
+    const lm_act_params *p = params;
     const float *x = t[0]->data, slope = p->slope;
     float *y = t[1]->data;
     long n = lm_tensor_numel(t[0]);
     int nthr = lm_nthreads(c);
     switch (p->kind) {
-    case ACT_RELU: FLAT_LOOP(y[i] = x[i] > 0.0f ? x[i] : 0.0f); break;
-    case ACT_LEAKY: leaky_fwd(x, y, n, slope, nthr); break;
-    case ACT_SIGMOID: FLAT_LOOP(y[i] = sigmoid_stable(x[i])); break;
-    case ACT_TANH: FLAT_LOOP(y[i] = tanhf(x[i])); break;
+    case LM_ACT_RELU: FLAT_LOOP(y[i] = x[i] > 0.0f ? x[i] : 0.0f); break;
+    case LM_ACT_LEAKY: leaky_fwd(x, y, n, slope, nthr); break;
+    case LM_ACT_SIGMOID: FLAT_LOOP(y[i] = sigmoid_stable(x[i])); break;
+    case LM_ACT_TANH: FLAT_LOOP(y[i] = tanhf(x[i])); break;
     default:
         if (lm_op_path(c) == LM_OP_PATH_FAST) gelu_fwd_fast(x, y, n, nthr);
         else FLAT_LOOP(y[i] = 0.5f * x[i] * (1.0f + erff(x[i] * INV_SQRT2)));
@@ -187,16 +186,16 @@ static void gelu_bwd_fast(const float *x, const float *gy, float *gx, long n, in
 static int act_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const act_params *p = params;
+    const lm_act_params *p = params;
     const float *x = t[0]->data, *y = t[1]->data, *gy = t[2]->data, slope = p->slope;
     float *gx = t[3]->data;
     long n = lm_tensor_numel(t[0]);
     int nthr = lm_nthreads(c);
     switch (p->kind) {
-    case ACT_RELU: FLAT_LOOP(gx[i] += x[i] > 0.0f ? gy[i] : 0.0f); break;
-    case ACT_LEAKY: leaky_bwd(x, gy, gx, n, slope, nthr); break;
-    case ACT_SIGMOID: FLAT_LOOP(gx[i] += gy[i] * y[i] * (1.0f - y[i])); break;
-    case ACT_TANH: FLAT_LOOP(gx[i] += gy[i] * (1.0f - y[i] * y[i])); break;
+    case LM_ACT_RELU: FLAT_LOOP(gx[i] += x[i] > 0.0f ? gy[i] : 0.0f); break;
+    case LM_ACT_LEAKY: leaky_bwd(x, gy, gx, n, slope, nthr); break;
+    case LM_ACT_SIGMOID: FLAT_LOOP(gx[i] += gy[i] * y[i] * (1.0f - y[i])); break;
+    case LM_ACT_TANH: FLAT_LOOP(gx[i] += gy[i] * (1.0f - y[i] * y[i])); break;
     default:
         if (lm_op_path(c) == LM_OP_PATH_FAST) gelu_bwd_fast(x, gy, gx, n, nthr);
         else FLAT_LOOP(gx[i] += gy[i] * gelu_grad(x[i]));
@@ -205,15 +204,15 @@ static int act_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *param
     return 0;
 }
 
-static const lm_kernel K_ACT_FWD = {"activation_fwd", act_fwd_cpu};
-static const lm_kernel K_ACT_BWD = {"activation_bwd", act_bwd_cpu};
+LM_KERNEL(activation_fwd, act_fwd_cpu);
+LM_KERNEL(activation_bwd, act_bwd_cpu);
 
 static void act_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[4] = {x, n->out, n->out->grad, lm_grad(c, x)};
-    if (t[3]) lm_kernel_run(c, &K_ACT_BWD, t, 4, n->params);
+    if (t[3]) lm_kernel_run(c, &lm_kernel_activation_bwd, t, 4, n->params);
 }
 
 static lm_tensor *activation(lm_ctx *c, lm_tensor *x, int kind, float slope)
@@ -227,18 +226,18 @@ static lm_tensor *activation(lm_ctx *c, lm_tensor *x, int kind, float slope)
     x = lm_contiguous(c, x);
     lm_tensor *y = x ? lm_tensor_new(c, x->ndim, x->shape) : NULL;
     if (!y) return NULL;
-    act_params p = {kind, slope};
+    lm_act_params p = {kind, slope};
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_ACT_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_activation_fwd, t, 2, &p)) return NULL;
     lm_record(c, name, act_backward, y, &x, 1, &p, sizeof p);
     return y;
 }
 
-lm_tensor *lm_relu(lm_ctx *c, lm_tensor *x) { return activation(c, x, ACT_RELU, 0.0f); }
+lm_tensor *lm_relu(lm_ctx *c, lm_tensor *x) { return activation(c, x, LM_ACT_RELU, 0.0f); }
 lm_tensor *lm_leaky_relu(lm_ctx *c, lm_tensor *x, float slope)
 {
-    return activation(c, x, ACT_LEAKY, slope);
+    return activation(c, x, LM_ACT_LEAKY, slope);
 }
-lm_tensor *lm_sigmoid(lm_ctx *c, lm_tensor *x) { return activation(c, x, ACT_SIGMOID, 0.0f); }
-lm_tensor *lm_tanh(lm_ctx *c, lm_tensor *x) { return activation(c, x, ACT_TANH, 0.0f); }
-lm_tensor *lm_gelu(lm_ctx *c, lm_tensor *x) { return activation(c, x, ACT_GELU, 0.0f); }
+lm_tensor *lm_sigmoid(lm_ctx *c, lm_tensor *x) { return activation(c, x, LM_ACT_SIGMOID, 0.0f); }
+lm_tensor *lm_tanh(lm_ctx *c, lm_tensor *x) { return activation(c, x, LM_ACT_TANH, 0.0f); }
+lm_tensor *lm_gelu(lm_ctx *c, lm_tensor *x) { return activation(c, x, LM_ACT_GELU, 0.0f); }

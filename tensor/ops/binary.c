@@ -11,9 +11,10 @@
  * temporary that lm_sum() (double accumulation, fixed order) reduces over the broadcast dims.
  * What it is not: scalar operands (scalar.c), in-place ops, type promotion. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 #include <assert.h>
 
-typedef enum bin_op { BIN_ADD = 0, BIN_SUB = 1, BIN_MUL = 2, BIN_DIV = 3 } bin_op;
 static const char *const BIN_NAMES[4] = {"add", "sub", "mul", "div"};
 
 #define BLK 4096L      /* elements of the innermost dim per parallel work unit */
@@ -137,9 +138,9 @@ static void fwd_row(int op, float *restrict y, const float *a, ptrdiff_t sa, con
                     ptrdiff_t sb, long n)
 {
     switch (op) {
-    case BIN_ADD: ROW_LOOP(y, =, av + bv); break;
-    case BIN_SUB: ROW_LOOP(y, =, av - bv); break;
-    case BIN_MUL: ROW_LOOP(y, =, av * bv); break;
+    case LM_BIN_ADD: ROW_LOOP(y, =, av + bv); break;
+    case LM_BIN_SUB: ROW_LOOP(y, =, av - bv); break;
+    case LM_BIN_MUL: ROW_LOOP(y, =, av * bv); break;
     default: ROW_LOOP(y, =, av / bv); break;
     }
 }
@@ -149,28 +150,24 @@ static void bwd_row(int op, int which, float *restrict d, const float *restrict 
                     const float *a, ptrdiff_t sa, const float *b, ptrdiff_t sb, long n)
 {
     switch (op * 2 + which) {
-    case BIN_ADD * 2 + 0:
-    case BIN_ADD * 2 + 1:
-    case BIN_SUB * 2 + 0: ROW_LOOP(d, +=, g[i]); break;
-    case BIN_SUB * 2 + 1: ROW_LOOP(d, +=, -g[i]); break;
-    case BIN_MUL * 2 + 0: ROW_LOOP(d, +=, g[i] * bv); break;
-    case BIN_MUL * 2 + 1: ROW_LOOP(d, +=, g[i] * av); break;
-    case BIN_DIV * 2 + 0: ROW_LOOP(d, +=, g[i] / bv); break;
+    case LM_BIN_ADD * 2 + 0:
+    case LM_BIN_ADD * 2 + 1:
+    case LM_BIN_SUB * 2 + 0: ROW_LOOP(d, +=, g[i]); break;
+    case LM_BIN_SUB * 2 + 1: ROW_LOOP(d, +=, -g[i]); break;
+    case LM_BIN_MUL * 2 + 0: ROW_LOOP(d, +=, g[i] * bv); break;
+    case LM_BIN_MUL * 2 + 1: ROW_LOOP(d, +=, g[i] * av); break;
+    case LM_BIN_DIV * 2 + 0: ROW_LOOP(d, +=, g[i] / bv); break;
     default: ROW_LOOP(d, +=, -g[i] * av / (bv * bv)); break;
     }
 }
 
 /* ---- kernels ----------------------------------------------------------------------------- */
-typedef struct binary_params { int op; } binary_params;
-typedef struct binary_bwd_params { int op, which, accumulate; } binary_bwd_params;
-typedef struct grad_acc_params { float scale; } grad_acc_params;
-
 /* t[0] = a, t[1] = b (contiguous, broadcastable), t[2] = y (contiguous, broadcast shape).
  * y = a op b (writes =). */
 static int binary_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const binary_params *p = params;
+    const lm_binary_params *p = params;
     const lm_tensor *a = t[0], *b = t[1];
     lm_tensor *y = t[2];
     bc_layout L;
@@ -194,7 +191,7 @@ static int binary_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
 static int binary_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const binary_bwd_params *p = params;
+    const lm_binary_bwd_params *p = params;
     const lm_tensor *g = t[0], *a = t[1], *b = t[2];
     float *d = t[3]->data;
     bc_layout L;
@@ -220,7 +217,7 @@ static int binary_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
 static int grad_acc_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    float k = ((const grad_acc_params *)params)->scale;
+    float k = ((const lm_grad_acc_params *)params)->scale;
     float *d = t[0]->data;
     const float *s = t[1]->data;
     long n = lm_tensor_numel(t[0]);
@@ -229,9 +226,9 @@ static int grad_acc_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *para
     return 0;
 }
 
-static const lm_kernel K_BINARY_FWD = {"binary_fwd", binary_fwd_cpu};
-static const lm_kernel K_BINARY_BWD = {"binary_bwd", binary_bwd_cpu};
-static const lm_kernel K_GRAD_ACC = {"binary_grad_acc", grad_acc_cpu};
+LM_KERNEL(binary_fwd, binary_fwd_cpu);
+LM_KERNEL(binary_bwd, binary_bwd_cpu);
+LM_KERNEL(binary_grad_acc, grad_acc_cpu);
 
 /* ---- backward ---------------------------------------------------------------------------- */
 /* Dims of the output g along which operand x was broadcast (x right-aligned). */
@@ -250,30 +247,30 @@ static void binary_grad_input(lm_ctx *c, lm_node *n, int op, int which)
 {
     lm_tensor *x = n->in[which], *g = n->out->grad, *gx = lm_grad(c, x);
     if (!gx) return;
-    binary_bwd_params bp = {op, which, 1};
+    lm_binary_bwd_params bp = {op, which, 1};
     if (lm_tensor_numel(x) == lm_tensor_numel(g)) { /* not broadcast: add in place */
         lm_tensor *t[4] = {g, n->in[0], n->in[1], gx};
-        lm_kernel_run(c, &K_BINARY_BWD, t, 4, &bp);
+        lm_kernel_run(c, &lm_kernel_binary_bwd, t, 4, &bp);
         return;
     }
     lm_tensor *src = g; /* add / sub: the contribution is +-g itself */
-    grad_acc_params ap = {op == BIN_SUB && which ? -1.0f : 1.0f};
-    if (op == BIN_MUL || op == BIN_DIV) {
+    lm_grad_acc_params ap = {op == LM_BIN_SUB && which ? -1.0f : 1.0f};
+    if (op == LM_BIN_MUL || op == LM_BIN_DIV) {
         src = lm_tensor_new(c, g->ndim, g->shape);
         if (!src) return;
         bp.accumulate = 0;
         lm_tensor *t[4] = {g, n->in[0], n->in[1], src};
-        if (lm_kernel_run(c, &K_BINARY_BWD, t, 4, &bp)) return;
+        if (lm_kernel_run(c, &lm_kernel_binary_bwd, t, 4, &bp)) return;
     }
     lm_tensor *s = lm_sum(c, src, bc_reduce_mask(x, g), 1);
     if (!s) return;
     lm_tensor *t2[2] = {gx, s};
-    lm_kernel_run(c, &K_GRAD_ACC, t2, 2, &ap);
+    lm_kernel_run(c, &lm_kernel_binary_grad_acc, t2, 2, &ap);
 }
 
 static void binary_backward(lm_ctx *c, lm_node *n)
 {
-    const binary_params *p = n->params;
+    const lm_binary_params *p = n->params;
     for (int which = 0; which < 2; which++)
         if (lm_requires_grad(n->in[which])) binary_grad_input(c, n, p->op, which);
 }
@@ -294,15 +291,15 @@ static lm_tensor *binary(lm_ctx *c, int op, lm_tensor *a, lm_tensor *b)
     b = lm_contiguous(c, b);
     lm_tensor *y = a && b ? lm_tensor_new(c, nd, shape) : NULL;
     if (!y) return NULL;
-    binary_params p = {op};
+    lm_binary_params p = {op};
     lm_tensor *t[3] = {a, b, y};
-    if (lm_kernel_run(c, &K_BINARY_FWD, t, 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_binary_fwd, t, 3, &p)) return NULL;
     lm_tensor *in[2] = {a, b};
     lm_record(c, name, binary_backward, y, in, 2, &p, sizeof p);
     return y;
 }
 
-lm_tensor *lm_add(lm_ctx *c, lm_tensor *a, lm_tensor *b) { return binary(c, BIN_ADD, a, b); }
-lm_tensor *lm_sub(lm_ctx *c, lm_tensor *a, lm_tensor *b) { return binary(c, BIN_SUB, a, b); }
-lm_tensor *lm_mul(lm_ctx *c, lm_tensor *a, lm_tensor *b) { return binary(c, BIN_MUL, a, b); }
-lm_tensor *lm_div(lm_ctx *c, lm_tensor *a, lm_tensor *b) { return binary(c, BIN_DIV, a, b); }
+lm_tensor *lm_add(lm_ctx *c, lm_tensor *a, lm_tensor *b) { return binary(c, LM_BIN_ADD, a, b); }
+lm_tensor *lm_sub(lm_ctx *c, lm_tensor *a, lm_tensor *b) { return binary(c, LM_BIN_SUB, a, b); }
+lm_tensor *lm_mul(lm_ctx *c, lm_tensor *a, lm_tensor *b) { return binary(c, LM_BIN_MUL, a, b); }
+lm_tensor *lm_div(lm_ctx *c, lm_tensor *a, lm_tensor *b) { return binary(c, LM_BIN_DIV, a, b); }

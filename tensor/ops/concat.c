@@ -6,9 +6,9 @@
  * per group of inputs, all with the same output; each adds only into its own group's grads.
  * What it is not: a view (outputs are contiguous copies). */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 #include <string.h>
-
-typedef struct band_params { int dim, start; } band_params; /* band [start, ...) along dim */
 
 /* Geometry of t around dim: outer = prod(shape[:dim]), inner = prod(shape[dim+1:]). */
 static void band_geometry(const lm_tensor *t, int dim, long *outer, long *inner)
@@ -48,7 +48,7 @@ static void band_move(lm_ctx *c, const lm_tensor *whole, const lm_tensor *part, 
 /* concat forward: t[0..nt-1) = inputs, t[nt-1] = output; out = */
 static int concat_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
-    const band_params *p = params;
+    const lm_band_params *p = params;
     int start = p->start;
     for (int i = 0; i < nt - 1; i++) {
         long outer, inner;
@@ -73,7 +73,7 @@ static int concat_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
 static int concat_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const band_params *p = params;
+    const lm_band_params *p = params;
     band_move(c, t[1], t[0], p->dim, p->start, 1, 1);
     return 0;
 }
@@ -81,7 +81,7 @@ static int concat_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
 static int split_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const band_params *p = params;
+    const lm_band_params *p = params;
     band_move(c, t[0], t[1], p->dim, p->start, 1, 0);
     return 0;
 }
@@ -89,26 +89,26 @@ static int split_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *par
 static int split_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const band_params *p = params;
+    const lm_band_params *p = params;
     band_move(c, t[0], t[1], p->dim, p->start, 0, 1);
     return 0;
 }
-static const lm_kernel K_CONCAT_FWD = {"concat_fwd", concat_fwd_cpu};
-static const lm_kernel K_CONCAT_BWD = {"concat_bwd", concat_bwd_cpu};
-static const lm_kernel K_SPLIT_FWD = {"split_fwd", split_fwd_cpu};
-static const lm_kernel K_SPLIT_BWD = {"split_bwd", split_bwd_cpu};
+LM_KERNEL(concat_fwd, concat_fwd_cpu);
+LM_KERNEL(concat_bwd, concat_bwd_cpu);
+LM_KERNEL(split_fwd, split_fwd_cpu);
+LM_KERNEL(split_bwd, split_bwd_cpu);
 
 /* One node = one group of inputs; params->start is the group's first band. */
 static void concat_backward(lm_ctx *c, lm_node *n)
 {
-    const band_params *p = n->params;
-    band_params q = *p;
+    const lm_band_params *p = n->params;
+    lm_band_params q = *p;
     for (int i = 0; i < n->nin; i++) {
         lm_tensor *x = n->in[i];
         if (lm_requires_grad(x)) {
             lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
             if (!t[0]) return;
-            lm_kernel_run(c, &K_CONCAT_BWD, t, 2, &q);
+            lm_kernel_run(c, &lm_kernel_concat_bwd, t, 2, &q);
         }
         q.start += x->shape[p->dim];
     }
@@ -158,8 +158,8 @@ lm_tensor *lm_concat(lm_ctx *c, lm_tensor *const *xs, int n, int dim)
     lm_tensor *y = lm_tensor_new(c, in[0]->ndim, s);
     if (!y) return NULL;
     in[n] = y;
-    band_params p = {d, 0};
-    if (lm_kernel_run(c, &K_CONCAT_FWD, in, n + 1, &p)) return NULL;
+    lm_band_params p = {d, 0};
+    if (lm_kernel_run(c, &lm_kernel_concat_fwd, in, n + 1, &p)) return NULL;
     for (int g = 0; g < n; g += LM_MAX_INPUTS) {
         int m = n - g < LM_MAX_INPUTS ? n - g : LM_MAX_INPUTS;
         lm_record(c, "concat", concat_backward, y, in + g, m, &p, sizeof p);
@@ -173,7 +173,7 @@ static void split_backward(lm_ctx *c, lm_node *n)
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_SPLIT_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_split_bwd, t, 2, n->params);
 }
 
 /* Checks split arguments; returns nonzero when valid. */
@@ -214,13 +214,13 @@ int lm_split(lm_ctx *c, lm_tensor *x, int dim, int n, const int *sizes, lm_tenso
     if (!split_check(c, x, d, n, sizes)) return c->status;
     x = lm_contiguous(c, x);
     if (!x) return c->status;
-    band_params p = {d, 0};
+    lm_band_params p = {d, 0};
     for (int i = 0; i < n; i++) {
         int s[LM_MAX_DIMS];
         for (int k = 0; k < x->ndim; k++) s[k] = k == d ? sizes[i] : x->shape[k];
         lm_tensor *y = lm_tensor_new(c, x->ndim, s);
         lm_tensor *t[2] = {x, y};
-        if (!y || lm_kernel_run(c, &K_SPLIT_FWD, t, 2, &p)) break;
+        if (!y || lm_kernel_run(c, &lm_kernel_split_fwd, t, 2, &p)) break;
         lm_record(c, "split", split_backward, y, &x, 1, &p, sizeof p);
         out[i] = y;
         p.start += sizes[i];

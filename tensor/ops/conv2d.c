@@ -9,6 +9,7 @@
  * picks one (lm_conv2d_set_path() forces the reference on a context, for tests).
  * What it is not: transposed or 3-D convolution (conv_transpose2d.c, conv3d.c). */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include "tensor/ops/gemm_internal.h"
 #include <omp.h>
 #include <string.h>
@@ -166,10 +167,10 @@ static int conv2d_bwd_bias_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const voi
     return 0;
 }
 
-static const lm_kernel K_CONV2D_FWD = {"conv2d_fwd", conv2d_fwd_cpu};
-static const lm_kernel K_CONV2D_BWD_X = {"conv2d_bwd_x", conv2d_bwd_x_cpu};
-static const lm_kernel K_CONV2D_BWD_W = {"conv2d_bwd_w", conv2d_bwd_w_cpu};
-static const lm_kernel K_CONV2D_BWD_BIAS = {"conv2d_bwd_bias", conv2d_bwd_bias_cpu};
+LM_KERNEL(conv2d_fwd, conv2d_fwd_cpu);
+LM_KERNEL(conv2d_bwd_x, conv2d_bwd_x_cpu);
+LM_KERNEL(conv2d_bwd_w, conv2d_bwd_w_cpu);
+LM_KERNEL(conv2d_bwd_bias, conv2d_bwd_bias_cpu);
 
 /* ---- op ------------------------------------------------------------------------------------ */
 static void conv2d_backward(lm_ctx *c, lm_node *n)
@@ -178,15 +179,15 @@ static void conv2d_backward(lm_ctx *c, lm_node *n)
     lm_tensor *dy = n->out->grad;
     if (lm_requires_grad(x)) {
         lm_tensor *t[3] = {dy, w, lm_grad(c, x)};
-        if (t[2]) lm_kernel_run(c, &K_CONV2D_BWD_X, t, 3, n->params);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_conv2d_bwd_x, t, 3, n->params);
     }
     if (lm_requires_grad(w)) {
         lm_tensor *t[3] = {dy, x, lm_grad(c, w)};
-        if (t[2]) lm_kernel_run(c, &K_CONV2D_BWD_W, t, 3, n->params);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_conv2d_bwd_w, t, 3, n->params);
     }
     if (lm_requires_grad(bias)) {
         lm_tensor *t[2] = {dy, lm_grad(c, bias)};
-        if (t[1]) lm_kernel_run(c, &K_CONV2D_BWD_BIAS, t, 2, n->params);
+        if (t[1]) lm_kernel_run(c, &lm_kernel_conv2d_bwd_bias, t, 2, n->params);
     }
 }
 
@@ -251,7 +252,7 @@ lm_tensor *lm_conv2d(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor *bias,
     lm_tensor *y = lm_tensor_new4(c, g.B, g.Cout, g.Ho, g.Wo);
     if (!y) return NULL;
     lm_tensor *t[4] = {x, w, y, bias};
-    if (lm_kernel_run(c, &K_CONV2D_FWD, t, bias ? 4 : 3, &g)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_conv2d_fwd, t, bias ? 4 : 3, &g)) return NULL;
     lm_tensor *in[3] = {x, w, bias};
     lm_record(c, "conv2d", conv2d_backward, y, in, bias ? 3 : 2, &g, sizeof g);
     return y;

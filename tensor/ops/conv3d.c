@@ -16,28 +16,22 @@
  * What it is not: a strided or dilated 3-D conv, nor an im2col/GEMM conv (the channel counts
  * this project uses are tiny; a many-channel 3-D conv would want GEMM). */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 #include <omp.h>
 #include <string.h>
-
-/* Geometry of one conv (no pointers: device backends reuse it). */
-typedef struct conv3d_params {
-    int B, Cin, D, H, W;    /* input x */
-    int Cout, Do, Ho, Wo;   /* output y */
-    int kd, kh, kw, pd, ph, pw;
-    int has_bias;
-} conv3d_params;
 
 /* Work (multiply-adds) below which a kernel runs on one thread: a parallel region costs more. */
 #define CONV3D_PAR_MIN 65536L
 
 /* Multiply-adds of one pass (forward, d/dx or d/dw). */
-static long conv3d_macs(const conv3d_params *p)
+static long conv3d_macs(const lm_conv3d_params *p)
 {
     return (long)p->B * p->Cout * p->Do * p->Ho * p->Wo * p->Cin * p->kd * p->kh * p->kw;
 }
 
 /* Width of a W-padded input row: output column ox, tap kx reads padded column ox + kx. */
-static int padded_width(const conv3d_params *p) { return p->Wo + p->kw - 1; }
+static int padded_width(const lm_conv3d_params *p) { return p->Wo + p->kw - 1; }
 
 /* dst (nrows x Wp) = rows of src (nrows x W) shifted right by pw (negative: cropped), zeros
  * elsewhere. Returns the arena buffer or NULL (ctx error set). */
@@ -99,7 +93,7 @@ static void tap_batch_flush(tap_batch *tb, float *restrict yr, int Wo)
 
 /* One output plane y[b, co, oz] (Ho x Wo) = bias (or += when accumulate) + taps over xb, the
  * W-padded input of batch item b (Cin x D x H rows of padded_width). */
-static void conv3d_plane(const conv3d_params *p, const float *xb, const float *w, float bias,
+static void conv3d_plane(const lm_conv3d_params *p, const float *xb, const float *w, float bias,
                          int accumulate, int co, int oz, float *yp)
 {
     int Wp = padded_width(p);
@@ -131,7 +125,7 @@ static void conv3d_plane(const conv3d_params *p, const float *xb, const float *w
 }
 
 /* y = (bias) + conv, or y += conv when accumulate; x unpadded. Each plane by one thread. */
-static int conv3d_direct(lm_ctx *c, const conv3d_params *p, const float *x, const float *w,
+static int conv3d_direct(lm_ctx *c, const lm_conv3d_params *p, const float *x, const float *w,
                          const float *bias, int accumulate, float *y)
 {
     int Wp = padded_width(p);
@@ -162,8 +156,8 @@ static int conv3d_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pp
 static int conv3d_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const conv3d_params *p = pp;
-    conv3d_params q = *p; /* dy -> dx geometry */
+    const lm_conv3d_params *p = pp;
+    lm_conv3d_params q = *p; /* dy -> dx geometry */
     q.Cin = p->Cout, q.D = p->Do, q.H = p->Ho, q.W = p->Wo;
     q.Cout = p->Cin, q.Do = p->D, q.Ho = p->H, q.Wo = p->W;
     q.pd = p->kd - 1 - p->pd, q.ph = p->kh - 1 - p->ph, q.pw = p->kw - 1 - p->pw;
@@ -213,7 +207,7 @@ static double dot_rows(const float *a, long sa, const float *b, long sb, int n, 
 
 /* part[co][ci][kz][ky][kx] += sum over the output planes q in [q0, q1) (q = b Do + oz) of
  * dy * shifted x; xp is the W-padded input. */
-static void wgrad_planes(const conv3d_params *p, const float *xp, const float *dy, long q0,
+static void wgrad_planes(const lm_conv3d_params *p, const float *xp, const float *dy, long q0,
                          long q1, double *part)
 {
     int Wp = padded_width(p);
@@ -246,7 +240,7 @@ static void wgrad_planes(const conv3d_params *p, const float *xp, const float *d
 static int conv3d_bwd_w_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const conv3d_params *p = pp;
+    const lm_conv3d_params *p = pp;
     int T = lm_nthreads(c);
     long nw = (long)p->Cout * p->Cin * p->kd * p->kh * p->kw, nq = (long)p->B * p->Do;
     lm_arena_mark mark = lm_arena_get_mark(&c->arena);
@@ -290,7 +284,7 @@ static double sum_floats(const float *r, long n)
 static int conv3d_bwd_b_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const conv3d_params *p = pp;
+    const lm_conv3d_params *p = pp;
     int T = lm_nthreads(c);
     long plane = (long)p->Ho * p->Wo, nq = (long)p->B * p->Cout * p->Do;
     lm_arena_mark mark = lm_arena_get_mark(&c->arena);
@@ -316,34 +310,34 @@ static int conv3d_bwd_b_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
     return 0;
 }
 
-static const lm_kernel K_CONV3D_FWD = {"conv3d_fwd", conv3d_fwd_cpu};
-static const lm_kernel K_CONV3D_BWD_X = {"conv3d_bwd_x", conv3d_bwd_x_cpu};
-static const lm_kernel K_CONV3D_BWD_W = {"conv3d_bwd_w", conv3d_bwd_w_cpu};
-static const lm_kernel K_CONV3D_BWD_B = {"conv3d_bwd_b", conv3d_bwd_b_cpu};
+LM_KERNEL(conv3d_fwd, conv3d_fwd_cpu);
+LM_KERNEL(conv3d_bwd_x, conv3d_bwd_x_cpu);
+LM_KERNEL(conv3d_bwd_w, conv3d_bwd_w_cpu);
+LM_KERNEL(conv3d_bwd_b, conv3d_bwd_b_cpu);
 
 /* in = {x, w [, bias]} */
 static void conv3d_backward(lm_ctx *c, lm_node *n)
 {
-    const conv3d_params *p = n->params;
+    const lm_conv3d_params *p = n->params;
     lm_tensor *x = n->in[0], *w = n->in[1], *bias = n->nin > 2 ? n->in[2] : NULL;
     lm_tensor *dy = n->out->grad;
     if (lm_requires_grad(x)) {
         lm_tensor *t[3] = {dy, w, lm_grad(c, x)};
-        if (t[2]) lm_kernel_run(c, &K_CONV3D_BWD_X, t, 3, p);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_conv3d_bwd_x, t, 3, p);
     }
     if (lm_requires_grad(w)) {
         lm_tensor *t[3] = {x, dy, lm_grad(c, w)};
-        if (t[2]) lm_kernel_run(c, &K_CONV3D_BWD_W, t, 3, p);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_conv3d_bwd_w, t, 3, p);
     }
     if (lm_requires_grad(bias)) {
         lm_tensor *t[2] = {dy, lm_grad(c, bias)};
-        if (t[1]) lm_kernel_run(c, &K_CONV3D_BWD_B, t, 2, p);
+        if (t[1]) lm_kernel_run(c, &lm_kernel_conv3d_bwd_b, t, 2, p);
     }
 }
 
 /* Shape checks and output size. Returns 0 on success (params filled), else sets the error. */
 static int conv3d_shapes(lm_ctx *c, const lm_tensor *x, const lm_tensor *w, const lm_tensor *bias,
-                         int pd, int ph, int pw, conv3d_params *p)
+                         int pd, int ph, int pw, lm_conv3d_params *p)
 {
     char sx[64], sw[64], sb[64];
     lm_shape_str(x, sx, sizeof sx);
@@ -357,7 +351,7 @@ static int conv3d_shapes(lm_ctx *c, const lm_tensor *x, const lm_tensor *w, cons
                     "x D x H x W, weight Cout x Cin x kd x kh x kw)", sx, sw);
         return -1;
     }
-    *p = (conv3d_params){x->shape[0], x->shape[1], x->shape[2], x->shape[3], x->shape[4],
+    *p = (lm_conv3d_params){x->shape[0], x->shape[1], x->shape[2], x->shape[3], x->shape[4],
                          w->shape[0], 0, 0, 0, w->shape[2], w->shape[3], w->shape[4],
                          pd, ph, pw, bias != NULL};
     if (bias && (bias->ndim != 1 || bias->shape[0] != p->Cout)) {
@@ -380,7 +374,7 @@ lm_tensor *lm_conv3d(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor *bias, int
                      int pad_h, int pad_w)
 {
     if (!lm_check_inputs(c, "conv3d", 2, x, w)) return NULL;
-    conv3d_params p;
+    lm_conv3d_params p;
     if (conv3d_shapes(c, x, w, bias, pad_d, pad_h, pad_w, &p)) return NULL;
     x = lm_contiguous(c, x);
     w = lm_contiguous(c, w);
@@ -389,7 +383,7 @@ lm_tensor *lm_conv3d(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor *bias, int
     lm_tensor *y = lm_tensor_new(c, 5, s);
     if (!y) return NULL;
     lm_tensor *t[4] = {x, w, y, bias};
-    if (lm_kernel_run(c, &K_CONV3D_FWD, t, bias ? 4 : 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_conv3d_fwd, t, bias ? 4 : 3, &p)) return NULL;
     lm_tensor *in[3] = {x, w, bias};
     lm_record(c, "conv3d", conv3d_backward, y, in, bias ? 3 : 2, &p, sizeof p);
     return y;

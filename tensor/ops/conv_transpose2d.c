@@ -13,23 +13,17 @@
  * What it is not: conv2d (tensor/ops/conv2d.c), nor an output-size-inferring layer: the
  * caller passes output_padding explicitly. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 #include "tensor/ops/gemm_internal.h"
 #include <omp.h>
 #include <string.h>
-
-/* Geometry shared by every kernel of this op (no pointers: device backends reuse it). */
-typedef struct convt_params {
-    int B, Cin, H, W;       /* input x */
-    int Cout, Ho, Wo;       /* output y */
-    int kh, kw, sh, sw, ph, pw, dh, dw, groups;
-    int has_bias;
-} convt_params;
 
 /* Work (multiply-adds) below which a kernel runs on one thread: a parallel region costs more. */
 #define CONVT_PAR_MIN 65536L
 
 /* Multiply-adds of the GEMMs of one pass (forward, d/dx or d/dw). */
-static long convt_macs(const convt_params *p)
+static long convt_macs(const lm_convt_params *p)
 {
     return (long)p->B * p->Cin * (p->Cout / p->groups) * p->kh * p->kw * p->H * p->W;
 }
@@ -54,7 +48,7 @@ static void split_range(long n, int parts, int id, long align, long *lo, long *h
 }
 
 /* y (Ho x Wo, one output channel) += col2im(col), col = kh kw rows of H W (this channel). */
-static void col2im_add(const convt_params *p, const float *col, float *y)
+static void col2im_add(const lm_convt_params *p, const float *col, float *y)
 {
     long HW = (long)p->H * p->W;
     for (int ky = 0; ky < p->kh; ky++)
@@ -72,7 +66,7 @@ static void col2im_add(const convt_params *p, const float *col, float *y)
 }
 
 /* col (kh kw rows of H W, one channel of dy) = im2col(dy channel, Ho x Wo); zero outside. */
-static void im2col_chan(const convt_params *p, const float *dy, float *col)
+static void im2col_chan(const lm_convt_params *p, const float *dy, float *col)
 {
     long HW = (long)p->H * p->W;
     for (int ky = 0; ky < p->kh; ky++)
@@ -94,7 +88,7 @@ static void im2col_chan(const convt_params *p, const float *dy, float *col)
  * Writes y = (bias). */
 static int convt_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
-    const convt_params *p = pp;
+    const lm_convt_params *p = pp;
     const float *x = t[0]->data, *w = t[1]->data, *bias = nt > 3 ? t[3]->data : NULL;
     float *y = t[2]->data;
     int G = p->groups, Cig = p->Cin / G, Cog = p->Cout / G, kk = p->kh * p->kw, M = Cog * kk;
@@ -132,7 +126,7 @@ static int convt_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 static int convt_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const convt_params *p = pp;
+    const lm_convt_params *p = pp;
     const float *dy = t[0]->data, *w = t[1]->data;
     float *dx = t[2]->data;
     int G = p->groups, Cig = p->Cin / G, Cog = p->Cout / G, kk = p->kh * p->kw, M = Cog * kk;
@@ -167,7 +161,7 @@ static int convt_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p
 static int convt_bwd_w_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const convt_params *p = pp;
+    const lm_convt_params *p = pp;
     const float *x = t[0]->data, *dy = t[1]->data;
     float *dw = t[2]->data;
     int G = p->groups, Cig = p->Cin / G, Cog = p->Cout / G, kk = p->kh * p->kw, M = Cog * kk;
@@ -217,7 +211,7 @@ static double sum_floats(const float *r, long n)
 static int convt_bwd_b_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pp)
 {
     (void)nt;
-    const convt_params *p = pp;
+    const lm_convt_params *p = pp;
     const float *dy = t[0]->data;
     float *db = t[1]->data;
     long HWo = (long)p->Ho * p->Wo;
@@ -232,33 +226,33 @@ static int convt_bwd_b_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p
     return 0;
 }
 
-static const lm_kernel K_CONVT_FWD = {"conv_transpose2d_fwd", convt_fwd_cpu};
-static const lm_kernel K_CONVT_BWD_X = {"conv_transpose2d_bwd_x", convt_bwd_x_cpu};
-static const lm_kernel K_CONVT_BWD_W = {"conv_transpose2d_bwd_w", convt_bwd_w_cpu};
-static const lm_kernel K_CONVT_BWD_B = {"conv_transpose2d_bwd_b", convt_bwd_b_cpu};
+LM_KERNEL(conv_transpose2d_fwd, convt_fwd_cpu);
+LM_KERNEL(conv_transpose2d_bwd_x, convt_bwd_x_cpu);
+LM_KERNEL(conv_transpose2d_bwd_w, convt_bwd_w_cpu);
+LM_KERNEL(conv_transpose2d_bwd_b, convt_bwd_b_cpu);
 
 /* in = {x, w [, bias]} */
 static void convt_backward(lm_ctx *c, lm_node *n)
 {
-    const convt_params *p = n->params;
+    const lm_convt_params *p = n->params;
     lm_tensor *x = n->in[0], *w = n->in[1], *bias = n->nin > 2 ? n->in[2] : NULL;
     lm_tensor *dy = n->out->grad;
     if (lm_requires_grad(x)) {
         lm_tensor *t[3] = {dy, w, lm_grad(c, x)};
-        if (t[2]) lm_kernel_run(c, &K_CONVT_BWD_X, t, 3, p);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_conv_transpose2d_bwd_x, t, 3, p);
     }
     if (lm_requires_grad(w)) {
         lm_tensor *t[3] = {x, dy, lm_grad(c, w)};
-        if (t[2]) lm_kernel_run(c, &K_CONVT_BWD_W, t, 3, p);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_conv_transpose2d_bwd_w, t, 3, p);
     }
     if (lm_requires_grad(bias)) {
         lm_tensor *t[2] = {dy, lm_grad(c, bias)};
-        if (t[1]) lm_kernel_run(c, &K_CONVT_BWD_B, t, 2, p);
+        if (t[1]) lm_kernel_run(c, &lm_kernel_conv_transpose2d_bwd_b, t, 2, p);
     }
 }
 
 /* Options with 0 read as 1; invalid values set the ctx error. Returns 0 on success. */
-static int convt_options(lm_ctx *c, const lm_conv2d_opts *o, int oph, int opw, convt_params *p)
+static int convt_options(lm_ctx *c, const lm_conv2d_opts *o, int oph, int opw, lm_convt_params *p)
 {
     lm_conv2d_opts d = {0, 0, 0, 0, 0, 0, 0};
     if (!o) o = &d;
@@ -287,7 +281,7 @@ static int convt_options(lm_ctx *c, const lm_conv2d_opts *o, int oph, int opw, c
 
 /* Shape checks and output size. Returns 0 on success (params filled), else sets the error. */
 static int convt_shapes(lm_ctx *c, const lm_tensor *x, const lm_tensor *w, const lm_tensor *bias,
-                        int oph, int opw, convt_params *p)
+                        int oph, int opw, lm_convt_params *p)
 {
     char sx[64], sw[64], sb[64];
     lm_shape_str(x, sx, sizeof sx);
@@ -321,7 +315,7 @@ lm_tensor *lm_conv_transpose2d(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor 
                                const lm_conv2d_opts *o, int out_pad_h, int out_pad_w)
 {
     if (!lm_check_inputs(c, "conv_transpose2d", 2, x, w)) return NULL;
-    convt_params p;
+    lm_convt_params p;
     memset(&p, 0, sizeof p);
     if (convt_options(c, o, out_pad_h, out_pad_w, &p) ||
         convt_shapes(c, x, w, bias, out_pad_h, out_pad_w, &p))
@@ -332,7 +326,7 @@ lm_tensor *lm_conv_transpose2d(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor 
     lm_tensor *y = lm_tensor_new4(c, p.B, p.Cout, p.Ho, p.Wo);
     if (!y) return NULL;
     lm_tensor *t[4] = {x, w, y, bias};
-    if (lm_kernel_run(c, &K_CONVT_FWD, t, bias ? 4 : 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_conv_transpose2d_fwd, t, bias ? 4 : 3, &p)) return NULL;
     lm_tensor *in[3] = {x, w, bias};
     lm_record(c, "conv_transpose2d", convt_backward, y, in, bias ? 3 : 2, &p, sizeof p);
     return y;

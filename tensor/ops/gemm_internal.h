@@ -9,6 +9,7 @@
 #ifndef LM_GEMM_INTERNAL_H
 #define LM_GEMM_INTERNAL_H
 #include "tensor/tensor.h"
+#include "tensor/op_params.h"
 
 /* ---- GEMM ------------------------------------------------------------------------------ */
 /* Row-major C = alpha op(A) op(B) + beta C with op(A) M x K, op(B) K x N (CBLAS semantics),
@@ -39,12 +40,7 @@ void lm_gemm_batched(lm_ctx *c, int batch, int ta, int tb, int M, int N, int K, 
                      float beta, float *C, long sc, int ldc);
 
 /* ---- conv2d geometry and CPU paths ----------------------------------------------------- */
-/* Plain parameters of a conv2d kernel (no pointers: also read by device backends).
- * x: B x Cin x H x W, w: Cout x Cin/groups x kh x kw, y: B x Cout x Ho x Wo. */
-typedef struct lm_conv_geom {
-    int B, Cin, H, W, Cout, Ho, Wo;
-    int kh, kw, sh, sw, ph, pw, dh, dw, groups;
-} lm_conv_geom;
+/* The params of a conv2d kernel: lm_conv_geom (tensor/op_params.h). */
 
 /* Which CPU implementation conv2d kernels use. AUTO: depthwise direct loops when each output
  * channel reads one input channel, Winograd F(4x4, 3x3) for 3x3 stride-1 convs with enough

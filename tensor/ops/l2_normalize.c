@@ -7,12 +7,12 @@
  * constant eps: gx += g / eps.
  * What it is not: other p-norms. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 #include "tensor/ops/op_paths.h"
 #include <math.h>
 
 enum { L2_BLOCK = 64 };
-
-typedef struct l2_params { int axis; float eps; } l2_params;
 
 /* outer, len, inner of t around axis */
 static void l2_geometry(const lm_tensor *t, int axis, long *outer, long *len, long *inner)
@@ -56,7 +56,7 @@ static void l2_rows_fwd(lm_ctx *c, const float *x0, float *y0, long outer, long 
 static int l2_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const l2_params *p = params;
+    const lm_l2_params *p = params;
     long outer, len, inner;
     l2_geometry(t[0], p->axis, &outer, &len, &inner);
     if (inner == 1 && lm_op_path(c) == LM_OP_PATH_FAST) {
@@ -88,7 +88,7 @@ static int l2_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params
 static int l2_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const l2_params *p = params;
+    const lm_l2_params *p = params;
     long outer, len, inner;
     l2_geometry(t[0], p->axis, &outer, &len, &inner);
     const long nblk = (inner + L2_BLOCK - 1) / L2_BLOCK;
@@ -117,15 +117,15 @@ static int l2_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params
     }
     return 0;
 }
-static const lm_kernel K_L2_FWD = {"l2_normalize_fwd", l2_fwd_cpu};
-static const lm_kernel K_L2_BWD = {"l2_normalize_bwd", l2_bwd_cpu};
+LM_KERNEL(l2_normalize_fwd, l2_fwd_cpu);
+LM_KERNEL(l2_normalize_bwd, l2_bwd_cpu);
 
 static void l2_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[3] = {lm_grad(c, x), n->out->grad, x};
-    if (t[0]) lm_kernel_run(c, &K_L2_BWD, t, 3, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_l2_normalize_bwd, t, 3, n->params);
 }
 
 lm_tensor *lm_l2_normalize(lm_ctx *c, lm_tensor *x, int axis, float eps)
@@ -146,9 +146,9 @@ lm_tensor *lm_l2_normalize(lm_ctx *c, lm_tensor *x, int axis, float eps)
     if (!x) return NULL;
     lm_tensor *y = lm_tensor_new(c, x->ndim, x->shape);
     if (!y) return NULL;
-    l2_params p = {a, eps};
+    lm_l2_params p = {a, eps};
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_L2_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_l2_normalize_fwd, t, 2, &p)) return NULL;
     lm_record(c, "l2_normalize", l2_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

@@ -6,18 +6,18 @@
  * (fixed order, double accumulation), so gradients do not depend on the thread count.
  * What it is not: LayerNorm over the last dim (use a permute first), nor batch/group norm. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 #include <math.h>
 
 enum { LN_BLOCK = 64 };
-
-typedef struct ln_params { float eps; int has_w, has_b; } ln_params;
 
 /* forward: t[0] = x, t[1] = y (B x C x H x W), t[2] = stats (B x 2 x H x W), t[3] = w or NULL,
  * t[4] = b or NULL (C); y =, stats = */
 static int ln_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const ln_params *p = params;
+    const lm_ln_params *p = params;
     const int B = t[0]->shape[0], C = t[0]->shape[1];
     const long HW = (long)t[0]->shape[2] * t[0]->shape[3], nblk = (HW + LN_BLOCK - 1) / LN_BLOCK;
     const float *w = p->has_w ? t[3]->data : NULL, *bias = p->has_b ? t[4]->data : NULL;
@@ -60,7 +60,7 @@ static int ln_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params
 static int ln_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const ln_params *p = params;
+    const lm_ln_params *p = params;
     const int B = t[0]->shape[0], C = t[0]->shape[1];
     const long HW = (long)t[0]->shape[2] * t[0]->shape[3], nblk = (HW + LN_BLOCK - 1) / LN_BLOCK;
     const float *w = p->has_w ? t[4]->data : NULL;
@@ -123,9 +123,9 @@ static int ln_bwd_wb_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *par
     }
     return 0;
 }
-static const lm_kernel K_LN_FWD = {"layer_norm_channels_fwd", ln_fwd_cpu};
-static const lm_kernel K_LN_BWD_X = {"layer_norm_channels_bwd_x", ln_bwd_x_cpu};
-static const lm_kernel K_LN_BWD_WB = {"layer_norm_channels_bwd_wb", ln_bwd_wb_cpu};
+LM_KERNEL(layer_norm_channels_fwd, ln_fwd_cpu);
+LM_KERNEL(layer_norm_channels_bwd_x, ln_bwd_x_cpu);
+LM_KERNEL(layer_norm_channels_bwd_wb, ln_bwd_wb_cpu);
 
 /* in = {x, w or NULL, b or NULL, stats} */
 static void ln_backward(lm_ctx *c, lm_node *n)
@@ -134,14 +134,14 @@ static void ln_backward(lm_ctx *c, lm_node *n)
     if (lm_requires_grad(x)) {
         lm_tensor *t[5] = {lm_grad(c, x), gy, x, st, w};
         if (!t[0]) return;
-        lm_kernel_run(c, &K_LN_BWD_X, t, 5, n->params);
+        lm_kernel_run(c, &lm_kernel_layer_norm_channels_bwd_x, t, 5, n->params);
     }
     if (lm_requires_grad(w) || lm_requires_grad(b)) {
         lm_tensor *gw = lm_requires_grad(w) ? lm_grad(c, w) : NULL;
         lm_tensor *gb = lm_requires_grad(b) ? lm_grad(c, b) : NULL;
         if (c->status) return;
         lm_tensor *t[5] = {gw, gb, gy, x, st};
-        lm_kernel_run(c, &K_LN_BWD_WB, t, 5, n->params);
+        lm_kernel_run(c, &lm_kernel_layer_norm_channels_bwd_wb, t, 5, n->params);
     }
 }
 
@@ -179,9 +179,9 @@ lm_tensor *lm_layer_norm_channels(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tens
     int ss[4] = {x->shape[0], 2, x->shape[2], x->shape[3]};
     lm_tensor *st = y ? lm_tensor_new(c, 4, ss) : NULL;
     if (!st) return NULL;
-    ln_params p = {eps, w != NULL, b != NULL};
+    lm_ln_params p = {eps, w != NULL, b != NULL};
     lm_tensor *t[5] = {x, y, st, w, b};
-    if (lm_kernel_run(c, &K_LN_FWD, t, 5, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_layer_norm_channels_fwd, t, 5, &p)) return NULL;
     lm_tensor *in[4] = {x, w, b, st};
     lm_record(c, "layer_norm_channels", ln_backward, y, in, 4, &p, sizeof p);
     return y;

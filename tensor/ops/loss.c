@@ -8,23 +8,21 @@
  * and the target, if it requires grad, gets the negative of that (dt -= ...).
  * What it is not: reductions other than the mean, Charbonnier or relative losses. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 #include <math.h>
 
 #define PAR_MIN 32768L  /* below this many elements, one thread */
 #define MAX_CHUNKS 256  /* at most this many chunk sums ... */
 #define MIN_CHUNK 8192L /* ... of at least this many elements */
 
-typedef enum loss_kind { LOSS_L1 = 0, LOSS_MSE = 1 } loss_kind;
 static const char *const LOSS_NAMES[2] = {"l1_loss", "mse_loss"};
-
-typedef struct loss_params { int kind; } loss_params;
-typedef struct loss_bwd_params { int kind; float sign; } loss_bwd_params;
 
 /* t[0] = pred, t[1] = target (same shape), t[2] = y {1}: y = mean of |d| or d^2 (writes =). */
 static int loss_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    int kind = ((const loss_params *)params)->kind;
+    int kind = ((const lm_loss_params *)params)->kind;
     const float *p = t[0]->data, *q = t[1]->data;
     long n = lm_tensor_numel(t[0]);
     long chunk = (n + MAX_CHUNKS - 1) / MAX_CHUNKS;
@@ -35,7 +33,7 @@ static int loss_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *para
     for (long k = 0; k < nch; k++) {
         long e = (k + 1) * chunk < n ? (k + 1) * chunk : n;
         double s = 0.0;
-        if (kind == LOSS_L1)
+        if (kind == LM_LOSS_L1)
             for (long i = k * chunk; i < e; i++) s += fabsf(p[i] - q[i]);
         else
             for (long i = k * chunk; i < e; i++) {
@@ -55,12 +53,12 @@ static int loss_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *para
 static int loss_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const loss_bwd_params *bp = params;
+    const lm_loss_bwd_params *bp = params;
     const float *p = t[0]->data, *q = t[1]->data;
     float *gd = t[3]->data;
     long n = lm_tensor_numel(t[0]);
     const float k = (float)((double)bp->sign * t[2]->data[0] / (double)n);
-    if (bp->kind == LOSS_L1) {
+    if (bp->kind == LM_LOSS_L1) {
 #pragma omp parallel for num_threads(lm_nthreads(c)) schedule(static) if (n >= PAR_MIN)
         for (long i = 0; i < n; i++) {
             float d = p[i] - q[i];
@@ -74,17 +72,17 @@ static int loss_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *para
     return 0;
 }
 
-static const lm_kernel K_LOSS_FWD = {"l1_mse_loss_fwd", loss_fwd_cpu};
-static const lm_kernel K_LOSS_BWD = {"l1_mse_loss_bwd", loss_bwd_cpu};
+LM_KERNEL(l1_mse_loss_fwd, loss_fwd_cpu);
+LM_KERNEL(l1_mse_loss_bwd, loss_bwd_cpu);
 
 static void loss_backward(lm_ctx *c, lm_node *n)
 {
-    int kind = ((const loss_params *)n->params)->kind;
+    int kind = ((const lm_loss_params *)n->params)->kind;
     for (int i = 0; i < 2; i++) {
         if (!lm_requires_grad(n->in[i])) continue;
-        loss_bwd_params bp = {kind, i == 0 ? 1.0f : -1.0f};
+        lm_loss_bwd_params bp = {kind, i == 0 ? 1.0f : -1.0f};
         lm_tensor *t[4] = {n->in[0], n->in[1], n->out->grad, lm_grad(c, n->in[i])};
-        if (t[3]) lm_kernel_run(c, &K_LOSS_BWD, t, 4, &bp);
+        if (t[3]) lm_kernel_run(c, &lm_kernel_l1_mse_loss_bwd, t, 4, &bp);
     }
 }
 
@@ -102,9 +100,9 @@ static lm_tensor *loss(lm_ctx *c, int kind, lm_tensor *pred, lm_tensor *target)
     target = lm_contiguous(c, target);
     lm_tensor *y = pred && target ? lm_tensor_new1(c, 1) : NULL;
     if (!y) return NULL;
-    loss_params p = {kind};
+    lm_loss_params p = {kind};
     lm_tensor *t[3] = {pred, target, y};
-    if (lm_kernel_run(c, &K_LOSS_FWD, t, 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_l1_mse_loss_fwd, t, 3, &p)) return NULL;
     lm_tensor *in[2] = {pred, target};
     lm_record(c, name, loss_backward, y, in, 2, &p, sizeof p);
     return y;
@@ -112,10 +110,10 @@ static lm_tensor *loss(lm_ctx *c, int kind, lm_tensor *pred, lm_tensor *target)
 
 lm_tensor *lm_l1_loss(lm_ctx *c, lm_tensor *pred, lm_tensor *target)
 {
-    return loss(c, LOSS_L1, pred, target);
+    return loss(c, LM_LOSS_L1, pred, target);
 }
 
 lm_tensor *lm_mse_loss(lm_ctx *c, lm_tensor *pred, lm_tensor *target)
 {
-    return loss(c, LOSS_MSE, pred, target);
+    return loss(c, LM_LOSS_MSE, pred, target);
 }

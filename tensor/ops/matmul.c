@@ -5,39 +5,19 @@
  * shared by a non-transposed batched left side is folded into one tall GEMM.
  * What it is not: convolution (conv2d*.c) or attention (composed in models/). */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 #include "tensor/ops/gemm_internal.h"
 #include <omp.h>
 
 /* ---- matmul --------------------------------------------------------------------------- */
-typedef struct mm_params {
-    int batch, M, N, K;   /* op(a): M x K, op(b): K x N, per batch item */
-    int ta, tb;           /* transpose flags as given */
-    int a_batched, b_batched;
-} mm_params;
-
-/* The batch folded into M when b is shared and a is not transposed (one tall GEMM). */
-static mm_params mm_folded(const mm_params *p)
-{
-    mm_params q = *p;
-    if (!p->ta && p->a_batched && !p->b_batched) {
-        q.M = p->M * p->batch;
-        q.batch = 1;
-    }
-    return q;
-}
-
-static int lda_of(const mm_params *p) { return p->ta ? p->M : p->K; }
-static int ldb_of(const mm_params *p) { return p->tb ? p->K : p->N; }
-static long sa_of(const mm_params *p) { return p->a_batched ? (long)p->M * p->K : 0; }
-static long sb_of(const mm_params *p) { return p->b_batched ? (long)p->K * p->N : 0; }
-
 /* t = {a, b, y}: y_i = op(a_i) op(b_i) (writes =). */
 static int matmul_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    mm_params p = mm_folded(params);
-    lm_gemm_batched(c, p.batch, p.ta, p.tb, p.M, p.N, p.K, 1.0f, t[0]->data, sa_of(&p),
-                    lda_of(&p), t[1]->data, sb_of(&p), ldb_of(&p), 0.0f, t[2]->data,
+    lm_mm_params p = lm_mm_folded(params);
+    lm_gemm_batched(c, p.batch, p.ta, p.tb, p.M, p.N, p.K, 1.0f, t[0]->data, lm_mm_sa(&p),
+                    lm_mm_lda(&p), t[1]->data, lm_mm_sb(&p), lm_mm_ldb(&p), 0.0f, t[2]->data,
                     (long)p.M * p.N, p.N);
     return 0;
 }
@@ -47,15 +27,15 @@ static int matmul_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
 static int matmul_bwd_a_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    mm_params p = mm_folded(params);
+    lm_mm_params p = lm_mm_folded(params);
     const float *dy = t[0]->data, *b = t[1]->data;
-    long sdy = (long)p.M * p.N, sda = sa_of(&p);
+    long sdy = (long)p.M * p.N, sda = lm_mm_sa(&p);
     if (!p.ta)
-        lm_gemm_batched(c, p.batch, 0, !p.tb, p.M, p.K, p.N, 1.0f, dy, sdy, p.N, b, sb_of(&p),
-                        ldb_of(&p), 1.0f, t[2]->data, sda, p.K);
+        lm_gemm_batched(c, p.batch, 0, !p.tb, p.M, p.K, p.N, 1.0f, dy, sdy, p.N, b, lm_mm_sb(&p),
+                        lm_mm_ldb(&p), 1.0f, t[2]->data, sda, p.K);
     else
-        lm_gemm_batched(c, p.batch, p.tb, 1, p.K, p.M, p.N, 1.0f, b, sb_of(&p), ldb_of(&p), dy,
-                        sdy, p.N, 1.0f, t[2]->data, sda, p.M);
+        lm_gemm_batched(c, p.batch, p.tb, 1, p.K, p.M, p.N, 1.0f, b, lm_mm_sb(&p), lm_mm_ldb(&p),
+                        dy, sdy, p.N, 1.0f, t[2]->data, sda, p.M);
     return 0;
 }
 
@@ -64,32 +44,32 @@ static int matmul_bwd_a_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
 static int matmul_bwd_b_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    mm_params p = mm_folded(params);
+    lm_mm_params p = lm_mm_folded(params);
     const float *dy = t[0]->data, *a = t[1]->data;
-    long sdy = (long)p.M * p.N, sdb = sb_of(&p);
+    long sdy = (long)p.M * p.N, sdb = lm_mm_sb(&p);
     if (!p.tb)
-        lm_gemm_batched(c, p.batch, !p.ta, 0, p.K, p.N, p.M, 1.0f, a, sa_of(&p), lda_of(&p), dy,
-                        sdy, p.N, 1.0f, t[2]->data, sdb, p.N);
+        lm_gemm_batched(c, p.batch, !p.ta, 0, p.K, p.N, p.M, 1.0f, a, lm_mm_sa(&p), lm_mm_lda(&p),
+                        dy, sdy, p.N, 1.0f, t[2]->data, sdb, p.N);
     else
-        lm_gemm_batched(c, p.batch, 1, p.ta, p.N, p.K, p.M, 1.0f, dy, sdy, p.N, a, sa_of(&p),
-                        lda_of(&p), 1.0f, t[2]->data, sdb, p.K);
+        lm_gemm_batched(c, p.batch, 1, p.ta, p.N, p.K, p.M, 1.0f, dy, sdy, p.N, a, lm_mm_sa(&p),
+                        lm_mm_lda(&p), 1.0f, t[2]->data, sdb, p.K);
     return 0;
 }
 
-static const lm_kernel K_MATMUL_FWD = {"matmul_fwd", matmul_fwd_cpu};
-static const lm_kernel K_MATMUL_BWD_A = {"matmul_bwd_a", matmul_bwd_a_cpu};
-static const lm_kernel K_MATMUL_BWD_B = {"matmul_bwd_b", matmul_bwd_b_cpu};
+LM_KERNEL(matmul_fwd, matmul_fwd_cpu);
+LM_KERNEL(matmul_bwd_a, matmul_bwd_a_cpu);
+LM_KERNEL(matmul_bwd_b, matmul_bwd_b_cpu);
 
 static void matmul_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *a = n->in[0], *b = n->in[1], *dy = n->out->grad;
     if (lm_requires_grad(a)) {
         lm_tensor *t[3] = {dy, b, lm_grad(c, a)};
-        if (t[2]) lm_kernel_run(c, &K_MATMUL_BWD_A, t, 3, n->params);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_matmul_bwd_a, t, 3, n->params);
     }
     if (lm_requires_grad(b)) {
         lm_tensor *t[3] = {dy, a, lm_grad(c, b)};
-        if (t[2]) lm_kernel_run(c, &K_MATMUL_BWD_B, t, 3, n->params);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_matmul_bwd_b, t, 3, n->params);
     }
 }
 
@@ -103,7 +83,7 @@ lm_tensor *lm_matmul(lm_ctx *c, lm_tensor *a, lm_tensor *b, int trans_a, int tra
         lm_ctx_fail(c, LM_ERR_SHAPE, "matmul: a %s and b %s must be 2-D or 3-D", sa, sb);
         return NULL;
     }
-    mm_params p = {1, 0, 0, 0, trans_a != 0, trans_b != 0, a->ndim == 3, b->ndim == 3};
+    lm_mm_params p = {1, 0, 0, 0, trans_a != 0, trans_b != 0, a->ndim == 3, b->ndim == 3};
     int ra = a->ndim - 2, rb = b->ndim - 2; /* index of the row dim */
     p.M = p.ta ? a->shape[ra + 1] : a->shape[ra];
     int ka = p.ta ? a->shape[ra] : a->shape[ra + 1];
@@ -127,19 +107,17 @@ lm_tensor *lm_matmul(lm_ctx *c, lm_tensor *a, lm_tensor *b, int trans_a, int tra
     lm_tensor *y = lm_tensor_new(c, nd, nd == 3 ? shape : shape + 1);
     if (!y) return NULL;
     lm_tensor *t[3] = {a, b, y};
-    if (lm_kernel_run(c, &K_MATMUL_FWD, t, 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_matmul_fwd, t, 3, &p)) return NULL;
     lm_tensor *in[2] = {a, b};
     lm_record(c, "matmul", matmul_backward, y, in, 2, &p, sizeof p);
     return y;
 }
 
 /* ---- linear --------------------------------------------------------------------------- */
-typedef struct linear_params { int R, in, out; } linear_params; /* R rows of x */
-
 /* t = {x (R x in), w (out x in), y (R x out)[, bias (out)]}: y = x w^T + bias (writes =). */
 static int linear_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
-    const linear_params *p = params;
+    const lm_linear_params *p = params;
     float *y = t[2]->data;
     if (nt > 3) {
         const float *bias = t[3]->data;
@@ -156,7 +134,7 @@ static int linear_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
 static int linear_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const linear_params *p = params;
+    const lm_linear_params *p = params;
     lm_gemm_mt(c, 0, 0, p->R, p->in, p->out, 1.0f, t[0]->data, p->out, t[1]->data, p->in, 1.0f,
                t[2]->data, p->in);
     return 0;
@@ -166,7 +144,7 @@ static int linear_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
 static int linear_bwd_w_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const linear_params *p = params;
+    const lm_linear_params *p = params;
     lm_gemm_mt(c, 1, 0, p->out, p->in, p->R, 1.0f, t[0]->data, p->out, t[1]->data, p->in, 1.0f,
                t[2]->data, p->in);
     return 0;
@@ -177,7 +155,7 @@ static int linear_bwd_w_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *
 static int linear_bwd_bias_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const linear_params *p = params;
+    const lm_linear_params *p = params;
     const float *dy = t[0]->data;
     float *db = t[1]->data;
     lm_arena_mark m = lm_arena_get_mark(&c->arena);
@@ -197,10 +175,10 @@ static int linear_bwd_bias_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const voi
     return 0;
 }
 
-static const lm_kernel K_LINEAR_FWD = {"linear_fwd", linear_fwd_cpu};
-static const lm_kernel K_LINEAR_BWD_X = {"linear_bwd_x", linear_bwd_x_cpu};
-static const lm_kernel K_LINEAR_BWD_W = {"linear_bwd_w", linear_bwd_w_cpu};
-static const lm_kernel K_LINEAR_BWD_BIAS = {"linear_bwd_bias", linear_bwd_bias_cpu};
+LM_KERNEL(linear_fwd, linear_fwd_cpu);
+LM_KERNEL(linear_bwd_x, linear_bwd_x_cpu);
+LM_KERNEL(linear_bwd_w, linear_bwd_w_cpu);
+LM_KERNEL(linear_bwd_bias, linear_bwd_bias_cpu);
 
 static void linear_backward(lm_ctx *c, lm_node *n)
 {
@@ -208,15 +186,15 @@ static void linear_backward(lm_ctx *c, lm_node *n)
     lm_tensor *dy = n->out->grad;
     if (lm_requires_grad(x)) {
         lm_tensor *t[3] = {dy, w, lm_grad(c, x)};
-        if (t[2]) lm_kernel_run(c, &K_LINEAR_BWD_X, t, 3, n->params);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_linear_bwd_x, t, 3, n->params);
     }
     if (lm_requires_grad(w)) {
         lm_tensor *t[3] = {dy, x, lm_grad(c, w)};
-        if (t[2]) lm_kernel_run(c, &K_LINEAR_BWD_W, t, 3, n->params);
+        if (t[2]) lm_kernel_run(c, &lm_kernel_linear_bwd_w, t, 3, n->params);
     }
     if (lm_requires_grad(bias)) {
         lm_tensor *t[2] = {dy, lm_grad(c, bias)};
-        if (t[1]) lm_kernel_run(c, &K_LINEAR_BWD_BIAS, t, 2, n->params);
+        if (t[1]) lm_kernel_run(c, &lm_kernel_linear_bwd_bias, t, 2, n->params);
     }
 }
 
@@ -236,7 +214,7 @@ lm_tensor *lm_linear(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor *b)
                     lm_shape_str(b, sb, sizeof sb), w->shape[0], sw);
         return NULL;
     }
-    linear_params p = {(int)(lm_tensor_numel(x) / w->shape[1]), w->shape[1], w->shape[0]};
+    lm_linear_params p = {(int)(lm_tensor_numel(x) / w->shape[1]), w->shape[1], w->shape[0]};
     x = lm_contiguous(c, x);
     w = lm_contiguous(c, w);
     if (b) b = lm_contiguous(c, b);
@@ -247,7 +225,7 @@ lm_tensor *lm_linear(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor *b)
     lm_tensor *y = lm_tensor_new(c, x->ndim, shape);
     if (!y) return NULL;
     lm_tensor *t[4] = {x, w, y, b};
-    if (lm_kernel_run(c, &K_LINEAR_FWD, t, b ? 4 : 3, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_linear_fwd, t, b ? 4 : 3, &p)) return NULL;
     lm_tensor *in[3] = {x, w, b};
     lm_record(c, "linear", linear_backward, y, in, b ? 3 : 2, &p, sizeof p);
     return y;

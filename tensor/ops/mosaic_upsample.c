@@ -14,13 +14,8 @@
  * At most 64 channels: the phases travel in the kernel's plain params struct.
  * What it is not: the pixel-unshuffle (see shuffle.c), nor any learned demosaic. */
 #include "tensor/ops.h"
-
-#define MOSAIC_MAX_CH 64
-
-typedef struct mosaic_params {
-    int ty, tx, nch;
-    int py[MOSAIC_MAX_CH], px[MOSAIC_MAX_CH];
-} mosaic_params;
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 
 /* Per position: sample index pair and weight of the second sample. Per sample v: the position
  * ranges [lo0, hi0) reading v as first and [lo1, hi1) as second sample (empty: lo = n, hi = 0). */
@@ -76,7 +71,7 @@ static int mosaic_table(lm_ctx *c, int nch, int n, int t, const int *phase, mosa
 }
 
 /* Row tables (nch x H) and column tables (nch x W) of every channel. */
-static int mosaic_tables(lm_ctx *c, const mosaic_params *p, int H, int W, mosaic_tab *rt,
+static int mosaic_tables(lm_ctx *c, const lm_mosaic_params *p, int H, int W, mosaic_tab *rt,
                          mosaic_tab *ct)
 {
     if (mosaic_table(c, p->nch, H, p->ty, p->py, rt)) return -1;
@@ -87,7 +82,7 @@ static int mosaic_tables(lm_ctx *c, const mosaic_params *p, int H, int W, mosaic
 static int mosaic_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const mosaic_params *p = params;
+    const lm_mosaic_params *p = params;
     const int H = t[0]->shape[2], W = t[0]->shape[3], nch = p->nch, tx = p->tx;
     mosaic_tab rt, ct;
     if (mosaic_tables(c, p, H, W, &rt, &ct)) return c->status;
@@ -131,7 +126,7 @@ static void mosaic_bwd_row(const mosaic_tab *ct, int k, int W, int ws, const flo
 
 /* Backward step 2, raw-gradient row R of one batch item (+=): every channel whose row phase
  * owns R adds its sample row v = (R - py) / ty, gathered from tmp (H x W/tx per channel). */
-static void mosaic_bwd_raw_row(const mosaic_params *p, const mosaic_tab *rt, const float *tmp,
+static void mosaic_bwd_raw_row(const lm_mosaic_params *p, const mosaic_tab *rt, const float *tmp,
                                float *grow, int H, int W, int R)
 {
     const int ws = W / p->tx, hs = H / p->ty;
@@ -155,7 +150,7 @@ static void mosaic_bwd_raw_row(const mosaic_params *p, const mosaic_tab *rt, con
 static int mosaic_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const mosaic_params *p = params;
+    const lm_mosaic_params *p = params;
     const int B = t[0]->shape[0], H = t[0]->shape[2], W = t[0]->shape[3], ws = W / p->tx;
     mosaic_tab rt, ct;
     if (mosaic_tables(c, p, H, W, &rt, &ct)) return c->status;
@@ -176,20 +171,20 @@ static int mosaic_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     }
     return 0;
 }
-static const lm_kernel K_MOSAIC_FWD = {"mosaic_upsample_fwd", mosaic_fwd_cpu};
-static const lm_kernel K_MOSAIC_BWD = {"mosaic_upsample_bwd", mosaic_bwd_cpu};
+LM_KERNEL(mosaic_upsample_fwd, mosaic_fwd_cpu);
+LM_KERNEL(mosaic_upsample_bwd, mosaic_bwd_cpu);
 
 static void mosaic_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_MOSAIC_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_mosaic_upsample_bwd, t, 2, n->params);
 }
 
 /* Validates the arguments and fills p; returns nonzero when valid. */
 static int mosaic_check(lm_ctx *c, const lm_tensor *raw, int ty, int tx, int nch,
-                        const int *phase_y, const int *phase_x, mosaic_params *p)
+                        const int *phase_y, const int *phase_x, lm_mosaic_params *p)
 {
     char sb[64];
     if (raw->ndim != 4 || raw->shape[1] != 1) {
@@ -202,12 +197,12 @@ static int mosaic_check(lm_ctx *c, const lm_tensor *raw, int ty, int tx, int nch
                     "tiles", lm_shape_str(raw, sb, sizeof sb), ty, tx);
         return 0;
     }
-    if (nch < 1 || nch > MOSAIC_MAX_CH || !phase_y || !phase_x) {
+    if (nch < 1 || nch > LM_MOSAIC_UPSAMPLE_MAX_CH || !phase_y || !phase_x) {
         lm_ctx_fail(c, LM_ERR_ARG, "mosaic_upsample: %d channels (need 1..%d and both phase "
-                    "arrays)", nch, MOSAIC_MAX_CH);
+                    "arrays)", nch, LM_MOSAIC_UPSAMPLE_MAX_CH);
         return 0;
     }
-    *p = (mosaic_params){.ty = ty, .tx = tx, .nch = nch};
+    *p = (lm_mosaic_params){.ty = ty, .tx = tx, .nch = nch};
     for (int k = 0; k < nch; k++) {
         if (phase_y[k] < 0 || phase_y[k] >= ty || phase_x[k] < 0 || phase_x[k] >= tx) {
             lm_ctx_fail(c, LM_ERR_ARG, "mosaic_upsample: channel %d phase (%d, %d) is outside "
@@ -224,7 +219,7 @@ lm_tensor *lm_mosaic_upsample(lm_ctx *c, lm_tensor *raw, int ty, int tx, int nch
                               const int *phase_y, const int *phase_x)
 {
     if (!lm_check_inputs(c, "mosaic_upsample", 1, raw)) return NULL;
-    mosaic_params p;
+    lm_mosaic_params p;
     if (!mosaic_check(c, raw, ty, tx, nch, phase_y, phase_x, &p)) return NULL;
     raw = lm_contiguous(c, raw);
     if (!raw) return NULL;
@@ -232,7 +227,7 @@ lm_tensor *lm_mosaic_upsample(lm_ctx *c, lm_tensor *raw, int ty, int tx, int nch
     lm_tensor *y = lm_tensor_new(c, 4, s);
     if (!y) return NULL;
     lm_tensor *t[2] = {raw, y};
-    if (lm_kernel_run(c, &K_MOSAIC_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_mosaic_upsample_fwd, t, 2, &p)) return NULL;
     lm_record(c, "mosaic_upsample", mosaic_backward, y, &raw, 1, &p, sizeof p);
     return y;
 }

@@ -6,8 +6,8 @@
  * input, so the backward runs one plane per job, each in a fixed order.
  * What it is not: replicate/circular padding, negative (cropping) pads. */
 #include "tensor/ops.h"
-
-typedef struct pad_params { int top, bottom, left, right, mode; } pad_params;
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 
 /* Source index of each of the n + lo + hi output positions (-1 = zero). */
 static void pad_table(int *tab, int n, int lo, int hi, int mode)
@@ -24,7 +24,7 @@ static void pad_table(int *tab, int n, int lo, int hi, int mode)
 }
 
 /* Row and column tables in the ctx arena; NULL on allocation failure. */
-static int *pad_tables(lm_ctx *c, const pad_params *p, int H, int W)
+static int *pad_tables(lm_ctx *c, const lm_pad_params *p, int H, int W)
 {
     const int Ho = H + p->top + p->bottom, Wo = W + p->left + p->right;
     int *tab = lm_ctx_alloc(c, (size_t)(Ho + Wo) * sizeof *tab);
@@ -84,19 +84,19 @@ static int pad_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *param
     }
     return 0;
 }
-static const lm_kernel K_PAD_FWD = {"pad2d_fwd", pad_fwd_cpu};
-static const lm_kernel K_PAD_BWD = {"pad2d_bwd", pad_bwd_cpu};
+LM_KERNEL(pad2d_fwd, pad_fwd_cpu);
+LM_KERNEL(pad2d_bwd, pad_bwd_cpu);
 
 static void pad_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_PAD_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_pad2d_bwd, t, 2, n->params);
 }
 
 /* Returns nonzero when the arguments are valid for x. */
-static int pad_check(lm_ctx *c, const lm_tensor *x, const pad_params *p)
+static int pad_check(lm_ctx *c, const lm_tensor *x, const lm_pad_params *p)
 {
     char sb[64];
     if (x->ndim != 4) {
@@ -128,7 +128,7 @@ lm_tensor *lm_pad2d(lm_ctx *c, lm_tensor *x, int top, int bottom, int left, int 
                     lm_pad_mode mode)
 {
     if (!lm_check_inputs(c, "pad2d", 1, x)) return NULL;
-    pad_params p = {top, bottom, left, right, (int)mode};
+    lm_pad_params p = {top, bottom, left, right, (int)mode};
     if (!pad_check(c, x, &p)) return NULL;
     x = lm_contiguous(c, x);
     if (!x) return NULL;
@@ -136,7 +136,7 @@ lm_tensor *lm_pad2d(lm_ctx *c, lm_tensor *x, int top, int bottom, int left, int 
     lm_tensor *y = lm_tensor_new(c, 4, s);
     if (!y) return NULL;
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_PAD_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_pad2d_fwd, t, 2, &p)) return NULL;
     lm_record(c, "pad2d", pad_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

@@ -4,8 +4,8 @@
  * What it is not: a view (PyTorch's permute is a view; ours always copies, so later ops see
  * contiguous memory). */
 #include "tensor/ops.h"
-
-typedef struct permute_params { int ndim; int perm[LM_MAX_DIMS]; } permute_params;
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 
 /* x: contiguous source (or gradient of the source), y: contiguous, y.shape[d] =
  * x.shape[perm[d]]. add == 0: y = x gathered; add: x += y scattered. The map is a bijection:
@@ -44,25 +44,25 @@ static void permute_move(lm_ctx *c, const lm_tensor *x, const lm_tensor *y, cons
 static int permute_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    permute_move(c, t[0], t[1], ((const permute_params *)params)->perm, 0);
+    permute_move(c, t[0], t[1], ((const lm_permute_params *)params)->perm, 0);
     return 0;
 }
 /* backward: t[0] = gx, t[1] = gy; gx += */
 static int permute_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    permute_move(c, t[0], t[1], ((const permute_params *)params)->perm, 1);
+    permute_move(c, t[0], t[1], ((const lm_permute_params *)params)->perm, 1);
     return 0;
 }
-static const lm_kernel K_PERMUTE_FWD = {"permute_fwd", permute_fwd_cpu};
-static const lm_kernel K_PERMUTE_BWD = {"permute_bwd", permute_bwd_cpu};
+LM_KERNEL(permute_fwd, permute_fwd_cpu);
+LM_KERNEL(permute_bwd, permute_bwd_cpu);
 
 static void permute_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_PERMUTE_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_permute_bwd, t, 2, n->params);
 }
 
 /* Shared by permute and transpose once `perm` is known to be valid. */
@@ -70,7 +70,7 @@ static lm_tensor *permute_run(lm_ctx *c, const char *op, lm_tensor *x, const int
 {
     x = lm_contiguous(c, x);
     if (!x) return NULL;
-    permute_params p = {x->ndim, {0, 0, 0, 0, 0}};
+    lm_permute_params p = {x->ndim, {0, 0, 0, 0, 0}};
     int s[LM_MAX_DIMS];
     for (int d = 0; d < x->ndim; d++) {
         p.perm[d] = perm[d];
@@ -79,7 +79,7 @@ static lm_tensor *permute_run(lm_ctx *c, const char *op, lm_tensor *x, const int
     lm_tensor *y = lm_tensor_new(c, x->ndim, s);
     if (!y) return NULL;
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_PERMUTE_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_permute_fwd, t, 2, &p)) return NULL;
     lm_record(c, op, permute_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

@@ -12,13 +12,13 @@
  * written by one thread). lm_global_avg_pool is a dedicated B x C x H x W -> B x C x 1 x 1 path.
  * What it is not: max/min/argmax reductions, variance. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 
 #define CB 64            /* outputs per block when the innermost dim is kept */
 #define PAR_MIN 32768L   /* below this many input elements, one thread */
 #define MAX_CHUNKS 256   /* "everything reduced": at most this many chunk sums */
 #define MIN_CHUNK 8192L  /* ... of at least this many elements */
-
-typedef struct reduce_params { unsigned mask; float scale; } reduce_params;
 
 /* ---- layout ------------------------------------------------------------------------------ */
 typedef struct red_layout {
@@ -127,7 +127,7 @@ static void sum_inner_kept(lm_ctx *c, const red_layout *L, const float *x, float
 static int sum_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const reduce_params *p = params;
+    const lm_reduce_params *p = params;
     const float *x = t[0]->data;
     float *y = t[1]->data;
     red_layout L;
@@ -183,7 +183,7 @@ static void bcast_inner_kept(lm_ctx *c, const red_layout *L, const float *gy, fl
 static int sum_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const reduce_params *p = params;
+    const lm_reduce_params *p = params;
     const float *gy = t[0]->data;
     float *gx = t[1]->data;
     red_layout L;
@@ -201,15 +201,15 @@ static int sum_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *param
     return 0;
 }
 
-static const lm_kernel K_SUM_FWD = {"reduce_sum_fwd", sum_fwd_cpu};
-static const lm_kernel K_SUM_BWD = {"reduce_sum_bwd", sum_bwd_cpu};
+LM_KERNEL(reduce_sum_fwd, sum_fwd_cpu);
+LM_KERNEL(reduce_sum_bwd, sum_bwd_cpu);
 
 static void sum_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {n->out->grad, lm_grad(c, x)};
-    if (t[1]) lm_kernel_run(c, &K_SUM_BWD, t, 2, n->params);
+    if (t[1]) lm_kernel_run(c, &lm_kernel_reduce_sum_bwd, t, 2, n->params);
 }
 
 static lm_tensor *reduce(lm_ctx *c, const char *name, lm_tensor *x, unsigned mask,
@@ -233,9 +233,9 @@ static lm_tensor *reduce(lm_ctx *c, const char *name, lm_tensor *x, unsigned mas
     x = lm_contiguous(c, x);
     lm_tensor *y = x ? lm_tensor_new(c, nd, shape) : NULL;
     if (!y) return NULL;
-    reduce_params p = {mask, mean ? (float)(1.0 / (double)count) : 1.0f};
+    lm_reduce_params p = {mask, mean ? (float)(1.0 / (double)count) : 1.0f};
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_SUM_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_reduce_sum_fwd, t, 2, &p)) return NULL;
     lm_record(c, name, sum_backward, y, &x, 1, &p, sizeof p);
     return y;
 }
@@ -284,15 +284,15 @@ static int gap_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *param
     return 0;
 }
 
-static const lm_kernel K_GAP_FWD = {"global_avg_pool_fwd", gap_fwd_cpu};
-static const lm_kernel K_GAP_BWD = {"global_avg_pool_bwd", gap_bwd_cpu};
+LM_KERNEL(global_avg_pool_fwd, gap_fwd_cpu);
+LM_KERNEL(global_avg_pool_bwd, gap_bwd_cpu);
 
 static void gap_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {n->out->grad, lm_grad(c, x)};
-    if (t[1]) lm_kernel_run(c, &K_GAP_BWD, t, 2, NULL);
+    if (t[1]) lm_kernel_run(c, &lm_kernel_global_avg_pool_bwd, t, 2, NULL);
 }
 
 lm_tensor *lm_global_avg_pool(lm_ctx *c, lm_tensor *x)
@@ -308,7 +308,7 @@ lm_tensor *lm_global_avg_pool(lm_ctx *c, lm_tensor *x)
     lm_tensor *y = x ? lm_tensor_new4(c, x->shape[0], x->shape[1], 1, 1) : NULL;
     if (!y) return NULL;
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_GAP_FWD, t, 2, NULL)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_global_avg_pool_fwd, t, 2, NULL)) return NULL;
     lm_record(c, "global_avg_pool", gap_backward, y, &x, 1, NULL, 0);
     return y;
 }

@@ -9,8 +9,8 @@
  * fixed band of columns per job, rows in order.
  * What it is not: antialiased downsampling, nearest/bicubic modes, scale-factor arguments. */
 #include "tensor/ops.h"
-
-typedef struct resize_params { int align_corners; } resize_params;
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 
 typedef struct axis_tab { int *i0, *i1; float *l; } axis_tab;
 
@@ -21,8 +21,7 @@ static int axis_table(lm_ctx *c, int in, int out, int ac, axis_tab *t)
     t->l = t->i0 ? lm_ctx_alloc(c, (size_t)out * sizeof(float)) : NULL;
     if (!t->l) return -1;
     t->i1 = t->i0 + out;
-    float scale = ac ? (out > 1 ? (float)(in - 1) / (float)(out - 1) : 0.0f)
-                     : (float)in / (float)out;
+    float scale = lm_resize_scale(in, out, ac);
     for (int o = 0; o < out; o++) {
         float s = ac ? scale * (float)o : scale * ((float)o + 0.5f) - 0.5f;
         if (s < 0.0f) s = 0.0f;
@@ -40,7 +39,7 @@ static int axis_table(lm_ctx *c, int in, int out, int ac, axis_tab *t)
 static int resize_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const resize_params *p = params;
+    const lm_resize_params *p = params;
     const lm_tensor *x = t[0], *y = t[1];
     const int H = x->shape[2], W = x->shape[3], oh = y->shape[2], ow = y->shape[3];
     axis_tab ty, tx;
@@ -70,7 +69,7 @@ static int resize_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
 {
     (void)nt;
     enum { BAND = 64 };
-    const resize_params *p = params;
+    const lm_resize_params *p = params;
     const lm_tensor *gx = t[0], *gy = t[1];
     const int H = gx->shape[2], W = gx->shape[3], oh = gy->shape[2], ow = gy->shape[3];
     const long planes = (long)gx->shape[0] * gx->shape[1], rows = planes * oh;
@@ -108,15 +107,15 @@ static int resize_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     }
     return 0;
 }
-static const lm_kernel K_RESIZE_FWD = {"resize_bilinear_fwd", resize_fwd_cpu};
-static const lm_kernel K_RESIZE_BWD = {"resize_bilinear_bwd", resize_bwd_cpu};
+LM_KERNEL(resize_bilinear_fwd, resize_fwd_cpu);
+LM_KERNEL(resize_bilinear_bwd, resize_bwd_cpu);
 
 static void resize_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_RESIZE_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_resize_bilinear_bwd, t, 2, n->params);
 }
 
 lm_tensor *lm_resize_bilinear(lm_ctx *c, lm_tensor *x, int oh, int ow, int align_corners)
@@ -138,9 +137,9 @@ lm_tensor *lm_resize_bilinear(lm_ctx *c, lm_tensor *x, int oh, int ow, int align
     int s[4] = {x->shape[0], x->shape[1], oh, ow};
     lm_tensor *y = lm_tensor_new(c, 4, s);
     if (!y) return NULL;
-    resize_params p = {align_corners ? 1 : 0};
+    lm_resize_params p = {align_corners ? 1 : 0};
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_RESIZE_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_resize_bilinear_fwd, t, 2, &p)) return NULL;
     lm_record(c, "resize_bilinear", resize_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

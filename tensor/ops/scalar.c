@@ -3,16 +3,16 @@
  * What it is: one flat elementwise kernel, parallel for large tensors; backward gx += s * gy.
  * What it is not: tensor-tensor arithmetic (binary.c); s and t get no gradient. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 
 #define PAR_MIN 32768L /* below this many elements, one thread */
-
-typedef struct affine_params { float s, t; } affine_params;
 
 /* t[0] = x, t[1] = y (contiguous, same shape): y = s * x + t (writes =). */
 static int affine_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const affine_params *p = params;
+    const lm_affine_params *p = params;
     const float s = p->s, b = p->t, *x = t[0]->data;
     float *y = t[1]->data;
     long n = lm_tensor_numel(t[0]);
@@ -25,7 +25,7 @@ static int affine_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
 static int affine_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const float s = ((const affine_params *)params)->s, *gy = t[0]->data;
+    const float s = ((const lm_affine_params *)params)->s, *gy = t[0]->data;
     float *gx = t[1]->data;
     long n = lm_tensor_numel(t[0]);
 #pragma omp parallel for simd num_threads(lm_nthreads(c)) schedule(static) if (parallel: n >= PAR_MIN)
@@ -33,15 +33,15 @@ static int affine_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *pa
     return 0;
 }
 
-static const lm_kernel K_AFFINE_FWD = {"affine_fwd", affine_fwd_cpu};
-static const lm_kernel K_AFFINE_BWD = {"affine_bwd", affine_bwd_cpu};
+LM_KERNEL(affine_fwd, affine_fwd_cpu);
+LM_KERNEL(affine_bwd, affine_bwd_cpu);
 
 static void affine_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {n->out->grad, lm_grad(c, x)};
-    if (t[1]) lm_kernel_run(c, &K_AFFINE_BWD, t, 2, n->params);
+    if (t[1]) lm_kernel_run(c, &lm_kernel_affine_bwd, t, 2, n->params);
 }
 
 lm_tensor *lm_affine(lm_ctx *c, lm_tensor *x, float s, float t)
@@ -50,9 +50,9 @@ lm_tensor *lm_affine(lm_ctx *c, lm_tensor *x, float s, float t)
     x = lm_contiguous(c, x);
     lm_tensor *y = x ? lm_tensor_new(c, x->ndim, x->shape) : NULL;
     if (!y) return NULL;
-    affine_params p = {s, t};
+    lm_affine_params p = {s, t};
     lm_tensor *k[2] = {x, y};
-    if (lm_kernel_run(c, &K_AFFINE_FWD, k, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_affine_fwd, k, 2, &p)) return NULL;
     lm_record(c, "affine", affine_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

@@ -5,8 +5,8 @@
  * so the forward and backward of both ops are the same loop.
  * What it is not: a resampling (values are only moved), nor a view (the output is a copy). */
 #include "tensor/ops.h"
-
-typedef struct shuffle_params { int fy, fx; } shuffle_params;
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 
 /* big: B x C x H x W, small: B x C*fy*fx x H/fy x W/fx, both contiguous.
  * to_small: small (= or += when add) big; else big (= or +=) small. The map is a bijection,
@@ -42,7 +42,7 @@ static void shuffle_move(lm_ctx *c, const lm_tensor *big, const lm_tensor *small
 static int unshuffle_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const shuffle_params *p = params;
+    const lm_shuffle_params *p = params;
     shuffle_move(c, t[0], t[1], p->fy, p->fx, 1, 0);
     return 0;
 }
@@ -50,7 +50,7 @@ static int unshuffle_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void 
 static int unshuffle_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const shuffle_params *p = params;
+    const lm_shuffle_params *p = params;
     shuffle_move(c, t[0], t[1], p->fy, p->fx, 0, 1);
     return 0;
 }
@@ -58,7 +58,7 @@ static int unshuffle_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void 
 static int shuffle_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const shuffle_params *p = params;
+    const lm_shuffle_params *p = params;
     shuffle_move(c, t[1], t[0], p->fy, p->fx, 0, 0);
     return 0;
 }
@@ -66,21 +66,21 @@ static int shuffle_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p
 static int shuffle_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const shuffle_params *p = params;
+    const lm_shuffle_params *p = params;
     shuffle_move(c, t[1], t[0], p->fy, p->fx, 1, 1);
     return 0;
 }
-static const lm_kernel K_UNSHUFFLE_FWD = {"pixel_unshuffle_fwd", unshuffle_fwd_cpu};
-static const lm_kernel K_UNSHUFFLE_BWD = {"pixel_unshuffle_bwd", unshuffle_bwd_cpu};
-static const lm_kernel K_SHUFFLE_FWD = {"pixel_shuffle_fwd", shuffle_fwd_cpu};
-static const lm_kernel K_SHUFFLE_BWD = {"pixel_shuffle_bwd", shuffle_bwd_cpu};
+LM_KERNEL(pixel_unshuffle_fwd, unshuffle_fwd_cpu);
+LM_KERNEL(pixel_unshuffle_bwd, unshuffle_bwd_cpu);
+LM_KERNEL(pixel_shuffle_fwd, shuffle_fwd_cpu);
+LM_KERNEL(pixel_shuffle_bwd, shuffle_bwd_cpu);
 
 static void unshuffle_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_UNSHUFFLE_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_pixel_unshuffle_bwd, t, 2, n->params);
 }
 
 static void shuffle_backward(lm_ctx *c, lm_node *n)
@@ -88,7 +88,7 @@ static void shuffle_backward(lm_ctx *c, lm_node *n)
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_SHUFFLE_BWD, t, 2, n->params);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_pixel_shuffle_bwd, t, 2, n->params);
 }
 
 /* Common argument checks; returns 0 after setting the ctx error. */
@@ -122,9 +122,9 @@ lm_tensor *lm_pixel_unshuffle(lm_ctx *c, lm_tensor *x, int fy, int fx)
     int s[4] = {x->shape[0], x->shape[1] * fy * fx, x->shape[2] / fy, x->shape[3] / fx};
     lm_tensor *y = lm_tensor_new(c, 4, s);
     if (!y) return NULL;
-    shuffle_params p = {fy, fx};
+    lm_shuffle_params p = {fy, fx};
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_UNSHUFFLE_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_pixel_unshuffle_fwd, t, 2, &p)) return NULL;
     lm_record(c, "pixel_unshuffle", unshuffle_backward, y, &x, 1, &p, sizeof p);
     return y;
 }
@@ -144,9 +144,9 @@ lm_tensor *lm_pixel_shuffle(lm_ctx *c, lm_tensor *x, int fy, int fx)
     int s[4] = {x->shape[0], x->shape[1] / (fy * fx), x->shape[2] * fy, x->shape[3] * fx};
     lm_tensor *y = lm_tensor_new(c, 4, s);
     if (!y) return NULL;
-    shuffle_params p = {fy, fx};
+    lm_shuffle_params p = {fy, fx};
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_SHUFFLE_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_pixel_shuffle_fwd, t, 2, &p)) return NULL;
     lm_record(c, "pixel_shuffle", shuffle_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

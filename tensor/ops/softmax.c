@@ -7,12 +7,12 @@
  * count.  Backward: gx += y * (gy - sum_L(gy * y)).
  * What it is not: log-softmax, masking, or a fused attention kernel. */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
+#include "tensor/op_params.h"
 #include <math.h>
 
 #define CB 64          /* columns per block when inner > 1 */
 #define PAR_MIN 32768L /* below this many elements, one thread */
-
-typedef struct softmax_params { int axis; } softmax_params;
 
 typedef struct sm_dims { long outer, len, inner; } sm_dims;
 
@@ -85,7 +85,7 @@ static void sm_block_bwd(const float *y, const float *gy, float *gx, long len, l
 static int softmax_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    sm_dims d = sm_split(t[0], ((const softmax_params *)params)->axis);
+    sm_dims d = sm_split(t[0], ((const lm_softmax_params *)params)->axis);
     const float *x = t[0]->data;
     float *y = t[1]->data;
     long nb = (d.inner + CB - 1) / CB, units = d.inner == 1 ? d.outer : d.outer * nb;
@@ -107,7 +107,7 @@ static int softmax_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p
 static int softmax_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    sm_dims d = sm_split(t[0], ((const softmax_params *)params)->axis);
+    sm_dims d = sm_split(t[0], ((const lm_softmax_params *)params)->axis);
     const float *y = t[0]->data, *gy = t[1]->data;
     float *gx = t[2]->data;
     long nb = (d.inner + CB - 1) / CB, units = d.inner == 1 ? d.outer : d.outer * nb;
@@ -125,15 +125,15 @@ static int softmax_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p
     return 0;
 }
 
-static const lm_kernel K_SOFTMAX_FWD = {"softmax_fwd", softmax_fwd_cpu};
-static const lm_kernel K_SOFTMAX_BWD = {"softmax_bwd", softmax_bwd_cpu};
+LM_KERNEL(softmax_fwd, softmax_fwd_cpu);
+LM_KERNEL(softmax_bwd, softmax_bwd_cpu);
 
 static void softmax_backward(lm_ctx *c, lm_node *n)
 {
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[3] = {n->out, n->out->grad, lm_grad(c, x)};
-    if (t[2]) lm_kernel_run(c, &K_SOFTMAX_BWD, t, 3, n->params);
+    if (t[2]) lm_kernel_run(c, &lm_kernel_softmax_bwd, t, 3, n->params);
 }
 
 lm_tensor *lm_softmax(lm_ctx *c, lm_tensor *x, int axis)
@@ -149,9 +149,9 @@ lm_tensor *lm_softmax(lm_ctx *c, lm_tensor *x, int axis)
     x = lm_contiguous(c, x);
     lm_tensor *y = x ? lm_tensor_new(c, x->ndim, x->shape) : NULL;
     if (!y) return NULL;
-    softmax_params p = {a};
+    lm_softmax_params p = {a};
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_SOFTMAX_FWD, t, 2, &p)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_softmax_fwd, t, 2, &p)) return NULL;
     lm_record(c, "softmax", softmax_backward, y, &x, 1, &p, sizeof p);
     return y;
 }

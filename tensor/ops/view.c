@@ -2,6 +2,7 @@
  * A view shares its input's data but has its own gradient buffer; its backward adds that
  * gradient into the input's gradient (flat for reshape, strided for slice). */
 #include "tensor/ops.h"
+#include "tensor/op_list.h"
 #include <string.h>
 
 /* ---- strided copy helpers (CPU) ---------------------------------------------------------- */
@@ -61,9 +62,9 @@ static int flat_add_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *p)
     for (long i = 0; i < n; i++) a[i] += b[i];
     return 0;
 }
-static const lm_kernel K_CONTIG = {"strided_copy", contig_fwd_cpu};
-static const lm_kernel K_STRIDED_ADD = {"strided_add", strided_add_cpu};
-static const lm_kernel K_FLAT_ADD = {"flat_add", flat_add_cpu};
+LM_KERNEL(strided_copy, contig_fwd_cpu);
+LM_KERNEL(strided_add, strided_add_cpu);
+LM_KERNEL(flat_add, flat_add_cpu);
 
 /* ---- reshape ----------------------------------------------------------------------------- */
 static void reshape_backward(lm_ctx *c, lm_node *n)
@@ -71,7 +72,7 @@ static void reshape_backward(lm_ctx *c, lm_node *n)
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_FLAT_ADD, t, 2, NULL);
+    if (t[0]) lm_kernel_run(c, &lm_kernel_flat_add, t, 2, NULL);
 }
 
 lm_tensor *lm_reshape(lm_ctx *c, lm_tensor *x, int ndim, const int *shape)
@@ -137,7 +138,7 @@ static void slice_backward(lm_ctx *c, lm_node *n)
     if (!gx) return;
     lm_tensor v = slice_of(gx, n->out, n->params);
     lm_tensor *t[2] = {&v, n->out->grad};
-    lm_kernel_run(c, &K_STRIDED_ADD, t, 2, NULL);
+    lm_kernel_run(c, &lm_kernel_strided_add, t, 2, NULL);
 }
 
 lm_tensor *lm_slice(lm_ctx *c, lm_tensor *x, int dim, int start, int len)
@@ -170,7 +171,7 @@ static void contig_backward(lm_ctx *c, lm_node *n)
     lm_tensor *x = n->in[0];
     if (!lm_requires_grad(x)) return;
     lm_tensor *t[2] = {lm_grad(c, x), n->out->grad};
-    if (t[0]) lm_kernel_run(c, &K_FLAT_ADD, t, 2, NULL); /* x's grad is contiguous */
+    if (t[0]) lm_kernel_run(c, &lm_kernel_flat_add, t, 2, NULL); /* x's grad is contiguous */
 }
 
 lm_tensor *lm_contiguous(lm_ctx *c, lm_tensor *x)
@@ -180,7 +181,7 @@ lm_tensor *lm_contiguous(lm_ctx *c, lm_tensor *x)
     lm_tensor *y = lm_tensor_new(c, x->ndim, x->shape);
     if (!y) return NULL;
     lm_tensor *t[2] = {x, y};
-    if (lm_kernel_run(c, &K_CONTIG, t, 2, NULL)) return NULL;
+    if (lm_kernel_run(c, &lm_kernel_strided_copy, t, 2, NULL)) return NULL;
     lm_record(c, "contiguous", contig_backward, y, &x, 1, NULL, 0);
     return y;
 }
