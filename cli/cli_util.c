@@ -7,6 +7,9 @@
 #include <errno.h>
 #include <ftw.h>
 #include <math.h>
+#include <pthread.h>
+#include <semaphore.h>
+#include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -42,6 +45,18 @@ int lm_cli_error(const lm_cli *c, const char *fmt, ...)
         if (*p == '\n' || *p == '\r') *p = ' ';
     fprintf(stderr, "%s: %s\n", c->prog, msg);
     return 2;
+}
+
+int lm_cli_exit_status(int status)
+{
+    switch (status) {
+    case LM_OK: return LM_EXIT_OK;
+    case LM_ERR_WRITE:
+    case LM_ERR_NOMEM:
+    case LM_ERR_BACKEND: return LM_EXIT_FAILED;
+    default: return LM_EXIT_USAGE; /* arguments, shapes, formats, reads, NaN in the input,
+                                    * unsupported input */
+    }
 }
 
 int lm_cli_unknown(const lm_cli *c)
@@ -195,22 +210,39 @@ static int dir_is_empty(const char *dir)
     return empty;
 }
 
+/* ---- signals ------------------------------------------------------------------------ */
+/* The handler only counts and records (async-signal-safe); a waiting thread does the rest
+ * (removing files, printing) in an ordinary thread context. The staging folder in use is
+ * guarded by `mu`: committing it (a rename) and removing it on a signal never interleave. */
+static struct {
+    const char *prog;
+    int graceful;
+    atomic_int count, first;
+    sem_t wake;
+    pthread_mutex_t mu;
+    char stage[1200];                  /* staging folder in use ("" = none) */
+} sig = {.mu = PTHREAD_MUTEX_INITIALIZER};
+
+static void set_stage(const char *tmp)
+{
+    pthread_mutex_lock(&sig.mu);
+    snprintf(sig.stage, sizeof sig.stage, "%s", tmp ? tmp : "");
+    pthread_mutex_unlock(&sig.mu);
+}
+
 int lm_cli_stage_dir(const lm_cli *c, const char *dir, char *tmp, size_t n)
 {
     struct stat st;
     if (stat(dir, &st) == 0 && !(S_ISDIR(st.st_mode) && dir_is_empty(dir))) {
-        lm_cli_error(c, "%s: output already exists and is not an empty folder", dir);
-        return -1;
+        return lm_cli_error(c, "%s: output already exists and is not an empty folder", dir);
     }
     int k = snprintf(tmp, n, "%s.tmp.%ld", dir, (long)getpid());
-    if (k < 0 || (size_t)k >= n) {
-        lm_cli_error(c, "%s: output path is too long", dir);
-        return -1;
-    }
+    if (k < 0 || (size_t)k >= n) return lm_cli_error(c, "%s: output path is too long", dir);
     if (mkdir(tmp, 0777) != 0) {
         lm_cli_error(c, "%s: cannot create a folder: %s", tmp, strerror(errno));
-        return -1;
+        return LM_EXIT_FAILED;
     }
+    set_stage(tmp);
     return 0;
 }
 
@@ -222,17 +254,81 @@ static int rm_entry(const char *p, const struct stat *st, int flag, struct FTW *
 
 void lm_cli_remove_tree(const char *dir)
 {
+    pthread_mutex_lock(&sig.mu);
+    if (!strcmp(sig.stage, dir)) sig.stage[0] = 0;
+    pthread_mutex_unlock(&sig.mu);
     nftw(dir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
 }
 
 int lm_cli_commit_dir(const lm_cli *c, const char *tmp, const char *dir)
 {
-    if (rename(tmp, dir) != 0) {
-        lm_cli_error(c, "%s: cannot move the output into place: %s", dir, strerror(errno));
+    pthread_mutex_lock(&sig.mu);
+    int bad = rename(tmp, dir) != 0, e = errno;
+    if (!bad && !strcmp(sig.stage, tmp)) sig.stage[0] = 0;
+    pthread_mutex_unlock(&sig.mu);
+    if (bad) {
+        lm_cli_error(c, "%s: cannot move the output into place: %s", dir, strerror(e));
         lm_cli_remove_tree(tmp);
         return -1;
     }
     return 0;
+}
+
+const char *lm_cli_signal_name(int s)
+{
+    static char buf[32];
+    if (s == SIGINT) return "SIGINT";
+    if (s == SIGTERM) return "SIGTERM";
+    snprintf(buf, sizeof buf, "signal %d", s);
+    return buf;
+}
+
+const atomic_int *lm_cli_signal_flag(void) { return &sig.first; }
+
+static void on_signal(int s)
+{
+    int n = atomic_fetch_add(&sig.count, 1);
+    if (n == 0) atomic_store(&sig.first, s);
+    if (!sig.graceful || n > 0) sem_post(&sig.wake);
+}
+
+/* Woken by a signal that ends the program: the staging folder goes (moved aside first, so the
+ * command's own threads cannot add files to it while it is removed), one line, exit. */
+static void *sig_waiter(void *arg)
+{
+    (void)arg;
+    while (sem_wait(&sig.wake) != 0) continue;
+    int s = atomic_load(&sig.first);
+    pthread_mutex_lock(&sig.mu); /* held until _exit: no commit can start */
+    int staged = sig.stage[0] != 0;
+    if (staged) {
+        char trash[1300];
+        snprintf(trash, sizeof trash, "%s.removing", sig.stage);
+        const char *dir = rename(sig.stage, trash) == 0 ? trash : sig.stage;
+        for (int k = 0; k < 5 && access(dir, F_OK) == 0; k++)
+            nftw(dir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
+    }
+    fprintf(stderr, "%s: interrupted (%s)%s\n", sig.prog, lm_cli_signal_name(s),
+            staged ? ": partial output removed"
+                   : sig.graceful ? " again: stopped at once (the last checkpoint is kept)" : "");
+    fflush(stderr);
+    _exit(128 + s);
+}
+
+int lm_cli_signals_init(const lm_cli *c, int graceful)
+{
+    sig.prog = c->prog;
+    sig.graceful = graceful;
+    pthread_t t;
+    if (sem_init(&sig.wake, 0, 0) != 0 || pthread_create(&t, NULL, sig_waiter, NULL) != 0)
+        return -1;
+    pthread_detach(t);
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sa.sa_flags = SA_RESTART; /* reads and writes in progress go on */
+    sigemptyset(&sa.sa_mask);
+    return sigaction(SIGINT, &sa, NULL) || sigaction(SIGTERM, &sa, NULL) ? -1 : 0;
 }
 
 int lm_cli_positional(lm_cli *c, const char **out, int *n)

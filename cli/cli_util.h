@@ -9,6 +9,7 @@
  * (nothing here is used by the library; it may print). */
 #ifndef LM_CLI_UTIL_H
 #define LM_CLI_UTIL_H
+#include <stdatomic.h>
 #include <stddef.h>
 
 typedef struct lm_cli {
@@ -43,6 +44,18 @@ int lm_cli_choice(lm_cli *c, const char *name, const char *const *choices, int *
 int lm_cli_parse_ll(const char *s, long long *out);
 int lm_cli_parse_real(const char *s, double *out);
 
+/* Exit statuses, the same for every command (README, "Commands"). */
+enum {
+    LM_EXIT_OK = 0,
+    LM_EXIT_FAILED = 1,  /* the work failed: cannot write an output (LM_ERR_WRITE), out of
+                          * memory, a NaN loss, a device failure */
+    LM_EXIT_USAGE = 2    /* bad usage or input: options, configs, unreadable or corrupt files */
+};                       /* (and 128 + the signal's number when interrupted: 130, 143) */
+/* The exit status of a library error: LM_EXIT_FAILED (cannot write, out of memory, device)
+ * or LM_EXIT_USAGE (the rest; LM_ERR_NUMERIC is NaN in the input: a command whose own
+ * computation went NaN, such as a training loss, says LM_EXIT_FAILED itself); 0 for LM_OK. */
+int lm_cli_exit_status(int status);
+
 /* Print "<prog>: <message>" as one line on stderr. Returns 2 (the bad-usage status). */
 int lm_cli_error(const lm_cli *c, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* "<prog>: unknown option '<arg>' (see '<prog> --help')", returns 2. */
@@ -59,13 +72,26 @@ int lm_cli_parse_size(const char *s, long long lo, long long hi, int *h, int *w)
 int lm_cli_has_ext(const char *path, const char *ext);
 
 /* Staging folder for an output folder `dir`: checks that dir does not exist or is an empty
- * folder, then creates "<dir>.tmp.<pid>" (written to tmp, n bytes). Returns 0, or -1 with a
- * one-line error printed. */
+ * folder, then creates "<dir>.tmp.<pid>" (written to tmp, n bytes). Returns 0, or the exit
+ * status with a one-line error printed (2: dir is in use or the path too long; 1: the folder
+ * cannot be created). */
 int lm_cli_stage_dir(const lm_cli *c, const char *dir, char *tmp, size_t n);
 /* Rename the staging folder onto dir (replacing an empty dir). 0, or -1 with an error printed
  * (the staging folder is then removed). */
 int lm_cli_commit_dir(const lm_cli *c, const char *tmp, const char *dir);
 /* Remove a folder and everything in it (staging folders after a failure). */
 void lm_cli_remove_tree(const char *dir);
+
+/* SIGINT / SIGTERM. Call once, before the command starts any work. Not graceful: a signal
+ * removes the staging folder of lm_cli_stage_dir (if one is in use), prints one line
+ * "<prog>: interrupted (SIGINT): partial output removed" and exits at once with 128 + the
+ * signal's number (130, 143). Graceful (train): the first signal only sets the flag of
+ * lm_cli_signal_flag (the command finishes its step, saves and exits 128 + the number
+ * itself); a second one exits at once as above. Returns 0, or -1 (cannot install). */
+int lm_cli_signals_init(const lm_cli *c, int graceful);
+/* 0, or the number of the first signal received. */
+const atomic_int *lm_cli_signal_flag(void);
+/* "SIGINT", "SIGTERM" or "signal N" */
+const char *lm_cli_signal_name(int sig);
 
 #endif

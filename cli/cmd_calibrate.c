@@ -436,7 +436,7 @@ static int test_models(cal_run *r, test_run *t, const lm_tile_opts *to, lm_err *
         double t0 = omp_get_wtime();
         if (test_scene(r, t, first + i, to, e))
             return lm_cli_error(r->c, "test scene %d: %s", i + 1, e->msg),
-                   e->status == LM_ERR_NOMEM ? 1 : 2;
+                   lm_cli_exit_status(e->status);
         fprintf(stderr, "test scene %d/%lld: %.2f s\n", i + 1, r->o->test_synth,
                 omp_get_wtime() - t0);
     }
@@ -545,7 +545,7 @@ static int calibrate(cal_run *r, lm_err *e)
         if (scene_samples(r, i, &to, e))
             return lm_cli_error(r->c, "scene %d (%s): %s", i + 1,
                                 i < r->nscenes ? r->scenes[i] : "procedural", e->msg),
-                   e->status == LM_ERR_NOMEM ? 1 : 2;
+                   lm_cli_exit_status(e->status);
         fprintf(stderr, "scene %d/%d: %.2f s\n", i + 1, total, omp_get_wtime() - t0);
     }
     for (int m = 0; m < a->nmodels; m++) {

@@ -16,6 +16,7 @@
  * --device opencl runs the network on an OpenCL device (weights uploaded once, lm_tile_device;
  * MST++ models run on the CPU only).
  * What it is not: training-time validation (train/), or a benchmark of speed. */
+#include <errno.h>
 #include <omp.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -200,7 +201,7 @@ typedef struct eval_run {
 static int fail(const lm_cli *c, const lm_err *e)
 {
     lm_cli_error(c, "%s", e->msg);
-    return e->status == LM_ERR_NOMEM ? 1 : 2;
+    return lm_cli_exit_status(e->status);
 }
 
 static int seen(const eval_run *r, const char *path)
@@ -316,7 +317,7 @@ static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
         lm_cube_free(&cube);
         if (st) {
             lm_cli_error(r->c, "%s: %s", s->path, e->msg);
-            return st == LM_ERR_NOMEM ? 1 : 2;
+            return lm_cli_exit_status(st);
         }
         for (int n = 0; n < r->o->nnoise; n++) lm_metrics_acc_add(&acc[n], &s->m[n]);
         fprintf(stderr, "scene %d/%d %s (%d x %d): %.2f s\n", i + 1, r->nsc, s->name, s->width,
@@ -466,8 +467,8 @@ static int write_outputs(eval_run *r)
             else write_json(f, r);
         }
         if (!f || ferror(f) | fclose(f)) {
-            lm_cli_error(r->c, "%s: cannot write", path);
-            return 1;
+            lm_cli_error(r->c, "%s: cannot write: %s", path, strerror(errno));
+            return LM_EXIT_FAILED;
         }
     }
     int rc = lm_cli_commit_dir(r->c, tmp, r->o->output) ? 1 : 0;
@@ -485,9 +486,9 @@ static int run(eval_run *r)
     r->im.sensor_bits = (int)r->o->bits;
     int rc = list_scenes(r, &e);
     if (rc) return rc;
-    if (r->o->output && lm_cli_stage_dir(r->c, r->o->output, r->tmp, sizeof r->tmp)) {
+    if (r->o->output && (rc = lm_cli_stage_dir(r->c, r->o->output, r->tmp, sizeof r->tmp))) {
         r->tmp[0] = '\0';
-        return 2;
+        return rc;
     }
     if (lm_ctx_init(&r->ctx, (int)r->o->threads) != 0)
         return lm_cli_error(r->c, "out of memory (compute context)"), 1;
@@ -505,7 +506,7 @@ static int run(eval_run *r)
     if (r->o->rainbow > 0 &&
         lm_eval_rainbow_run(&r->ctx, &r->im, (int)r->o->rainbow, &to, &r->rb, &e)) {
         lm_cli_error(r->c, "rainbow: %s", e.msg);
-        return e.status == LM_ERR_NOMEM ? 1 : 2;
+        return lm_cli_exit_status(e.status);
     }
     print_table(r);
     return r->o->output ? write_outputs(r) : 0;
@@ -519,6 +520,10 @@ int lm_cmd_eval(int argc, char **argv)
     int rc = parse(&c, &o);
     if (rc == 1) {
         if (o.threads > 0) omp_set_num_threads((int)o.threads);
+        if (lm_cli_signals_init(&c, 0)) {
+            free(o.data);
+            return lm_cli_error(&c, "cannot install signal handlers"), 1;
+        }
         eval_run r;
         memset(&r, 0, sizeof r);
         r.c = &c;

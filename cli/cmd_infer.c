@@ -115,12 +115,12 @@ static int parse(lm_cli *c, infer_opts *o)
     return 1;
 }
 
-/* Exit status for a library error: out of memory / I/O while writing are runtime failures (1),
- * everything else is bad input (2). */
+/* Exit status for a library error (lm_cli_exit_status); runtime: a failure of this program's
+ * own work whatever the status (1). */
 static int fail(const lm_cli *c, const lm_err *e, int runtime)
 {
     lm_cli_error(c, "%s", e->msg);
-    return runtime || e->status == LM_ERR_NOMEM ? 1 : 2;
+    return runtime ? LM_EXIT_FAILED : lm_cli_exit_status(e->status);
 }
 
 /* Temporal alignment state: the sub-images (np planes of ph x pw) of frames i-1, i, i+1. */
@@ -340,7 +340,7 @@ static int run_frames(infer_run *r)
         double t1 = omp_get_wtime();
         if (st) {
             lm_cli_error(r->c, "%s: %s", r->seq.paths[i], e.msg);
-            return st == LM_ERR_NOMEM ? 1 : 2;
+            return lm_cli_exit_status(st);
         }
         int rc = write_frame(r, &cube, r->seq.first_index + i, &e);
         lm_cube_free(&cube);
@@ -418,6 +418,7 @@ int lm_cmd_infer(int argc, char **argv)
     int rc = parse(&c, &o);
     if (rc != 1) return rc;
     if (o.threads > 0) omp_set_num_threads((int)o.threads);
+    if (lm_cli_signals_init(&c, 0)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
     infer_run r;
     memset(&r, 0, sizeof r);
     r.c = &c;
@@ -438,8 +439,8 @@ int lm_cmd_infer(int argc, char **argv)
             r.whole = 0; /* the strip path (infer/whole.c) is host-only: windows on the device */
         }
     }
-    if (!rc && lm_cli_stage_dir(&c, o.output, r.tmp, sizeof r.tmp) != 0) rc = 2;
-    else if (!rc) {
+    if (!rc) rc = lm_cli_stage_dir(&c, o.output, r.tmp, sizeof r.tmp);
+    if (!rc) {
         rc = run_frames(&r);
         if (rc) lm_cli_remove_tree(r.tmp);
         else if (lm_cli_commit_dir(&c, r.tmp, o.output)) rc = 1;

@@ -102,7 +102,7 @@ static int load_system(lm_cli *c, const char *path, lm_system *sys)
     if (st) {
         lm_system_free(sys);
         lm_cli_error(c, "%s", e.msg);
-        return st == LM_ERR_IO ? 1 : 2;
+        return lm_cli_exit_status(st);
     }
     return 0;
 }
@@ -133,8 +133,7 @@ int lm_cmd_info(int argc, char **argv)
     lm_system_free(&sys);
     if (m && lm_model_profile(m, (int)a.batch, (int)a.height, (int)a.width, &p, &e) == LM_OK)
         print_table(&p, a.model, &a);
-    r = e.status ? lm_cli_error(&c, "%s", e.msg) : 0;
-    if (e.status == LM_ERR_NOMEM) r = 1;
+    r = e.status ? (lm_cli_error(&c, "%s", e.msg), lm_cli_exit_status(e.status)) : 0;
     lm_profile_free(&p);
     lm_model_free(m);
     return r;

@@ -67,18 +67,17 @@ int lm_cmd_render(int argc, char **argv)
     lm_err e;
     lm_err_clear(&e);
     if (lm_cube_read(o.input, &cube, &e) != LM_OK)
-        return e.status == LM_ERR_NOMEM ? (lm_cli_error(&c, "%s", e.msg), 1)
-                                        : lm_cli_error(&c, "%s", e.msg);
+        return lm_cli_error(&c, "%s", e.msg), lm_cli_exit_status(e.status);
     float *rgb = malloc(sizeof(float) * 3 * (size_t)cube.height * cube.width);
     int status = 0;
     if (!rgb) {
         status = 1;
         lm_cli_error(&c, "out of memory (%d x %d image)", cube.width, cube.height);
     } else if (lm_srgb_render_cube(&cube, (float)o.exposure, NULL, rgb, &e) != LM_OK) {
-        status = e.status == LM_ERR_ARG || e.status == LM_ERR_SHAPE ? 2 : 1;
+        status = lm_cli_exit_status(e.status);
         lm_cli_error(&c, "%s: %s", o.input, e.msg);
     } else if (lm_image_write_rgb8(o.output, cube.width, cube.height, rgb, &e) != LM_OK) {
-        status = 1;
+        status = LM_EXIT_FAILED;
         lm_cli_error(&c, "%s", e.msg);
     }
     free(rgb);

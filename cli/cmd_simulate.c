@@ -9,6 +9,7 @@
  * written into "<DIR>.tmp.<pid>" and renamed onto DIR at the end (nothing is left on failure).
  * What it is not: the models (data/forward.c, data/video.c) or the readers (data/cube_io.c). */
 #include <jansson.h>
+#include <errno.h>
 #include <math.h>
 #include <omp.h>
 #include <stdio.h>
@@ -66,7 +67,8 @@ static void help(void)
         "  --help              this text\n\n"
         "Frame i starts at i x the frame period; its ground truth is the scene at the centre of\n"
         "the Lime LED's window.\n"
-        "Exit status: 0 done, 1 failure while writing, 2 bad usage or input.\n");
+        "Exit status: 0 done, 1 failure while writing, 2 bad usage or input, 130/143 interrupted\n"
+        "(SIGINT/SIGTERM: the staging folder is removed).\n");
 }
 
 typedef struct sim_opts {
@@ -246,7 +248,7 @@ static int prepare(const lm_cli *c, const sim_opts *o, const lm_system *sys, con
     lm_status st = isgrid ? sub_cube(in, 0, in->bands, h, w, sim) : lm_cube_mirror41(gt, sim, &e);
     if (st != LM_OK) {
         lm_cube_free(gt);
-        return st == LM_ERR_NOMEM ? (lm_cli_error(c, "out of memory"), 1)
+        return st == LM_ERR_NOMEM ? (lm_cli_error(c, "out of memory"), LM_EXIT_FAILED)
                                   : lm_cli_error(c, "%s: %s", o->input, e.msg);
     }
     return 0;
@@ -405,19 +407,21 @@ static int run(const lm_cli *c, sim_run *r, const lm_cube *in)
     r->rgb = malloc(sizeof(float) * 3 * n);
     r->files = json_array();
     if (!r->b1 || !r->b0 || !r->rgb || !r->files) return lm_cli_error(c, "out of memory"), 1;
-    if (lm_cli_stage_dir(c, r->o->output, r->tmp, sizeof r->tmp) != 0) return 2;
+    int status = lm_cli_stage_dir(c, r->o->output, r->tmp, sizeof r->tmp);
+    if (status) return status;
     const char *subs[3] = {"frames", "gt", r->o->bucket0 ? "bucket0" : NULL};
     char path[1100];
-    int status = 0;
     for (int k = 0; k < 3 && !status && subs[k]; k++)
         if ((status = out_path(c, r, subs[k], path, sizeof path)) == 0 && mkdir(path, 0777))
-            status = (lm_cli_error(c, "%s: cannot create a folder", path), 1);
+            status = (lm_cli_error(c, "%s: cannot create a folder: %s", path, strerror(errno)),
+                      LM_EXIT_FAILED);
     lm_rng_seed(&r->rng, (uint64_t)r->o->seed);
     if (!status) status = run_frames(c, r);
     json_t *js = status ? NULL : summary_json(r, in);
     if (!status && (out_path(c, r, "simulate.json", path, sizeof path) ||
                     !js || json_dump_file(js, path, JSON_INDENT(2) | JSON_REAL_PRECISION(10))))
-        status = (lm_cli_error(c, "%s: cannot write the summary", path), 1);
+        status = (lm_cli_error(c, "%s: cannot write the summary: %s", path,
+                               js ? strerror(errno) : "out of memory"), LM_EXIT_FAILED);
     json_decref(js);
     if (status) lm_cli_remove_tree(r->tmp);
     else if (lm_cli_commit_dir(c, r->tmp, r->o->output)) status = 1;
@@ -435,6 +439,7 @@ int lm_cmd_simulate(int argc, char **argv)
     int status = parse(&c, &o);
     if (status != 1) return status;
     if (o.threads > 0) omp_set_num_threads((int)o.threads);
+    if (lm_cli_signals_init(&c, 0)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
     lm_system sys;
     lm_cube in;
     lm_err e;
@@ -445,8 +450,7 @@ int lm_cmd_simulate(int argc, char **argv)
     }
     if (lm_cube_read(o.input, &in, &e) != LM_OK) {
         lm_system_free(&sys);
-        return e.status == LM_ERR_NOMEM ? (lm_cli_error(&c, "%s", e.msg), 1)
-                                        : lm_cli_error(&c, "%s", e.msg);
+        return lm_cli_error(&c, "%s", e.msg), lm_cli_exit_status(e.status);
     }
     sim_run r = {.o = &o, .sys = &sys};
     status = prepare(&c, &o, &sys, &in, &r.gt0, &r.sim);

@@ -68,11 +68,11 @@ static int parse(lm_cli *c, study_args *a)
     return 1;
 }
 
-/* Bad config or data (including missing scene files): 2; a failed run (memory, NaN loss): 1. */
+/* Bad config or data (including missing scene files): 2; a failed run (memory, NaN loss, an
+ * output that cannot be written): 1. */
 static int status_code(lm_status st)
 {
-    return st == LM_ERR_ARG || st == LM_ERR_FORMAT || st == LM_ERR_SHAPE || st == LM_ERR_IO ||
-           st == LM_ERR_UNSUPPORTED ? 2 : 1;
+    return st == LM_ERR_NUMERIC ? LM_EXIT_FAILED : lm_cli_exit_status(st);
 }
 
 static void print_summary(const lm_study *s, const char *dir)

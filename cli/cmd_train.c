@@ -24,8 +24,10 @@ static void help(void)
            "  --quiet                        no progress output\n");
     lm_train_cfg_print_help(stdout);
     printf("  --help                         this text\n\n"
+           "SIGINT/SIGTERM: the current iteration finishes, a checkpoint is written, exit 130/143\n"
+           "(a second signal stops at once).\n"
            "Exit status: 0 done, 1 training failed (e.g. NaN loss: the last good checkpoint is\n"
-           "kept), 2 bad options or config.\n");
+           "kept; an output that cannot be written), 2 bad options, config or data.\n");
 }
 
 typedef struct train_args {
@@ -119,12 +121,25 @@ int lm_cmd_train(int argc, char **argv)
     /* A fixed mmap threshold: glibc's dynamic one moves big per-step buffers onto the heap,
      * where trimming and regrowing them made steps 2-30x slower here (bench_train). */
     mallopt(M_MMAP_THRESHOLD, 128 * 1024);
-    lm_train_opts o = {.resume = a.resume, .stop_after = (long)a.stop_after, .progress = !a.quiet};
+    if (lm_cli_signals_init(&c, 1)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
+    lm_train_opts o = {.resume = a.resume, .stop_after = (long)a.stop_after, .progress = !a.quiet,
+                       .interrupt = lm_cli_signal_flag()};
     lm_train_result res;
     lm_status st = lm_train_session(&cfg, &o, &res, &e);
-    if (st) {
+    if (st) { /* a NaN loss is the run failing (1), not bad input */
         lm_cli_error(&c, "%s", e.msg);
-        return st == LM_ERR_ARG || st == LM_ERR_FORMAT || st == LM_ERR_SHAPE ? 2 : 1;
+        return st == LM_ERR_NUMERIC ? LM_EXIT_FAILED : lm_cli_exit_status(st);
+    }
+    int sig = atomic_load(lm_cli_signal_flag());
+    if (sig) { /* SIGINT / SIGTERM: the step finished and the checkpoint is on disk */
+        if (res.interrupted)
+            lm_cli_error(&c, "interrupted (%s) at iteration %ld: checkpoint written to %s "
+                         "(continue with --resume %s)", lm_cli_signal_name(sig),
+                         res.iterations_done, cfg.output, cfg.output);
+        else
+            lm_cli_error(&c, "interrupted (%s) as the run ended: checkpoint written to %s",
+                         lm_cli_signal_name(sig), cfg.output);
+        return 128 + sig;
     }
     if (res.closed_form) {
         printf("fitted %s in closed form (%.1f s); fit.json has every noise level\n", cfg.model,

@@ -1,6 +1,7 @@
 /* commands.h — the subcommands of the `lumosaic` program. Each lives in its own cli/cmd_*.c,
  * parses its own options (every option has --help text), prints one-line errors to stderr and
- * returns the process exit status (0 ok, 1 runtime failure, 2 bad usage or input). */
+ * returns the process exit status (cli_util.h: 0 ok, 1 the work failed, e.g. an output that
+ * cannot be written, 2 bad usage or input, 128 + N on signal N). */
 #ifndef LM_CLI_COMMANDS_H
 #define LM_CLI_COMMANDS_H
 

@@ -12,6 +12,7 @@
 #include <OpenImageIO/imageio.h>
 #include <openexr.h>
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -291,12 +292,13 @@ static lm_status write_atomic(const char *path, ImageSpec &spec, const void *pix
         std::string msg = first_line(out->geterror());
         out.reset();
         remove(tmp);
-        return lm_err_set(e, LM_ERR_IO, "%s: write failed: %s", path, msg.c_str());
+        return lm_err_set(e, LM_ERR_WRITE, "%s: write failed: %s", path, msg.c_str());
     }
     out.reset();
     if (rename(tmp, path) != 0) {
         remove(tmp);
-        return lm_err_set(e, LM_ERR_IO, "%s: cannot rename the temporary file into place", path);
+        return lm_err_set(e, LM_ERR_WRITE, "%s: cannot rename the temporary file into place: %s",
+                          path, strerror(errno));
     }
     return LM_OK;
 }
@@ -339,7 +341,7 @@ extern "C" lm_status lm_image_write_rgb8(const char *path, int width, int height
         ImageSpec spec(width, height, 3, TypeDesc::UINT8);
         return write_atomic(path, spec, q.data(), e);
     } catch (...) {
-        return lm_err_set(e, LM_ERR_IO, "%s: write failed (exception)", path);
+        return lm_err_set(e, LM_ERR_WRITE, "%s: write failed (exception)", path);
     }
 }
 
@@ -356,7 +358,7 @@ extern "C" lm_status lm_image_write_gray16(const char *path, int width, int heig
         spec.channelnames.assign(1, "Y");
         return write_atomic(path, spec, q.data(), e);
     } catch (...) {
-        return lm_err_set(e, LM_ERR_IO, "%s: write failed (exception)", path);
+        return lm_err_set(e, LM_ERR_WRITE, "%s: write failed (exception)", path);
     }
 }
 
@@ -381,6 +383,6 @@ extern "C" lm_status lm_image_write_exr(const char *path, int width, int height,
             spec.attribute(attrs[i], attrs[i + 1]);
         return write_atomic(path, spec, inter.data(), e);
     } catch (...) {
-        return lm_err_set(e, LM_ERR_IO, "%s: write failed (exception)", path);
+        return lm_err_set(e, LM_ERR_WRITE, "%s: write failed (exception)", path);
     }
 }

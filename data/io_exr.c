@@ -9,6 +9,7 @@
 #include "data/cube_io.h"
 #include "data/image.h"
 #include "data/limits.h"
+#include <errno.h>
 #include <math.h>
 #include <openexr.h>
 #include <stdio.h>
@@ -309,7 +310,7 @@ static lm_status write_header(exr_context_t ctx, const lm_cube *cube, chan_name 
         rv = exr_add_channel(ctx, part, names[b], EXR_PIXEL_FLOAT, EXR_PERCEPTUALLY_LINEAR, 1, 1);
     if (rv == EXR_ERR_SUCCESS) rv = exr_attr_set_string(ctx, part, "spectralLayoutVersion", "1.0");
     if (rv == EXR_ERR_SUCCESS) rv = exr_write_header(ctx);
-    return rv == EXR_ERR_SUCCESS ? LM_OK : exr_fail(e, LM_ERR_IO, path, "cannot write header", rv);
+    return rv == EXR_ERR_SUCCESS ? LM_OK : exr_fail(e, LM_ERR_WRITE, path, "cannot write header", rv);
 }
 
 static void point_encoder(exr_encode_pipeline_t *p, const lm_cube *cube, chan_name *names)
@@ -349,7 +350,7 @@ static lm_status write_pixels(exr_context_t ctx, const lm_cube *cube, chan_name 
         rv = exr_encoding_run(ctx, 0, &enc);
     }
     if (started) exr_encoding_destroy(ctx, &enc);
-    return rv == EXR_ERR_SUCCESS ? LM_OK : exr_fail(e, LM_ERR_IO, path, "cannot write pixels", rv);
+    return rv == EXR_ERR_SUCCESS ? LM_OK : exr_fail(e, LM_ERR_WRITE, path, "cannot write pixels", rv);
 }
 
 lm_status lm_cube_write_exr(const char *path, const lm_cube *cube, lm_err *e)
@@ -363,16 +364,17 @@ lm_status lm_cube_write_exr(const char *path, const lm_cube *cube, lm_err *e)
     exr_context_initializer_t init = exr_init(0);
     exr_context_t ctx = NULL;
     exr_result_t rv = exr_start_write(&ctx, tmp, EXR_WRITE_FILE_DIRECTLY, &init);
-    if (rv != EXR_ERR_SUCCESS) s = exr_fail(e, LM_ERR_IO, path, "cannot create file", rv);
+    if (rv != EXR_ERR_SUCCESS) s = exr_fail(e, LM_ERR_WRITE, path, "cannot create file", rv);
     if (s == LM_OK) s = write_header(ctx, cube, names, path, e);
     if (s == LM_OK) s = write_pixels(ctx, cube, names, path, e);
     if (ctx) {
         rv = exr_finish(&ctx);
         if (s == LM_OK && rv != EXR_ERR_SUCCESS)
-            s = exr_fail(e, LM_ERR_IO, path, "cannot finish file", rv);
+            s = exr_fail(e, LM_ERR_WRITE, path, "cannot finish file", rv);
     }
     if (s == LM_OK && rename(tmp, path) != 0)
-        s = lm_err_set(e, LM_ERR_IO, "%s: cannot rename the temporary file into place", path);
+        s = lm_err_set(e, LM_ERR_WRITE, "%s: cannot rename the temporary file into place: %s", path,
+                       strerror(errno));
     if (s != LM_OK) remove(tmp);
     return s;
 }

@@ -3,11 +3,13 @@
  * What it is not: model loading or the CLI. */
 #include "infer/auto.h"
 #include "infer/model_io.h"
+#include <errno.h>
 #include <jansson.h>
 #include <math.h>
 #include <omp.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 static const char *const measure_names[] = {"grad", "relgrad"};
 
@@ -227,9 +229,17 @@ lm_status lm_auto_save_ext(const char *path, const lm_auto_calib *a, json_t *ext
         json_decref(root);
         root = NULL;
     }
-    int rc = root ? json_dump_file(root, path, JSON_INDENT(2) | JSON_REAL_PRECISION(10)) : -1;
+    char tmp[4200]; /* written whole, then renamed into place */
+    snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());
+    errno = 0;
+    int rc = root ? json_dump_file(root, tmp, JSON_INDENT(2) | JSON_REAL_PRECISION(10)) : -1;
     json_decref(root);
-    if (rc) return lm_err_set(err, LM_ERR_IO, "auto: cannot write '%s'", path);
+    if (rc || rename(tmp, path)) {
+        int e = errno;
+        remove(tmp);
+        return lm_err_set(err, root ? LM_ERR_WRITE : LM_ERR_NOMEM, "auto: cannot write '%s': %s",
+                          path, !root ? "out of memory" : e ? strerror(e) : "write failed");
+    }
     return LM_OK;
 }
 

@@ -45,7 +45,7 @@ lm_status lm_params_save(const lm_params *p, const char *path, const char *const
     FILE *f = fopen(tmp, "wb");
     if (!f) {
         free(js);
-        return lm_err_set(err, LM_ERR_IO, "%s: cannot write: %s", path, strerror(errno));
+        return lm_err_set(err, LM_ERR_WRITE, "%s: cannot write: %s", path, strerror(errno));
     }
     uint64_t n = padded;
     unsigned char len8[8];
@@ -62,7 +62,7 @@ lm_status lm_params_save(const lm_params *p, const char *path, const char *const
     if (!ok || rename(tmp, path) != 0) {
         int e = errno;
         remove(tmp);
-        return lm_err_set(err, LM_ERR_IO, "%s: write failed: %s", path, strerror(e));
+        return lm_err_set(err, LM_ERR_WRITE, "%s: write failed: %s", path, strerror(e));
     }
     return LM_OK;
 }

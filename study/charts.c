@@ -68,13 +68,13 @@ static FILE *open_in(const char *dir, const char *name, char *path, lm_err *err)
 {
     snprintf(path, CPATH, "%s/%s", dir, name);
     FILE *f = fopen(path, "w");
-    if (!f) lm_err_set(err, LM_ERR_IO, "%s: cannot write (%s)", path, strerror(errno));
+    if (!f) lm_err_set(err, LM_ERR_WRITE, "%s: cannot write (%s)", path, strerror(errno));
     return f;
 }
 
 static lm_status close_file(FILE *f, const char *path, lm_err *err)
 {
-    if (ferror(f) | fclose(f)) return lm_err_set(err, LM_ERR_IO, "%s: cannot write", path);
+    if (ferror(f) | fclose(f)) return lm_err_set(err, LM_ERR_WRITE, "%s: cannot write", path);
     return LM_OK;
 }
 
@@ -624,7 +624,7 @@ lm_status lm_charts_write(const lm_study_cfg *cfg, const lm_study *s, const char
     char cdir[CPATH];
     snprintf(cdir, sizeof cdir, "%s/charts", dir);
     if (mkdir(cdir, 0777) && errno != EEXIST)
-        return lm_err_set(err, LM_ERR_IO, "%s: cannot create (%s)", cdir, strerror(errno));
+        return lm_err_set(err, LM_ERR_WRITE, "%s: cannot create (%s)", cdir, strerror(errno));
     lm_status st = speed_chart(cfg, s->runs, cdir, err);
     if (!st) st = noise_charts(cfg, s->runs, cdir, err);
     if (!st) st = curve_charts(s->runs, cfg->train.iterations, dir, cdir, err);

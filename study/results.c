@@ -60,7 +60,7 @@ static FILE *open_tmp(const char *dir, const char *name, char *tmp, char *dst, l
     snprintf(dst, RPATH, "%s/%s", dir, name);
     snprintf(tmp, RPATH + 32, "%s.tmp.%d", dst, (int)getpid());
     FILE *f = fopen(tmp, "w");
-    if (!f) lm_err_set(err, LM_ERR_IO, "%s: cannot write (%s)", tmp, strerror(errno));
+    if (!f) lm_err_set(err, LM_ERR_WRITE, "%s: cannot write (%s)", tmp, strerror(errno));
     return f;
 }
 
@@ -68,7 +68,7 @@ static lm_status commit(FILE *f, const char *tmp, const char *dst, lm_err *err)
 {
     if ((ferror(f) | fclose(f)) || rename(tmp, dst)) {
         remove(tmp);
-        return lm_err_set(err, LM_ERR_IO, "%s: cannot write", dst);
+        return lm_err_set(err, LM_ERR_WRITE, "%s: cannot write", dst);
     }
     return LM_OK;
 }

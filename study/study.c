@@ -502,7 +502,7 @@ static lm_status write_json_atomic(json_t *j, const char *path, lm_err *err)
     if (json_dump_file(j, tmp, JSON_INDENT(2) | JSON_REAL_PRECISION(9)) != 0 ||
         rename(tmp, path) != 0) {
         remove(tmp);
-        return lm_err_set(err, LM_ERR_IO, "%s: cannot write", path);
+        return lm_err_set(err, LM_ERR_WRITE, "%s: cannot write", path);
     }
     return LM_OK;
 }
@@ -611,7 +611,7 @@ lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_
     held h;
     lm_status st = held_open(cfg, &h, &out->held_out, err); /* checks the data first */
     if (!st && make_dirs(runs))
-        st = lm_err_set(err, LM_ERR_IO, "%s: cannot create (%s)", runs, strerror(errno));
+        st = lm_err_set(err, LM_ERR_WRITE, "%s: cannot create (%s)", runs, strerror(errno));
     if (!st && h.procedural)
         fprintf(o.log, "study: the test split of the data is empty; evaluating on %d procedural "
                 "scenes (%d x %d) with seeds disjoint from training's\n", h.n, cfg->eval_h,

@@ -15,6 +15,7 @@ const char *lm_status_str(lm_status s)
     case LM_ERR_BACKEND: return "backend error";
     case LM_ERR_NUMERIC: return "numeric error";
     case LM_ERR_UNSUPPORTED: return "unsupported";
+    case LM_ERR_WRITE: return "write error";
     }
     return "unknown status";
 }

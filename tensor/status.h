@@ -18,7 +18,9 @@ typedef enum lm_status {
     LM_ERR_FORMAT = -5,      /* file content is malformed */
     LM_ERR_BACKEND = -6,     /* compute backend failure (e.g. OpenCL) */
     LM_ERR_NUMERIC = -7,     /* NaN / inf where a finite value is required */
-    LM_ERR_UNSUPPORTED = -8  /* valid request this build cannot serve */
+    LM_ERR_UNSUPPORTED = -8, /* valid request this build cannot serve */
+    LM_ERR_WRITE = -9        /* an output could not be written (disk full, permissions, a
+                              * missing folder): not bad input, unlike LM_ERR_IO on a read */
 } lm_status;
 
 /* Short constant text for a status ("shape error", ...). Never NULL. */

@@ -179,10 +179,10 @@ static void test_writes_are_atomic(void)
               f.data[7] == (k ? 0.25f : q16(0.25f)));
         lm_frame_free(&f);
     }
-    CHECK(lm_frame_write(tpath(p, "nodir/a.png"), 3, 4, v, &e) == LM_ERR_IO);
-    CHECK_ERR(e, LM_ERR_IO, "nodir/a.png", NULL);
+    CHECK(lm_frame_write(tpath(p, "nodir/a.png"), 3, 4, v, &e) == LM_ERR_WRITE);
+    CHECK_ERR(e, LM_ERR_WRITE, "nodir/a.png", NULL);
     lm_err_clear(&e);
-    CHECK(lm_frame_write(tpath(p, "nodir/a.exr"), 3, 4, v, &e) == LM_ERR_IO);
+    CHECK(lm_frame_write(tpath(p, "nodir/a.exr"), 3, 4, v, &e) == LM_ERR_WRITE);
     CHECK(file_size(p) < 0 && !tmp_leftovers());
 }
 

@@ -107,7 +107,7 @@ static void test_safetensors_bad_files(void)
     /* failed save leaves nothing behind */
     char dirpath[300];
     snprintf(dirpath, sizeof dirpath, "%s/no_such_dir/x.safetensors", tmpdir);
-    CHECK(lm_params_save(&a, dirpath, NULL, 0, &e) == LM_ERR_IO);
+    CHECK(lm_params_save(&a, dirpath, NULL, 0, &e) == LM_ERR_WRITE);
     lm_params_free(&a);
     lm_params_free(&other);
     lm_params_free(&small);

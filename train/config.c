@@ -482,8 +482,10 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
     int rc = json_dump_file(root, tmp, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(9));
     json_decref(root);
     if (rc != 0 || rename(tmp, path) != 0) {
+        int e = errno;
         remove(tmp);
-        return lm_err_set(err, LM_ERR_IO, "%s: cannot write the config", path);
+        return lm_err_set(err, LM_ERR_WRITE, "%s: cannot write the config: %s", path,
+                          strerror(e));
     }
     return LM_OK;
 }

@@ -7,6 +7,7 @@
 #include "data/spectra.h"
 #include "train/fit_lmmse.h"
 #include "data/mosaic.h"
+#include <errno.h>
 #include <jansson.h>
 #include <math.h>
 #include <stdlib.h>
@@ -141,8 +142,10 @@ static lm_status write_fit_report(const lm_train_cfg *cfg, const lm_lmmse_fit_re
     int rc = root ? json_dump_file(root, tmp, JSON_INDENT(2) | JSON_REAL_PRECISION(6)) : -1;
     json_decref(root);
     if (rc || rename(tmp, path)) {
+        int e = errno;
         remove(tmp);
-        return lm_err_set(err, LM_ERR_IO, "%s: cannot write the fit report", path);
+        return lm_err_set(err, LM_ERR_WRITE, "%s: cannot write the fit report: %s", path,
+                          strerror(e));
     }
     snprintf(path, sizeof path, "%s/log.csv", cfg->output);
     FILE *f = fopen(path, "w");
@@ -150,7 +153,7 @@ static lm_status write_fit_report(const lm_train_cfg *cfg, const lm_lmmse_fit_re
     if (ok && isfinite(r->val_psnr[0])) ok = fprintf(f, "%.6f", r->val_psnr[0]) > 0;
     ok = ok && fprintf(f, ",,,\n") > 0;
     if (f && fclose(f)) ok = 0;
-    return ok ? LM_OK : lm_err_set(err, LM_ERR_IO, "%s: cannot write the log", path);
+    return ok ? LM_OK : lm_err_set(err, LM_ERR_WRITE, "%s: cannot write the log", path);
 }
 
 static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
@@ -160,17 +163,20 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     lm_lmmse_fit_report r;
     char path[LM_TRAIN_PATH_LEN + 16];
     snprintf(path, sizeof path, "%s/config.json", cfg->output);
-    lm_status st = lm_train_make_dir(cfg->output, err);
     lm_noise_opts sensor = {0};
     sensor.clip = cfg->sensor_clip;
     sensor.bits = cfg->sensor_bits;
-    if (!st) st = lm_lmmse_fit(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches, cfg->batch,
-                               cfg->fit_synth,
-                               &sensor, &r, err);
+    char made[LM_TRAIN_PATH_LEN] = ""; /* the run folder is made once the fit has worked */
+    lm_status st = lm_lmmse_fit(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches, cfg->batch,
+                                cfg->fit_synth, &sensor, &r, err);
+    if (!st) st = lm_train_make_dir_top(cfg->output, made, sizeof made, err);
     if (!st) st = lm_train_cfg_save(cfg, path, err);
     if (!st) st = lm_train_save_checkpoint(cfg->output, m, NULL, 0, 0, opts, cfg, err);
     if (!st) st = write_fit_report(cfg, &r, lm_lmmse_window(m), err);
-    if (st) return st;
+    if (st) {
+        lm_train_discard_dir(cfg->output, made);
+        return st;
+    }
     if (opts->progress) {
         fprintf(out, "train: %s fitted in closed form in %.1f s (%ld patches, %ld pixels; %ld "
                 "validation patches; solving %.1f s)\n", cfg->model, r.seconds, r.patches, r.rows,

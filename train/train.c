@@ -31,6 +31,7 @@ typedef struct loop {
     float *sigma;                 /* per item: the input's estimated noise sd (noise_input) */
     void *noise_scratch;          /* the estimator's scratch (noise_input), allocated once */
     FILE *log;
+    char made[LM_TRAIN_PATH_LEN]; /* outermost folder this run created ("" = none) */
     long it0;                     /* iteration this invocation started at */
     long saved;                   /* iteration of the checkpoint on disk (-1: none yet) */
     double t0, last_print;
@@ -52,22 +53,49 @@ static double now_s(void)
     return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
-lm_status lm_train_make_dir(const char *path, lm_err *err)
+lm_status lm_train_make_dir_top(const char *path, char *top, size_t n, lm_err *err)
 {
     char buf[LM_TRAIN_PATH_LEN];
     snprintf(buf, sizeof buf, "%s", path);
+    if (top && n) top[0] = 0;
     for (char *p = buf + 1; ; p++) {
         if (*p == '/' || *p == 0) {
             char ch = *p;
             *p = 0;
-            if (mkdir(buf, 0777) != 0 && errno != EEXIST)
-                return lm_err_set(err, LM_ERR_IO, "output %s: cannot create folder %s: %s", path,
-                                  buf, strerror(errno));
+            int made = mkdir(buf, 0777) == 0;
+            if (!made && errno != EEXIST)
+                return lm_err_set(err, LM_ERR_WRITE, "output %s: cannot create folder %s: %s",
+                                  path, buf, strerror(errno));
+            if (made && top && n && !top[0]) snprintf(top, n, "%s", buf);
             *p = ch;
             if (!ch) break;
         }
     }
     return LM_OK;
+}
+
+lm_status lm_train_make_dir(const char *path, lm_err *err)
+{
+    return lm_train_make_dir_top(path, NULL, 0, err);
+}
+
+void lm_train_discard_dir(const char *dir, const char *top)
+{
+    static const char *const files[] = {"config.json", "log.csv", "fit.json",
+                                        "model.safetensors", "optimizer.safetensors"};
+    char p[LM_TRAIN_PATH_LEN + 32];
+    for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
+        snprintf(p, sizeof p, "%s/%s", dir, files[i]);
+        remove(p);
+    }
+    if (!top || !top[0]) return;
+    size_t lt = strlen(top);
+    snprintf(p, sizeof p, "%s", dir); /* dir, then its parents, down to top */
+    while (strlen(p) >= lt && rmdir(p) == 0 && strlen(p) > lt) {
+        char *s = strrchr(p, '/');
+        if (!s) break;
+        *s = 0;
+    }
 }
 
 /* ---- parameters on the device for one step (no-ops on the CPU) ------------------------ */
@@ -99,6 +127,16 @@ static void set_noise(loop *L, int B)
 }
 
 /* ---- one iteration -------------------------------------------------------------------- */
+/* "the last good checkpoint (iteration N) in DIR is kept" or "no checkpoint ..." */
+static void kept_text(const loop *L, char *buf, size_t n)
+{
+    if (L->saved >= 0)
+        snprintf(buf, n, "the last good checkpoint (iteration %ld) in %.400s is kept", L->saved,
+                 L->cfg->output);
+    else
+        snprintf(buf, n, "no checkpoint had been written yet");
+}
+
 /* Forward + L1 + backward of batch `index`; adds the unscaled loss to *loss_sum. */
 static lm_status micro_step(loop *L, long index, double *loss_sum, lm_err *err)
 {
@@ -157,11 +195,7 @@ static lm_status iteration(loop *L, long it, double *loss, lm_err *err)
         return LM_OK;
     }
     char kept[LM_TRAIN_PATH_LEN + 64];
-    if (L->saved >= 0)
-        snprintf(kept, sizeof kept, "the last good checkpoint (iteration %ld) in %.400s is kept",
-                 L->saved, cfg->output);
-    else
-        snprintf(kept, sizeof kept, "no checkpoint had been written yet");
+    kept_text(L, kept, sizeof kept);
     return lm_err_set(err, LM_ERR_NUMERIC, "iteration %ld: %s is %s; training stopped (%s)",
                       it + 1, isfinite(*loss) ? "a gradient" : "the loss",
                       isnan(*loss) ? "NaN" : "not finite", kept);
@@ -258,14 +292,21 @@ static void progress(loop *L, long done, double loss, float lr, int final)
     fflush(f);
 }
 
-static void log_row(loop *L, long it, double loss, float lr, const lm_metrics *m)
+/* One row of log.csv, flushed; a row that cannot be written (disk full) stops the run. */
+static lm_status log_row(loop *L, long it, double loss, float lr, const lm_metrics *m,
+                         lm_err *err)
 {
-    if (!L->log) return;
-    if (loss == loss) fprintf(L->log, "%ld,%.8g,%.6g", it, loss, lr);
-    else fprintf(L->log, "%ld,,%.6g", it, lr);
-    if (m) fprintf(L->log, ",%.6f,%.6f,%.8f,%.6f\n", m->psnr, m->ssim, m->mae, m->sam);
-    else fprintf(L->log, ",,,,\n");
-    fflush(L->log);
+    if (!L->log) return LM_OK;
+    int ok = (loss == loss ? fprintf(L->log, "%ld,%.8g,%.6g", it, loss, lr)
+                           : fprintf(L->log, "%ld,,%.6g", it, lr)) > 0;
+    if (m) ok &= fprintf(L->log, ",%.6f,%.6f,%.8f,%.6f\n", m->psnr, m->ssim, m->mae, m->sam) > 0;
+    else ok &= fprintf(L->log, ",,,,\n") > 0;
+    if (fflush(L->log) == 0 && ok && !ferror(L->log)) return LM_OK;
+    int e = errno;
+    char kept[LM_TRAIN_PATH_LEN + 64];
+    kept_text(L, kept, sizeof kept);
+    return lm_err_set(err, LM_ERR_WRITE, "%.400s/log.csv: cannot write: %s; training stopped (%s)",
+                      L->cfg->output, e ? strerror(e) : "write error", kept);
 }
 
 /* Open log.csv: fresh (header) or, on resume, keeping only rows up to `upto`. */
@@ -277,7 +318,7 @@ static lm_status open_log(loop *L, int resume, long upto, lm_err *err)
     FILE *in = resume ? fopen(path, "r") : NULL, *out = fopen(tmp, "w");
     if (!out) {
         if (in) fclose(in);
-        return lm_err_set(err, LM_ERR_IO, "%s: cannot write: %s", tmp, strerror(errno));
+        return lm_err_set(err, LM_ERR_WRITE, "%s: cannot write: %s", tmp, strerror(errno));
     }
     fprintf(out, "iteration,loss,lr,psnr,ssim,mae,sam\n");
     char line[512];
@@ -289,10 +330,11 @@ static lm_status open_log(loop *L, int resume, long upto, lm_err *err)
     if (in) fclose(in);
     if (fclose(out) != 0 || rename(tmp, path) != 0) {
         remove(tmp);
-        return lm_err_set(err, LM_ERR_IO, "%s: cannot write the log", path);
+        return lm_err_set(err, LM_ERR_WRITE, "%s: cannot write the log", path);
     }
     L->log = fopen(path, "a");
-    if (!L->log) return lm_err_set(err, LM_ERR_IO, "%s: cannot append: %s", path, strerror(errno));
+    if (!L->log)
+        return lm_err_set(err, LM_ERR_WRITE, "%s: cannot append: %s", path, strerror(errno));
     return LM_OK;
 }
 
@@ -339,7 +381,7 @@ static lm_status setup(loop *L, lm_err *err)
     lm_adam_cfg ac;
     lm_train_cfg_adam(cfg, &ac);
     if (lm_adam_init(&L->opt, &L->model->params, &ac, err)) return err->status;
-    return lm_train_make_dir(cfg->output, err);
+    return lm_train_make_dir_top(cfg->output, L->made, sizeof L->made, err);
 }
 
 static void teardown(loop *L)
@@ -464,7 +506,7 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
         double loss = 0;
         lm_status st = iteration(L, it, &loss, err);
         if (st) {
-            log_row(L, it + 1, loss, lr, NULL);
+            log_row(L, it + 1, loss, lr, NULL, err); /* err keeps the step's message */
             return st;
         }
         if (it == start) res->first_loss = loss;
@@ -474,7 +516,9 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
         double el = elapsed(L);
         int out_of_time = budget > 0 && el >= budget;
         int stop_now = L->opts->stop_seconds > 0 && el >= L->opts->stop_seconds;
-        if (out_of_time || stop_now) end = it + 1;
+        int signalled = L->opts->interrupt ? atomic_load(L->opts->interrupt) : 0;
+        if (out_of_time || stop_now || signalled) end = it + 1;
+        res->interrupted = signalled;
         int last = it + 1 == end;
         int val = (cfg->val_interval > 0 && (it + 1) % cfg->val_interval == 0) ||
                   it + 1 == L->total || out_of_time;
@@ -484,7 +528,7 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
         } else {
             val = 0;
         }
-        log_row(L, it + 1, loss, lr, val ? &res->val : NULL);
+        if (log_row(L, it + 1, loss, lr, val ? &res->val : NULL, err)) return err->status;
         progress(L, it + 1, loss, lr, last);
         if (snapshots(L, it + 1, err)) return err->status;
         if ((cfg->checkpoint_interval > 0 && (it + 1) % cfg->checkpoint_interval == 0) || last) {
@@ -527,5 +571,8 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
     if (!st) st = run_loop(&L, start, res, err);
     res->seconds = now_s() - L.t0;
     teardown(&L);
+    /* a fresh run that failed before its first iteration completed leaves no run folder */
+    if (st && !opts->resume && L.saved < 0 && res->iterations_done == 0)
+        lm_train_discard_dir(cfg->output, L.made);
     return st;
 }

@@ -20,6 +20,7 @@
  * models (models/model.h). */
 #ifndef LM_TRAIN_H
 #define LM_TRAIN_H
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include "models/model.h"
@@ -140,6 +141,10 @@ typedef struct lm_train_opts {
                                 * runs early with it) */
     double elapsed;            /* set by the loop: training seconds so far, recorded in
                                 * checkpoints ("seconds") */
+    const atomic_int *interrupt; /* NULL, or a flag another thread or a signal handler sets
+                                * (nonzero, e.g. the signal's number): the run finishes the
+                                * current iteration, writes its checkpoint and returns LM_OK
+                                * with res->interrupted = the flag's value */
 } lm_train_opts;
 
 typedef struct lm_train_result {
@@ -151,6 +156,7 @@ typedef struct lm_train_result {
     double seconds;
     int closed_form;           /* fitted in closed form (lmmse): no iterations, val.psnr only */
     int budget_spent;          /* stopped because cfg.minutes of training time were spent */
+    int interrupted;           /* stopped by opts->interrupt (its value), 0 otherwise */
 } lm_train_result;
 
 /* Train `model` (created by the caller from cfg->model with the run's mosaic) on `src`.
@@ -160,7 +166,10 @@ typedef struct lm_train_result {
  * host; validation runs its forward passes the same way. A device that cannot be opened is
  * LM_ERR_ARG with a one-line message naming it.
  * LM_ERR_NUMERIC when a loss is NaN/inf: the run stops, the message names the iteration, and
- * the last checkpoint on disk is left untouched. */
+ * the last checkpoint on disk is left untouched. LM_ERR_WRITE when log.csv (or a checkpoint)
+ * cannot be written: the run stops the same way. A fresh run that fails before its first
+ * iteration completes (a scene that cannot be read, a NaN at once) leaves no run folder: the
+ * files it wrote and the folders it created are removed. */
 lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_source *src,
                        const lm_train_opts *opts, lm_train_result *res, lm_err *err);
 
@@ -185,5 +194,11 @@ lm_status lm_train_load_checkpoint(const char *dir, lm_model *m, lm_adam *opt, l
 double lm_train_checkpoint_seconds(const char *dir);
 /* mkdir -p. */
 lm_status lm_train_make_dir(const char *path, lm_err *err);
+/* mkdir -p that also gives the outermost folder it created (top, n bytes; "" if path existed). */
+lm_status lm_train_make_dir_top(const char *path, char *top, size_t n, lm_err *err);
+/* Undo a run that failed to start: remove the files a run writes into `dir` (config.json,
+ * log.csv, fit.json, the checkpoints) and the folders from dir up to `top` (as made by
+ * lm_train_make_dir_top; "" = none were created). Other files are left alone. */
+void lm_train_discard_dir(const char *dir, const char *top);
 
 #endif

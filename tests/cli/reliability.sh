@@ -2,7 +2,11 @@
 # reliability.sh — end-to-end regression tests of issue 16 (reliability) at the command line:
 # impossible options and config values (thread counts, integers that do not fit, non-finite or
 # out-of-range numbers in flags, run and study configs and system files) are refused with one
-# line on stderr that says the allowed range, exit 2 and no run folder left.
+# line on stderr that says the allowed range, exit 2 and no run folder left; a training run
+# started with relative paths resumes from anywhere; an output that cannot be written is exit
+# status 1 with the reason, for every command; a run that fails to start leaves no folder;
+# SIGINT/SIGTERM: train checkpoints and exits 130/143 (a second signal at once), infer removes
+# its staging folder.
 # usage: reliability.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 SRC=$(cd "$(dirname "$0")/../.." && pwd)
@@ -39,6 +43,8 @@ expect_error "config iterations 2^63 - 1" 2 "'iterations': 9223372036854775807 i
   "$T/n7" -- $TR --config "$T/iter.json" --output "$T/n7"
 printf '{"version": 1, "presets": ["linear"], "data": "%s", "eval_size": [4294967362, 64]}' \
   "$CAVE" > "$T/study.json"
+printf '{"version": 1, "presets": ["linear"], "data": "%s", "iterations": 2}' "$CAVE" \
+  > "$T/study_ok.json"
 expect_error "study eval_size [2^32 + 66, 64]" 2 "field 'eval_size': must be \"HxW\" or [H, W] (1..8192)" \
   "$T/n8" -- timeout 60 "$LM" study --config "$T/study.json" --output "$T/n8"
 expect_error "simulate --frames x" 2 "--frames: 'x' is not an integer in 1..10000" "$T/n9" -- \
@@ -75,5 +81,115 @@ check "relative run: $(cat "$T/rel.log")" [ -s "$T/wd1/runs/rel/model.safetensor
 check "resume from the same folder: $(cat "$T/rel2.log")" grep -q "for 3 iterations" "$T/rel2.log"
 (cd "$T/wd2" && "$LM" train --resume ../wd1/runs/rel --iterations 4 > "$T/rel3.log" 2>&1)
 check "resume from another folder: $(cat "$T/rel3.log")" grep -q "for 4 iterations" "$T/rel3.log"
+
+# ---- cannot write an output: exit status 1 for every command, with the reason --------------
+R=$T/wd1/runs/rel # the model trained above
+touch "$T/afile"  # a file where a folder should be: nothing can be written below it
+"$LM" simulate --input "$CAVE" --crop --output "$T/frames" > /dev/null 2>&1
+check "frames fixture" [ -s "$T/frames/frames/frame_0000.png" ]
+expect_error "train: output cannot be written" 1 "cannot create folder $T/afile/run: Not a directory" \
+  "$T/afile/run" -- $TR --iterations 2 --output "$T/afile/run"
+expect_error "simulate: output cannot be written" 1 "cannot create a folder: Not a directory" \
+  "$T/afile/sim" -- "$LM" simulate --input "$CAVE" --crop --output "$T/afile/sim"
+expect_error "infer: output cannot be written" 1 "cannot create a folder: Not a directory" \
+  "$T/afile/inf" -- "$LM" infer --model "$R" --input "$T/frames/frames" --output "$T/afile/inf"
+expect_error "eval: output cannot be written" 1 "cannot create a folder: Not a directory" \
+  "$T/afile/ev" -- "$LM" eval --model "$R" "$CAVE" --split all --noise 0 --rainbow 0 \
+  --output "$T/afile/ev"
+"$LM" calibrate --models "$R,$R" --synth 1 --synth-size 66x64 --bins 1 \
+  --output "$T/afile/auto.json" > /dev/null 2> "$T/cal.err"
+check "calibrate: output cannot be written: exit 1" [ $? -eq 1 ]
+check "calibrate: output cannot be written: the reason: $(cat "$T/cal.err")" \
+  grep -q "auto: cannot write '$T/afile/auto.json': Not a directory" "$T/cal.err"
+expect_error "render: output cannot be written" 1 "x.png: write failed" "$T/afile/x.png" -- \
+  "$LM" render --input "$CAVE" --output "$T/afile/x.png"
+expect_error "study: output cannot be written" 1 "runs: cannot create (Not a directory)" \
+  "$T/afile/st" -- "$LM" study --config "$T/study_ok.json" --output "$T/afile/st" --no-charts
+# ... and input that cannot be read is bad input (2), for train too (it was 1)
+expect_error "train: missing data" 2 "$T/nope: no such file or folder" "$T/nd" -- \
+  $TR --iterations 2 --data "$T/nope" --output "$T/nd"
+
+# ---- a run that fails to start leaves no run folder -----------------------------------------
+mkdir -p "$T/badscene"
+cp -r "$CAVE" "$T/badscene/"
+head -c 700 "$CAVE/balloons_crop100_ms_05.png" > "$T/badscene/balloons_crop100/balloons_crop100_ms_05.png"
+expect_error "train: a scene fails at the first batch" 2 "ms_05.png: truncated PNG" "$T/fs/run" -- \
+  timeout 60 "$LM" train $RT --iterations 2 --data "$T/badscene" --output "$T/fs/run"
+check "train: no parent folder left either" [ ! -e "$T/fs" ]
+
+# ---- signals ----------------------------------------------------------------------------------
+# (a watchdog kills the command after 60 s: before the fix, a background job ignored SIGINT, as
+# a shell starts it, and ran for ever)
+# wait_for COND...: poll (up to 60 s) until the command succeeds
+wait_for() {
+  local k
+  for k in $(seq 1 1200); do "$@" 2>/dev/null && return 0; sleep 0.05; done
+  return 1
+}
+log_rows() { [ -f "$1/log.csv" ] && [ "$(wc -l < "$1/log.csv")" -gt "$2" ]; }
+# watch PID: SIGKILL it after 60 s (the watchdog's pid in $dog)
+watch() { (sleep 60; kill -KILL "$1") > /dev/null 2>&1 & dog=$!; }
+# train: the first SIGINT / SIGTERM finishes the iteration, writes the checkpoint, says so in
+# one line and exits 130 / 143; the run resumes from there
+for sg in INT TERM; do
+  d=$T/sig_$sg
+  "$LM" train $RT --data "$CAVE" --iterations 1000000000 --val-interval 0 \
+    --checkpoint-interval 0 --output "$d" > "$d.out" 2> "$d.err" &
+  pid=$!
+  watch $pid
+  wait_for log_rows "$d" 3
+  kill -$sg $pid
+  wait $pid
+  rc=$?
+  kill $dog
+  want=$([ $sg = INT ] && echo 130 || echo 143)
+  check "train SIG$sg: exit $rc, want $want: $(cat "$d.err")" [ $rc -eq $want ]
+  check "train SIG$sg: one line" [ "$(wc -l < "$d.err")" -eq 1 ]
+  n=$(sed -n 's/.*interrupted (SIG'$sg') at iteration \([0-9]*\): checkpoint written.*/\1/p' "$d.err")
+  check "train SIG$sg: the line names the iteration: $(cat "$d.err")" [ -n "$n" ]
+  check "train SIG$sg: checkpoint on disk" [ -s "$d/model.safetensors" -a -s "$d/optimizer.safetensors" ]
+  check "train SIG$sg: no temporary file left" [ -z "$(ls "$d" | grep tmp)" ]
+  if [ -n "$n" ]; then
+    "$LM" train --resume "$d" --iterations $((n + 2)) > "$d.res" 2>&1
+    check "train SIG$sg: resumes: $(cat "$d.res")" grep -q "for $((n + 2)) iterations" "$d.res"
+  fi
+done
+# a second signal stops at once (a slow step: han-small)
+d=$T/sig_twice
+"$LM" train --model han-small --data "$CAVE" --batch 4 --accum-steps 1 --synth-fraction 0 \
+  --val-patches 1 --iterations 5 --quiet --output "$d" > "$d.out" 2> "$d.err" &
+pid=$!
+watch $pid
+wait_for [ -s "$d/config.json" ]
+kill -INT $pid
+sleep 0.1
+kill -INT $pid
+wait $pid
+rc=$?
+kill $dog
+check "train: second SIGINT: exit $rc: $(cat "$d.err")" [ $rc -eq 130 ]
+check "train: second SIGINT stops at once: $(cat "$d.err")" grep -q "stopped at once" "$d.err"
+# infer: a signal removes the staging folder (a long sequence: the signal comes after the first
+# cube is staged; a FIFO as frame 1 no longer works, every frame's header is read first)
+mkdir -p "$T/long"
+for i in $(seq -w 0 399); do
+  ln -s "$T/frames/frames/frame_0000.png" "$T/long/frame_0$i.png"
+done
+O=$T/inf_sig
+"$LM" infer --model "$R" --input "$T/long" --no-align --output "$O" > "$T/isig.out" 2> "$T/isig.err" &
+pid=$!
+watch $pid
+staged() { ls "$O".tmp.*/cube_0000.exr; } # the glob is expanded at each try
+wait_for staged
+kill -INT $pid
+wait $pid
+rc=$?
+kill $dog
+check "infer SIGINT: exit $rc: $(cat "$T/isig.err")" [ $rc -eq 130 ]
+check "infer SIGINT: one line: $(cat "$T/isig.err")" [ "$(grep -vc '^frame ' "$T/isig.err")" -eq 1 ]
+check "infer SIGINT: says so: $(cat "$T/isig.err")" \
+  grep -q "interrupted (SIGINT): partial output removed" "$T/isig.err"
+check "infer SIGINT: no staging folder or output left: $(ls -d "$O"* 2>&1)" no_output "$O"
+check "infer SIGINT: nothing set aside either" [ -z "$(ls -d "$O".* 2>/dev/null)" ]
 
 finish

@@ -2,8 +2,8 @@
 # simulate_errors.sh — end-to-end tests of `lumosaic simulate` on bad input (missing, truncated
 # and corrupt cubes, wrong band counts, NaN / negative values, unknown formats, invalid system
 # files, sizes that are not a multiple of the tile, unknown options, out-of-range numbers, an
-# unusable output): exit status 2, one line on stderr naming the file and problem, and no
-# partial output left behind.
+# unusable output): exit status 2 (1 for an output folder that cannot be created, as for every
+# command), one line on stderr naming the file and problem, and no partial output left behind.
 # usage: simulate_errors.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 
@@ -53,7 +53,7 @@ expect_error "region size" 2 "--motion: invalid 'region:rect,5,5,0,3,1,1'" "$B" 
 expect_error "motion without video" 2 "need --video" "$B" -- $S --input "$CAVE" --motion translate:1,2
 expect_error "no input" 2 "--input is required" "$B" -- $S
 expect_error "no output" 2 "--output is required" "$B" -- "$LM" simulate --input "$CAVE"
-expect_error "output parent missing" 2 "cannot create a folder" "$T/no/such/dir" -- "$LM" simulate --input "$CAVE" --crop --output "$T/no/such/dir"
+expect_error "output parent missing" 1 "cannot create a folder" "$T/no/such/dir" -- "$LM" simulate --input "$CAVE" --crop --output "$T/no/such/dir"
 # an output that exists and is not empty is refused and left untouched
 mkdir "$T/full" && echo keep > "$T/full/note.txt"
 expect_error "output exists" 2 "full: output already exists" "$T/none" -- "$LM" simulate --input "$CAVE" --crop --output "$T/full"
