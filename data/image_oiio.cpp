@@ -12,6 +12,7 @@
 #include <OpenImageIO/imageio.h>
 #include <openexr.h>
 
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -21,6 +22,7 @@
 #include <strings.h>
 #include <sys/stat.h>
 #include <vector>
+#include <zlib.h>
 
 using OIIO::ImageInput;
 using OIIO::ImageOutput;
@@ -46,31 +48,48 @@ static std::string first_line(std::string s)
     return s;
 }
 
-/* A PNG must hold whole chunks up to IEND. Checked before OpenImageIO sees the file: its PNG
- * reader leaks when libpng hits the end of a truncated file, and the message is clearer.
- * Returns 1 if the file is a PNG cut short, 0 otherwise (including "not a PNG"). */
-static int png_truncated(const char *path)
+/* A PNG must hold whole chunks up to IEND, each with a correct CRC. Checked before
+ * OpenImageIO sees the file: its PNG reader leaks when libpng hits the end of a truncated
+ * file, libpng prints its own complaint about a corrupt chunk on stderr (a second line), and
+ * the message is clearer. A file that is not a PNG passes (OpenImageIO reports it). */
+static lm_status png_check(const char *path, lm_err *e)
 {
     FILE *f = fopen(path, "rb");
-    if (!f) return 0;
-    unsigned char b[8];
-    int cut = 0;
+    if (!f) return LM_OK;
+    unsigned char b[8], block[65536];
+    lm_status s = LM_OK;
     if (fread(b, 1, 8, f) == 8 && std::memcmp(b, "\x89PNG\r\n\x1a\n", 8) == 0) {
         fseek(f, 0, SEEK_END);
         long size = ftell(f), pos = 8;
-        cut = 1;
-        while (pos + 12 <= size && fseek(f, pos, SEEK_SET) == 0 && fread(b, 1, 8, f) == 8) {
-            long len = (long)((unsigned long)b[0] << 24 | b[1] << 16 | b[2] << 8 | b[3]);
-            pos += 12 + len;
-            if (pos > size) break;
-            if (std::memcmp(b + 4, "IEND", 4) == 0) {
-                cut = 0;
-                break;
+        int ended = 0;
+        while (s == LM_OK && !ended && pos + 12 <= size && fseek(f, pos, SEEK_SET) == 0 &&
+               fread(b, 1, 8, f) == 8) {
+            unsigned long len = (unsigned long)b[0] << 24 | b[1] << 16 | b[2] << 8 | b[3];
+            if (len > (unsigned long)(size - pos - 12)) break;
+            uLong crc = crc32(0L, b + 4, 4);
+            for (unsigned long done = 0; done < len;) {
+                size_t k = len - done < sizeof block ? len - done : sizeof block;
+                if (fread(block, 1, k, f) != k) break;
+                crc = crc32(crc, block, (uInt)k);
+                done += k;
             }
+            unsigned char c[4];
+            if (fread(c, 1, 4, f) != 4 ||
+                crc != ((uLong)c[0] << 24 | (uLong)c[1] << 16 | (uLong)c[2] << 8 | c[3])) {
+                char type[5];
+                for (int i = 0; i < 4; i++) type[i] = std::isalpha(b[4 + i]) ? (char)b[4 + i] : '?';
+                type[4] = 0;
+                s = lm_err_set(e, LM_ERR_FORMAT, "%s: corrupt PNG: chunk %s at byte %ld fails "
+                               "its CRC", path, type, pos);
+            }
+            ended = std::memcmp(b + 4, "IEND", 4) == 0;
+            pos += 12 + (long)len;
         }
+        if (s == LM_OK && !ended)
+            s = lm_err_set(e, LM_ERR_FORMAT, "%s: truncated PNG (file ends before IEND)", path);
     }
     fclose(f);
-    return cut;
+    return s;
 }
 
 /* OpenEXR's C API (Core) checks every attribute's size against the file while parsing a
@@ -189,8 +208,7 @@ static lm_status open_input(const char *path, const lm_image_want *want,
     if (!plugin)
         return lm_err_set(e, LM_ERR_UNSUPPORTED, "%s: unknown image format (expected .png, "
                           ".tif, .tiff or .exr)", path);
-    if (png_truncated(path))
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: truncated PNG (file ends before IEND)", path);
+    if ((s = png_check(path, e)) != LM_OK) return s;
     if (!std::strcmp(plugin, "openexr") && (s = exr_header_ok(path, e)) != LM_OK) return s;
     ImageSpec config, spec;
     config.attribute("oiio:UnassociatedAlpha", 1); /* never premultiply PNG/TIFF alpha */

@@ -28,5 +28,9 @@ lm_status lm_err_set(lm_err *e, lm_status s, const char *fmt, ...)
     va_start(ap, fmt);
     vsnprintf(e->msg, sizeof e->msg, fmt, ap);
     va_end(ap);
+    /* one line whatever the arguments hold: a library's message quoting a corrupt file's
+     * names, or a path, may carry newlines or other control characters */
+    for (char *p = e->msg; *p; p++)
+        if ((unsigned char)*p < 0x20 || *p == 0x7f) *p = '?';
     return s;
 }

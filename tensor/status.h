@@ -33,7 +33,8 @@ typedef struct lm_err {
     char msg[512];
 } lm_err;
 
-/* Record the first error into e (e may be NULL). Returns s, so: return lm_err_set(e, ...). */
+/* Record the first error into e (e may be NULL). Returns s, so: return lm_err_set(e, ...).
+ * The message is kept on one line: control characters (a newline in a quoted name) become '?'. */
 lm_status lm_err_set(lm_err *e, lm_status s, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 static inline void lm_err_clear(lm_err *e) { if (e) { e->status = LM_OK; e->msg[0] = 0; } }

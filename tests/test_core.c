@@ -127,6 +127,18 @@ static void test_errors_are_sticky(void)
     lm_ctx_free(&c);
 }
 
+/* lm_err keeps the first error, on one line whatever the arguments hold. */
+static void test_err_one_line(void)
+{
+    lm_err e = {LM_OK, ""};
+    CHECK(lm_err_set(&e, LM_ERR_FORMAT, "%s: channel '%s'", "in.exr", "S0.6\n\n\tnm\r") ==
+          LM_ERR_FORMAT);
+    CHECK(strcmp(e.msg, "in.exr: channel 'S0.6???nm?'") == 0);
+    CHECK(lm_err_set(&e, LM_ERR_IO, "second") == LM_ERR_IO && e.status == LM_ERR_FORMAT);
+    lm_err_clear(&e);
+    CHECK(e.status == LM_OK && e.msg[0] == 0);
+}
+
 static void test_views_share_memory(void)
 {
     lm_ctx c;
@@ -229,5 +241,6 @@ int main(void)
     RUN(test_view_gradients);
     RUN(test_scope_releases_in_no_grad);
     RUN(test_backward_errors);
+    RUN(test_err_one_line);
     return check_summary();
 }

@@ -113,7 +113,7 @@ static void test_exr_round_trip(void)
 
 static void test_frame_errors(void)
 {
-    char p[1024], q[1024];
+    char p[1024], q[1024], c0[1024];
     lm_err e = {0};
     lm_frame f;
     float v[12] = {0};
@@ -147,6 +147,15 @@ static void test_frame_errors(void)
         CHECK_ERR(e, LM_ERR_FORMAT, cut[k], "truncated");
         lm_err_clear(&e);
     }
+    /* one byte changed inside the pixel data: the chunk's CRC says so (libpng used to print
+     * its own complaint on stderr besides the error) */
+    truncate_copy(q, tpath(c0, "flip.png"), file_size(q));
+    FILE *fl = fopen(c0, "r+b");
+    CHECK(fl && fseek(fl, file_size(c0) / 2, SEEK_SET) == 0 && fputc(0x5a, fl) == 0x5a);
+    if (fl) fclose(fl);
+    CHECK(lm_frame_read(c0, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "flip.png: corrupt PNG: chunk IDAT", "fails its CRC");
+    lm_err_clear(&e);
     const char *two[2] = {"Y", "Z"};
     CHECK(lm_image_write_exr(tpath(p, "two.exr"), 3, 2, 2, two, v, NULL, &e) == LM_OK);
     CHECK(lm_frame_read(p, &f, &e) == LM_ERR_FORMAT);

@@ -46,7 +46,11 @@ seq_of "$T/seq1" "$REG/frame/tiff-huge-claim-1.tif"
 seq_of "$T/seq2" "$REG/frame/tiff-huge-claim-2.tif"
 seq_of "$T/seq3" "$REG/frame/png-ratio-claim.png"
 
+# one byte of the pixel data changed (bit rot): one line, not libpng's own complaint as well
+cp "$GOOD" "$T/flip.png" && printf '\x5a' | dd of="$T/flip.png" bs=1 seek=$(( $(stat -c %s "$GOOD") / 2 )) conv=notrunc 2> /dev/null
+
 I="$LM infer --model $MODEL --output $T/out"
+bounded "png with a changed byte" infer "flip.png: corrupt PNG" "$T/out" -- $I --input "$T/flip.png"
 bounded "tiff 1 (256 channels), frame 2" infer "f_0001.tif: has 256 channels" "$T/out" -- $I --input "$T/seq1"
 bounded "tiff 2 (3584 x 61452), frame 2" infer "f_0001.tif: image size 3584 x 61452" "$T/out" -- $I --input "$T/seq2"
 bounded "png 8000 x 8000 in 700 bytes, frame 2" infer "f_0001.png" "$T/out" -- $I --input "$T/seq3"
