@@ -34,17 +34,22 @@ double lm_cond_clean_level(lm_cond_family f)
     return f == LM_COND_SATURATION ? 1.0 : 0.0;
 }
 
+/* The levels of each family: photo-electrons as simulate --poisson, exposure factors, %,
+ * px/s as eval --motion. */
+static const double ranges[LM_COND_NFAMILIES][2] = {{0, 1e12}, {1, 1e6}, {0, 100}, {0, 100},
+                                                    {0, 1e4}};
+
+int lm_cond_range(lm_cond_family f, double *lo, double *hi)
+{
+    if ((int)f < 0 || f >= LM_COND_NFAMILIES) return -1;
+    *lo = ranges[f][0], *hi = ranges[f][1];
+    return 0;
+}
+
 int lm_cond_level_ok(lm_cond_family f, double v)
 {
-    if (!isfinite(v)) return 0;
-    switch (f) {
-    case LM_COND_PHOTONS: return v >= 0.0;
-    case LM_COND_SATURATION: return v >= 1.0;
-    case LM_COND_LED_GAIN:
-    case LM_COND_DEAD_PIXELS: return v >= 0.0 && v <= 100.0;
-    case LM_COND_MOTION: return v >= 0.0;
-    default: return 0;
-    }
+    double lo, hi;
+    return lm_cond_range(f, &lo, &hi) == 0 && v >= lo && v <= hi; /* NaN is not */
 }
 
 int lm_cond_default_levels(lm_cond_family f, double *levels)
@@ -141,9 +146,11 @@ static lm_status bad_family(const lm_infer_model *im, lm_cond_family f, double l
 {
     if (!lm_cond_name(f))
         return lm_err_set(err, LM_ERR_ARG, "conditions: unknown family %d", (int)f);
+    double lo = 0, hi = 0;
+    lm_cond_range(f, &lo, &hi);
     if (!lm_cond_level_ok(f, level))
-        return lm_err_set(err, LM_ERR_ARG, "conditions: %s level %g is out of range",
-                          lm_cond_name(f), level);
+        return lm_err_set(err, LM_ERR_ARG, "conditions: %s level %g is out of range (%g..%g)",
+                          lm_cond_name(f), level, lo, hi);
     if (!lm_cond_applies(f, im->model->in_channels))
         return lm_err_set(err, LM_ERR_ARG, "conditions: %s does not apply to %s (RGB input)",
                           lm_cond_name(f), im->model->preset);

@@ -43,8 +43,10 @@ int lm_cond_parse(const char *name);
 const char *lm_cond_unit(lm_cond_family f);
 /* The level at which the family changes nothing (photons 0, saturation 1, others 0). */
 double lm_cond_clean_level(lm_cond_family f);
-/* Is level valid for f (finite; photons >= 0, saturation >= 1, led_gain 0..100, dead_pixels
- * 0..100, motion >= 0)? */
+/* The valid levels of f: [*lo, *hi] (photons 0..1e12, saturation 1..1e6, led_gain 0..100,
+ * dead_pixels 0..100, motion 0..1e4 px/s). 0, or -1 for an unknown family. */
+int lm_cond_range(lm_cond_family f, double *lo, double *hi);
+/* Is level valid for f (finite, in lm_cond_range)? */
 int lm_cond_level_ok(lm_cond_family f, double level);
 /* The default sweep (mild to severe) into levels (room for LM_COND_MAX_LEVELS); the count. */
 int lm_cond_default_levels(lm_cond_family f, double *levels);

@@ -142,12 +142,14 @@ static lm_status cond_levels(lm_study_cond *sc, json_t *lv, const char *w, size_
     if (n < 1 || n > LM_COND_MAX_LEVELS)
         BAD("%s: field 'conditions[%zu].levels': must be a list of 1..%d levels", w, i,
             LM_COND_MAX_LEVELS);
+    double lo = 0, hi = 0;
+    lm_cond_range(sc->family, &lo, &hi);
     for (size_t k = 0; k < n; k++) {
         json_t *e = json_array_get(lv, k);
         double v = json_is_number(e) ? json_number_value(e) : NAN;
         if (!lm_cond_level_ok(sc->family, v))
-            BAD("%s: field 'conditions[%zu].levels[%zu]': not a valid %s level (%s)", w, i, k,
-                lm_cond_name(sc->family), lm_cond_unit(sc->family));
+            BAD("%s: field 'conditions[%zu].levels[%zu]': not a valid %s level (%s, %g..%g)", w,
+                i, k, lm_cond_name(sc->family), lm_cond_unit(sc->family), lo, hi);
         sc->levels[k] = v;
     }
     sc->nlevels = (int)n;

@@ -47,6 +47,10 @@ printf '{"version": 1, "presets": ["linear"], "data": "%s", "iterations": 2}' "$
   > "$T/study_ok.json"
 expect_error "study eval_size [2^32 + 66, 64]" 2 "field 'eval_size': must be \"HxW\" or [H, W] (1..8192)" \
   "$T/n8" -- timeout 60 "$LM" study --config "$T/study.json" --output "$T/n8"
+printf '{"version": 1, "presets": ["linear"], "data": "%s", "conditions": [{"family": "motion", "levels": [0, 1e308]}]}' \
+  "$CAVE" > "$T/study_motion.json"
+expect_error "study motion level 1e308" 2 "levels[1]': not a valid motion level (motion (px/s), 0..10000)" \
+  "$T/n15" -- timeout 60 "$LM" study --config "$T/study_motion.json" --output "$T/n15"
 expect_error "simulate --frames x" 2 "--frames: 'x' is not an integer in 1..10000" "$T/n9" -- \
   "$LM" simulate --input "$CAVE" --crop --video --frames x --output "$T/n9"
 expect_error "render --exposure 1e999" 2 "--exposure: '1e999' is not a finite number in 1e-12..1e+06" \
