@@ -15,7 +15,7 @@
 
 static void help(void)
 {
-    printf("usage: lumosaic study --config STUDY.json [--output DIR] [--threads T]\n"
+    printf("usage: lumosaic study --config STUDY.json [--output DIR] [--threads T] [--jobs J]\n"
            "                      [--no-charts] [--dry-run] [--quiet]\n\n"
            "Speed against accuracy: every preset of the config is trained with the same budget\n"
            "into DIR/runs/<preset>/, scored on the held-out scenes (the data's test split, or\n"
@@ -30,7 +30,14 @@ static void help(void)
            "with a DIR/runs/<preset>/result.json are skipped, interrupted training continues.\n\n"
            "  --config FILE  study config (see study/ci.json, study/full.json)\n"
            "  --output DIR   output folder (default: the config's \"output\")\n"
-           "  --threads T    compute threads (1..1024; default: all cores)\n"
+           "  --threads T    compute threads (1..1024; default: all cores; with --jobs, each\n"
+           "                 training's threads, default cores / J)\n"
+           "  --jobs J       train J presets side by side (1..64; default 1), each in a worker\n"
+           "                 process; evaluation and timing stay serial, after the training.\n"
+           "                 Use it with \"clock\": \"cpu\" in the config's training fields, so\n"
+           "                 that runs sharing the machine get the same budget of CPU time\n"
+           "  --worker NAME  (used by --jobs) train the one preset NAME and exit\n"
+           "  --stop-seconds S  (with --worker) stop at S seconds of training time\n"
            "  --no-charts    do not draw charts (gnuplot not needed)\n"
            "  --dry-run      check the config and print the plan; nothing is run or written\n"
            "  --quiet        no training progress\n"
@@ -40,8 +47,9 @@ static void help(void)
 }
 
 typedef struct study_args {
-    const char *config, *output;
-    long long threads;
+    const char *config, *output, *worker;
+    long long threads, jobs;
+    double stop;                /* --stop-seconds (-1: not given) */
     int no_charts, quiet, dry_run;
 } study_args;
 
@@ -56,6 +64,9 @@ static int parse(lm_cli *c, study_args *a)
         if ((r = lm_cli_value(c, "--config", &a->config)) ||
             (r = lm_cli_value(c, "--output", &a->output)) ||
             (r = lm_cli_threads(c, &a->threads)) ||
+            (r = lm_cli_int(c, "--jobs", 1, 64, &a->jobs)) ||
+            (r = lm_cli_value(c, "--worker", &a->worker)) ||
+            (r = lm_cli_real(c, "--stop-seconds", 0, 1e9, &a->stop)) ||
             (r = lm_cli_flag(c, "--no-charts", &a->no_charts)) ||
             (r = lm_cli_flag(c, "--dry-run", &a->dry_run)) ||
             (r = lm_cli_flag(c, "--quiet", &a->quiet))) {
@@ -65,6 +76,7 @@ static int parse(lm_cli *c, study_args *a)
         return lm_cli_unknown(c);
     }
     if (!a->config) return lm_cli_error(c, "--config is required (see 'lumosaic study --help')");
+    if (a->stop >= 0 && !a->worker) return lm_cli_error(c, "--stop-seconds needs --worker");
     return 1;
 }
 
@@ -124,7 +136,8 @@ static int run(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const ch
 {
     lm_err e = {0};
     lm_study s;
-    lm_study_opts o = {.threads = (int)a->threads, .progress = !a->quiet, .log = stderr};
+    lm_study_opts o = {.threads = (int)a->threads, .progress = !a->quiet, .log = stderr,
+                       .jobs = a->jobs > 1 ? (int)a->jobs : 1};
     lm_status st = lm_study_run(cfg, dir, &o, &s, &e);
     if (st) {
         lm_cli_error(c, "%s", e.msg);
@@ -144,10 +157,23 @@ static int run(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const ch
     return rc;
 }
 
+/* --worker NAME: one preset's training for a study run with --jobs. */
+static int worker(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const char *dir)
+{
+    double stop = a->stop > 0 ? a->stop : 0.0;
+    if (a->threads > 0) omp_set_num_threads((int)a->threads);
+    mallopt(M_MMAP_THRESHOLD, 128 * 1024);
+    lm_study_opts o = {.threads = (int)a->threads, .progress = !a->quiet, .log = stderr, .jobs = 1};
+    lm_err e = {0};
+    lm_status st = lm_study_train_one(cfg, dir, a->worker, stop, &o, &e);
+    if (st) lm_cli_error(c, "%s", e.msg);
+    return st ? status_code(st) : 0;
+}
+
 int lm_cmd_study(int argc, char **argv)
 {
     lm_cli c;
-    study_args a = {0};
+    study_args a = {.stop = -1};
     lm_cli_init(&c, "lumosaic study", argc, argv);
     int r = parse(&c, &a);
     if (r != 1) return r;
@@ -159,6 +185,7 @@ int lm_cmd_study(int argc, char **argv)
         return lm_cli_error(&c, "no output folder: pass --output DIR or set \"output\" in %s",
                             a.config);
     if (a.dry_run) return print_plan(&cfg, dir);
+    if (a.worker) return worker(&c, &a, &cfg, dir);
     if (!a.no_charts && !lm_charts_gnuplot_available()) {
         fprintf(stderr, "lumosaic study: gnuplot not found on PATH (install gnuplot, or pass "
                         "--no-charts)\n");

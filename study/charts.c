@@ -590,7 +590,8 @@ static lm_status minutes_chart(const lm_study_cfg *cfg, const json_t *runs, cons
     FILE *f = open_in(dir, "accuracy_minutes.gp", path, err);
     if (!f) return err->status;
     gp_head(f, "accuracy_minutes", "Held-out accuracy against training time (solid: noise "
-            "0 %, dashed: 10 %)", "minutes of training (this machine)", "PSNR (dB)");
+            "0 %, dashed: 10 %)", strcmp(cfg->train.clock, "cpu") ? "minutes of training "
+            "(this machine)" : "CPU minutes of training (this machine)", "PSNR (dB)");
     fprintf(f, "set logscale x\nplot ");
     int first = 1;
     for (int i = 0; i < n; i++) {

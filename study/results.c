@@ -144,11 +144,15 @@ static void md_curve_table(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
         any |= json_array_size(json_object_get(json_array_get(runs, i), "curve")) > 0;
     if (!any) return;
     fprintf(f, "\n## Accuracy against training time\n\nHeld-out PSNR (dB) at %g %% / %g %% noise "
-               "of the weights after the given minutes of training on this machine (snapshots "
-               "of one run whose schedule spans the %g-minute budget; a closed-form fit: its fit "
-               "time; a residual: its own training, after its base's).\n\n| model | points "
-               "(minutes: PSNR %g %% / %g %%) | note |\n|---|---|---|\n",
-            100.0 * cfg->noise[k0], 100.0 * cfg->noise[k10], (double)cfg->train.minutes,
+               "of the weights after the given minutes of training on this machine (%s; "
+               "snapshots of one run whose schedule spans the %g-minute budget; a closed-form "
+               "fit: its fit time; a residual: its own training, after its base's).\n\n| model "
+               "| points (minutes: PSNR %g %% / %g %%) | note |\n|---|---|---|\n",
+            100.0 * cfg->noise[k0], 100.0 * cfg->noise[k10],
+            strcmp(cfg->train.clock, "cpu") ? "wall-clock minutes"
+            : "CPU minutes of the training process, all its threads: a budget that runs sharing "
+              "the machine do not shrink",
+            (double)cfg->train.minutes,
             100.0 * cfg->noise[k0], 100.0 * cfg->noise[k10]);
     for (size_t i = 0; i < json_array_size(runs); i++) {
         const json_t *r = json_array_get(runs, i), *cv = json_object_get(r, "curve");

@@ -561,6 +561,57 @@ static lm_status run_preset(const lm_study_cfg *cfg, const char *dir, const run_
     return st;
 }
 
+/* The i-th preset of the config: "net" or "net+base" (a residual on runs/<base>). */
+static run_spec preset_spec(const lm_study_cfg *cfg, int i, char net[64])
+{
+    const char *p = cfg->presets[i], *plus = strchr(p, '+');
+    snprintf(net, 64, "%.*s", plus ? (int)(plus - p) : 63, p);
+    return (run_spec){net, p, -1.0f, plus ? plus + 1 : NULL};
+}
+
+lm_status lm_study_train_one(const lm_study_cfg *cfg, const char *dir, const char *name,
+                             double stop_s, const lm_study_opts *o, lm_err *err)
+{
+    int i = 0;
+    while (i < cfg->npresets && strcmp(cfg->presets[i], name)) i++;
+    if (i == cfg->npresets)
+        return lm_err_set(err, LM_ERR_ARG, "study --worker: %s is not a preset of %s", name,
+                          cfg->path);
+    char net[64], rundir[PATH_MAX_LEN];
+    run_spec rs = preset_spec(cfg, i, net);
+    snprintf(rundir, sizeof rundir, "%s/runs/%s", dir, name);
+    json_t *rec = json_object();
+    lm_status st = train_preset(cfg, dir, &rs, rundir, o, stop_s, rec, err);
+    json_decref(rec);
+    return st;
+}
+
+/* --jobs: every preset not dropped and not done is trained (to stop_s seconds of training
+ * time when stop_s > 0) before the serial phases score it. The bases of residual presets
+ * (closed-form fits in practice) are trained first, here; the rest side by side in workers. */
+static lm_status train_side_by_side(const lm_study_cfg *cfg, const char *dir, const run_spec *rs,
+                                    int n, const int *dropped, const lm_study_opts *o,
+                                    double stop_s, lm_err *err)
+{
+    const char *names[LM_STUDY_MAX_PRESETS];
+    int k = 0;
+    lm_status st = LM_OK;
+    for (int i = 0; i < n && !st; i++) {
+        char rundir[PATH_MAX_LEN];
+        snprintf(rundir, sizeof rundir, "%s/runs/%s", dir, rs[i].name);
+        json_t *done = NULL;
+        if (dropped[i] || (st = load_done(rundir, &rs[i], &done, err)) || done) {
+            json_decref(done);
+            continue;
+        }
+        int base = 0;
+        for (int j = 0; j < n; j++) base |= rs[j].base && !strcmp(rs[j].base, rs[i].name);
+        if (base) st = lm_study_train_one(cfg, dir, rs[i].name, stop_s, o, err);
+        else names[k++] = rs[i].name;
+    }
+    return st || !k ? st : lm_study_spawn(cfg, dir, names, k, stop_s, o, err);
+}
+
 /* Early-drop phase: every unfinished preset trained to drop_minutes, scored there (clean PSNR
  * of the snapshot, or of the fit); dropped[i] = more than drop_db behind the best. */
 static lm_status drop_phase(const lm_study_cfg *cfg, const char *dir, const run_spec *rs, int n,
@@ -623,13 +674,15 @@ lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_
     int dropped[LM_STUDY_MAX_PRESETS] = {0};
     double drop_psnr[LM_STUDY_MAX_PRESETS];
     for (int i = 0; i < LM_STUDY_MAX_PRESETS; i++) drop_psnr[i] = NAN;
-    for (int i = 0; i < cfg->npresets; i++) {
-        const char *p = cfg->presets[i], *plus = strchr(p, '+');
-        snprintf(net[i], sizeof net[i], "%.*s", plus ? (int)(plus - p) : 63, p);
-        rs[i] = (run_spec){net[i], p, -1.0f, plus ? plus + 1 : NULL};
-    }
-    if (!st && cfg->drop_minutes > 0 && cfg->train.minutes > cfg->drop_minutes)
+    for (int i = 0; i < cfg->npresets; i++) rs[i] = preset_spec(cfg, i, net[i]);
+    int drop = cfg->drop_minutes > 0 && cfg->train.minutes > cfg->drop_minutes;
+    if (!st && drop && o.jobs > 1)
+        st = train_side_by_side(cfg, dir, rs, cfg->npresets, dropped, &o,
+                                cfg->drop_minutes * 60.0, err);
+    if (!st && drop)
         st = drop_phase(cfg, dir, rs, cfg->npresets, &h, &o, dropped, drop_psnr, err);
+    if (!st && o.jobs > 1)
+        st = train_side_by_side(cfg, dir, rs, cfg->npresets, dropped, &o, 0.0, err);
     out->runs = json_array();
     for (int i = 0; !st && i < cfg->npresets; i++) {
         json_t *rec = NULL;

@@ -83,6 +83,10 @@ typedef struct lm_study_opts {
     int threads;     /* compute threads for training, evaluation and timing (0 = all cores) */
     int progress;    /* training progress on `log` */
     FILE *log;       /* one line per step of the study (NULL = stderr) */
+    int jobs;        /* presets trained side by side (<= 1: one at a time, in this process):
+                      * each in a child `lumosaic study --worker` process with `threads`
+                      * threads; evaluation and timing stay serial, after the training */
+    const char *exe; /* jobs > 1: the lumosaic program the workers run (NULL: this one) */
 } lm_study_opts;
 
 /* The outcome: a description of the held-out set and one record per preset (config order). */
@@ -98,6 +102,15 @@ typedef struct lm_study {
 lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_opts *o,
                        lm_study *out, lm_err *err);
 void lm_study_free(lm_study *s);
+/* A --jobs worker: train (or continue) the one preset `name` of the config into
+ * dir/runs/<name>, stopping at stop_s seconds of training time when stop_s > 0. */
+lm_status lm_study_train_one(const lm_study_cfg *cfg, const char *dir, const char *name,
+                             double stop_s, const lm_study_opts *o, lm_err *err);
+/* (jobs.c) Train the presets names[0..n) side by side, o->jobs at a time, each in a worker
+ * process (lm_study_train_one) with o->threads threads (0: the cores / jobs); waits for all.
+ * A worker that fails fails the call (no new worker starts after it). */
+lm_status lm_study_spawn(const lm_study_cfg *cfg, const char *dir, const char *const *names,
+                         int n, double stop_s, const lm_study_opts *o, lm_err *err);
 
 /* <dir>/results.json, results.csv and results.md (atomic: temp file + rename). charts: the
  * chart files exist in <dir>/charts/ (results.md links them). */

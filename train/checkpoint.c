@@ -54,9 +54,10 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
         if (moment_views(m, opt, &v, err)) return err->status;
         snprintf(step, sizeof step, "%ld", opt->step);
         const char *meta[] = {"format", CKPT_FORMAT, "step", step, "iteration", it,
-                              "next_batch", nb, "seed", seed, "threads", thr, "seconds", secs};
+                              "next_batch", nb, "seed", seed, "threads", thr, "seconds", secs,
+                              "clock", cfg->clock[0] ? cfg->clock : "wall"};
         dir_file(path, sizeof path, dir, "optimizer.safetensors");
-        lm_status st = lm_params_save(&v, path, meta, 7, err);
+        lm_status st = lm_params_save(&v, path, meta, 8, err);
         lm_params_free(&v);
         if (st) return st;
     }
@@ -65,6 +66,17 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
                           m->base ? m->base->preset : ""};
     dir_file(path, sizeof path, dir, "model.safetensors");
     return lm_params_save(&m->params, path, meta, m->base ? 7 : 6, err);
+}
+
+int lm_train_checkpoint_cpu_clock(const char *dir)
+{
+    char path[LM_TRAIN_PATH_LEN + 64];
+    dir_file(path, sizeof path, dir, "optimizer.safetensors");
+    lm_err e = {0};
+    char *s = lm_safetensors_meta(path, "clock", &e);
+    int cpu = s && !strcmp(s, "cpu");
+    free(s);
+    return cpu;
 }
 
 double lm_train_checkpoint_seconds(const char *dir)

@@ -87,6 +87,8 @@ static const field fields[] = {
         "<output>/snapshots/<M>min/", 0, 0),
     FLD("minutes", F_FLOAT, minutes, "M", "time budget in minutes (0 = none; the schedule "
         "spans it)", 0, 1e6),
+    FLD("clock", F_STR, clock, "C", "what minutes and snapshots count: wall | cpu (CPU time of "
+        "the process, all threads; not shrunk by a busy machine)", 0, 0),
 };
 #define NFIELDS (int)(sizeof fields / sizeof fields[0])
 
@@ -116,6 +118,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     c->fit_patches = 4096;
     c->fit_synth = -1.0f;
     c->res_init = 1.0f;
+    snprintf(c->clock, sizeof c->clock, "wall");
 }
 
 static const field *find_field(const char *key)
@@ -437,6 +440,8 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     if (!c->output[0]) BAD("'output': must name a folder%s", "");
     if (strcmp(c->fit, "auto") && strcmp(c->fit, "closed") && strcmp(c->fit, "sgd"))
         BAD("'fit': must be auto, closed or sgd (got '%s')", c->fit);
+    if (strcmp(c->clock, "wall") && strcmp(c->clock, "cpu"))
+        BAD("'clock': must be wall or cpu (got '%s')", c->clock);
     if (!(c->fit_synth == -1.0f || (c->fit_synth >= 0.0f && c->fit_synth <= 1.0f)))
         BAD("'fit_synth': must be -1 (chosen on validation) or in [0, 1] (got %g)",
             (double)c->fit_synth);
@@ -469,13 +474,13 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
         "checkpoint_interval", (json_int_t)c->checkpoint_interval,
         "log_interval", (json_int_t)c->log_interval, "output", c->output);
     if (root)
-        json_object_update_new(root, json_pack("{s:s, s:I, s:f, s:s, s:i, s:f, s:f, s:s, s:i, s:i}", "fit", c->fit,
+        json_object_update_new(root, json_pack("{s:s, s:I, s:f, s:s, s:i, s:f, s:f, s:s, s:i, s:i, s:s}", "fit", c->fit,
                                "fit_patches", (json_int_t)c->fit_patches,
                                "fit_synth", (double)c->fit_synth, "base", c->base,
                                "base_trainable", c->base_trainable,
                                "res_init", (double)c->res_init, "minutes", (double)c->minutes,
                                "snapshots", c->snapshots, "sensor_clip", c->sensor_clip,
-                               "sensor_bits", c->sensor_bits));
+                               "sensor_bits", c->sensor_bits, "clock", c->clock));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

@@ -34,7 +34,8 @@ typedef struct loop {
     char made[LM_TRAIN_PATH_LEN]; /* outermost folder this run created ("" = none) */
     long it0;                     /* iteration this invocation started at */
     long saved;                   /* iteration of the checkpoint on disk (-1: none yet) */
-    double t0, last_print;
+    double t0, last_print;        /* wall clock: progress lines */
+    double t_train0;              /* training clock (train_s) when this invocation started */
     int tty;
     long total;                   /* iterations of the schedule (cfg->iterations, or resolved
                                    * from the time budget) */
@@ -44,12 +45,22 @@ typedef struct loop {
     long next_it;                 /* time budget: re-resolve at this iteration too (0: none) */
     long it_res;                  /* time budget: iteration and time of the first resolution */
     double t_res;
+    int cpu_clock;                /* cfg->clock "cpu": training time is the process's CPU time */
 } loop;
 
 static double now_s(void)
 {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+/* The clock of training time (budget, snapshots, checkpoint seconds): wall, or the process's
+ * CPU time over all its threads (cfg->clock). Progress lines and ETAs stay on the wall clock. */
+static double train_s(const loop *L)
+{
+    struct timespec ts;
+    if (!L->cpu_clock || clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts) != 0) return now_s();
     return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
@@ -415,6 +426,12 @@ static lm_status begin(loop *L, long *start, lm_err *err)
     uint64_t seed = 0;
     if (lm_train_load_checkpoint(L->opts->resume, L->model, &L->opt, start, &nb, &seed, err))
         return err->status;
+    int was_cpu = lm_train_checkpoint_cpu_clock(L->opts->resume);
+    if (was_cpu != !strcmp(cfg->clock, "cpu"))
+        return lm_err_set(err, LM_ERR_ARG, "resume %s: its training time was counted on the %s "
+                          "clock, this run counts the %s clock (set --clock %s)",
+                          L->opts->resume, was_cpu ? "cpu" : "wall", cfg->clock,
+                          was_cpu ? "cpu" : "wall");
     if (seed != cfg->seed || nb != *start * cfg->accum_steps)
         return lm_err_set(err, LM_ERR_ARG, "resume %s: checkpoint has seed %llu and sampler "
                           "position %ld, the run expects seed %llu and position %ld",
@@ -424,7 +441,7 @@ static lm_status begin(loop *L, long *start, lm_err *err)
 }
 
 /* Seconds of training so far, over every invocation (resume restores the checkpoint's). */
-static double elapsed(const loop *L) { return L->seconds0 + (now_s() - L->t0); }
+static double elapsed(const loop *L) { return L->seconds0 + (train_s(L) - L->t_train0); }
 
 /* Time budget: at 3 % and 50 % of it (training time over all invocations), and half-way
  * through each resolved schedule while more than a tenth of the budget is left, the schedule's
@@ -439,7 +456,7 @@ static double elapsed(const loop *L) { return L->seconds0 + (now_s() - L->t0); }
 static void resolve_budget(loop *L, long done, double *next_mark, long *end)
 {
     const lm_train_cfg *cfg = L->cfg;
-    double el = elapsed(L), budget = cfg->minutes * 60.0, t = now_s();
+    double el = elapsed(L), budget = cfg->minutes * 60.0, t = train_s(L);
     if (budget <= 0) return;
     if (L->t_first == 0.0) L->t_first = t;
     double own = t - L->t_first;
@@ -567,9 +584,11 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
     L.it0 = start;
     L.saved = opts->resume ? start : -1;
     L.seconds0 = opts->resume ? lm_train_checkpoint_seconds(opts->resume) : 0.0;
+    L.cpu_clock = !strcmp(cfg->clock, "cpu");
     L.t0 = L.last_print = now_s();
+    L.t_train0 = train_s(&L);
     if (!st) st = run_loop(&L, start, res, err);
-    res->seconds = now_s() - L.t0;
+    res->seconds = train_s(&L) - L.t_train0;
     teardown(&L);
     /* a fresh run that failed before its first iteration completed leaves no run folder */
     if (st && !opts->resume && L.saved < 0 && res->iterations_done == 0)

@@ -77,6 +77,10 @@ typedef struct lm_train_cfg {
     int sensor_bits;                /* quantisation of the samples (0 = off; 16 = PNG) */
     char snapshots[128];            /* "5,15,30": weights at these minutes of training time into
                                      * <output>/snapshots/<M>min/ ("" = none) */
+    /* what "training time" (minutes, snapshots, the checkpoint's seconds) counts: "wall"
+     * (elapsed time, the default) or "cpu" (CPU time of the process, every thread: a budget a
+     * busy machine does not shrink; the study runs presets side by side on it) */
+    char clock[8];
 } lm_train_cfg;
 
 /* Paper defaults (system.md §7) with output "runs/train". */
@@ -192,6 +196,9 @@ lm_status lm_train_load_checkpoint(const char *dir, lm_model *m, lm_adam *opt, l
                                    long *next_batch, uint64_t *seed, lm_err *err);
 /* Training seconds recorded in a run folder's optimizer checkpoint (0 if none). */
 double lm_train_checkpoint_seconds(const char *dir);
+/* 1 when that checkpoint counted training time on the CPU clock (cfg.clock "cpu"); 0: wall
+ * (also checkpoints from before the field). */
+int lm_train_checkpoint_cpu_clock(const char *dir);
 /* mkdir -p. */
 lm_status lm_train_make_dir(const char *path, lm_err *err);
 /* mkdir -p that also gives the outermost folder it created (top, n bytes; "" if path existed). */

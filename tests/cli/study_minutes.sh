@@ -8,6 +8,7 @@
 # accuracy-against-training-time table, the accuracy_minutes chart exists; a second run skips
 # everything; `train --minutes` records its training time and resume continues the clock; a
 # missing base or a residual given as a base is refused (one line, exit 2, nothing written).
+# The same study with "clock": "cpu" and --jobs 2 trains the two SGD presets side by side.
 # usage: study_minutes.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 S=$T/s
@@ -74,6 +75,40 @@ check "results.md: per-preset training fields" grep -q 'linear `{"lr":0.005}`' "
 check "accuracy_minutes chart" [ -s "$S/charts/accuracy_minutes.png" ]
 "$LM" study --config "$T/m.json" --output "$S" --threads 2 --quiet > /dev/null 2> "$T/err2"
 check "rerun skips all" [ "$(grep -c 'done before' "$T/err2")" -eq 3 ]
+
+# --jobs 2 on the CPU clock: the two SGD presets train side by side in workers (the base is
+# fitted first, in the study's process); each run's checkpoint counts CPU time and reaches the
+# budget; the records are complete as in the serial study
+sed 's/"fit_patches": 64}/"fit_patches": 64, "clock": "cpu"}/' "$T/m.json" > "$T/mj.json"
+check "cpu-clock config" grep -q '"clock": "cpu"' "$T/mj.json"
+"$LM" study --config "$T/mj.json" --output "$T/sj" --jobs 2 --quiet > /dev/null 2> "$T/errj"
+check "study --jobs 2: $(tail -1 "$T/errj")" [ $? -eq 0 ]
+check "two workers per phase" [ "$(grep -c 'worker [0-9]* started' "$T/errj")" -eq 4 ]
+meta() { python3 - "$1" "$2" <<'PY'
+import json, struct, sys
+f = open(sys.argv[1], "rb"); n = struct.unpack("<Q", f.read(8))[0]
+print(json.loads(f.read(n))["__metadata__"][sys.argv[2]])
+PY
+}
+for r in linear rt-8+lmmse-5; do
+  check "$r: cpu clock" [ "$(meta "$T/sj/runs/$r/optimizer.safetensors" clock)" = cpu ]
+  s=$(meta "$T/sj/runs/$r/optimizer.safetensors" seconds)
+  check "$r: budget of CPU time spent ($s s)" python3 -c "import sys; sys.exit(not 17.5 <= $s <= 40)"
+  check "$r: drop-check snapshot" [ -s "$T/sj/runs/$r/snapshots/0.15min/model.safetensors" ]
+done
+python3 - "$T/sj/results.json" <<'PY'
+import json, sys
+runs = {r["preset"]: r for r in json.load(open(sys.argv[1]))["runs"]}
+assert set(runs) == {"lmmse-5", "linear", "rt-8+lmmse-5"}, set(runs)
+for name, r in runs.items():
+    assert r["seconds_per_frame"] > 0 and "drop_check" in r, name
+    if name != "lmmse-5": assert len(r["curve"]) >= 2, (name, r["curve"])
+PY
+check "--jobs records" [ $? -eq 0 ]
+"$LM" study --config "$T/mj.json" --output "$T/sj" --worker nosuch 2> "$T/ej"
+check "worker of an unknown preset: exit 2, one line" [ $? -eq 2 -a "$(wc -l < "$T/ej")" -eq 1 ]
+"$LM" train --resume "$T/sj/runs/linear" --clock wall 2> "$T/ej"
+check "resume on the other clock: refused" [ $? -eq 2 ] && grep -q "cpu clock" "$T/ej"
 
 # train --minutes: the clock is in the checkpoint and resume continues it
 "$LM" train --model linear --data "$CAVE" --patch 33x32 --batch 2 --accum-steps 1 \
