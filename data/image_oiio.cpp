@@ -51,14 +51,19 @@ static std::string first_line(std::string s)
 /* A PNG must hold whole chunks up to IEND, each with a correct CRC. Checked before
  * OpenImageIO sees the file: its PNG reader leaks when libpng hits the end of a truncated
  * file, libpng prints its own complaint about a corrupt chunk on stderr (a second line), and
- * the message is clearer. A file that is not a PNG passes (OpenImageIO reports it). */
-static lm_status png_check(const char *path, lm_err *e)
+ * the message is clearer. A .png without the PNG signature is refused here too (libpng would
+ * print "PNG file corrupted by ASCII conversion" and the like); another file passes. */
+static lm_status png_check(const char *path, bool is_png, lm_err *e)
 {
     FILE *f = fopen(path, "rb");
     if (!f) return LM_OK;
     unsigned char b[8], block[65536];
     lm_status s = LM_OK;
-    if (fread(b, 1, 8, f) == 8 && std::memcmp(b, "\x89PNG\r\n\x1a\n", 8) == 0) {
+    bool sig = fread(b, 1, 8, f) == 8 && std::memcmp(b, "\x89PNG\r\n\x1a\n", 8) == 0;
+    if (!sig && is_png)
+        s = lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read image: not a PNG file (no PNG "
+                       "signature)", path);
+    if (sig) {
         fseek(f, 0, SEEK_END);
         long size = ftell(f), pos = 8;
         int ended = 0;
@@ -208,7 +213,7 @@ static lm_status open_input(const char *path, const lm_image_want *want,
     if (!plugin)
         return lm_err_set(e, LM_ERR_UNSUPPORTED, "%s: unknown image format (expected .png, "
                           ".tif, .tiff or .exr)", path);
-    if ((s = png_check(path, e)) != LM_OK) return s;
+    if ((s = png_check(path, !std::strcmp(plugin, "png"), e)) != LM_OK) return s;
     if (!std::strcmp(plugin, "openexr") && (s = exr_header_ok(path, e)) != LM_OK) return s;
     ImageSpec config, spec;
     config.attribute("oiio:UnassociatedAlpha", 1); /* never premultiply PNG/TIFF alpha */

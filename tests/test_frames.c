@@ -156,6 +156,12 @@ static void test_frame_errors(void)
     CHECK(lm_frame_read(c0, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
     CHECK_ERR(e, LM_ERR_FORMAT, "flip.png: corrupt PNG: chunk IDAT", "fails its CRC");
     lm_err_clear(&e);
+    /* a .png whose signature's last byte changed (found by fuzz_frame: libpng printed "PNG
+     * file corrupted by ASCII conversion" besides the error) */
+    write_bytes(tpath(c0, "ascii.png"), "\x89PNG\r\n\x1a\0\0\0\0\rIHDR", 16);
+    CHECK(lm_frame_read(c0, &f, &e) == LM_ERR_FORMAT && f.data == NULL);
+    CHECK_ERR(e, LM_ERR_FORMAT, "ascii.png", "not a PNG file");
+    lm_err_clear(&e);
     const char *two[2] = {"Y", "Z"};
     CHECK(lm_image_write_exr(tpath(p, "two.exr"), 3, 2, 2, two, v, NULL, &e) == LM_OK);
     CHECK(lm_frame_read(p, &f, &e) == LM_ERR_FORMAT);

@@ -50,6 +50,7 @@ seq_of "$T/seq3" "$REG/frame/png-ratio-claim.png"
 cp "$GOOD" "$T/flip.png" && printf '\x5a' | dd of="$T/flip.png" bs=1 seek=$(( $(stat -c %s "$GOOD") / 2 )) conv=notrunc 2> /dev/null
 
 I="$LM infer --model $MODEL --output $T/out"
+bounded "png signature's last byte changed" infer "png-ascii-signature.png: cannot read image: not a PNG file" "$T/out" -- $I --input "$REG/frame/png-ascii-signature.png"
 bounded "png with a changed byte" infer "flip.png: corrupt PNG" "$T/out" -- $I --input "$T/flip.png"
 bounded "tiff 1 (256 channels), frame 2" infer "f_0001.tif: has 256 channels" "$T/out" -- $I --input "$T/seq1"
 bounded "tiff 2 (3584 x 61452), frame 2" infer "f_0001.tif: image size 3584 x 61452" "$T/out" -- $I --input "$T/seq2"
