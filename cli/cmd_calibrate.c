@@ -1,612 +1,310 @@
-/* cmd_calibrate.c — `lumosaic calibrate`: the calibration file of `lumosaic infer --model auto`.
- * What it is: load the models, take held-out scenes (DATA scenes of the dataset's val / test
- * splits, as training splits them, and/or --synth N procedural scenes whose seeds are not
- * drawn by training), simulate each scene's coded frame, record per window the difficulty
- * and every model's error (lm_auto_scene), fit expected PSNR per difficulty bin (lm_auto_fit),
- * store each model's measured seconds per window and MACs, write the JSON and print the
- * per-bin table.
- * With --test-synth N: N more procedural scenes (a seed stream disjoint from the calibration
- * scenes') reconstructed by every model alone and by the auto choice at each --test-tol (the
- * selection of `infer --model auto`: lm_auto_bin / lm_auto_choose per window, lm_auto_infer),
- * scored by PSNR against the truth (31 bands, scene divided by its maximum, as eval), with the
- * share of windows per model, the seconds per 640 x 480 frame estimated from the calibrated
- * per-window costs and the measured wall time; printed and stored as "test" in the JSON.
- * What it is not: the selection or the inference (infer/auto.h, cli/cmd_infer.c). */
-#define _XOPEN_SOURCE 700 /* realpath */
+/* cmd_calibrate.c — `lumosaic calibrate`: the paper's LED-gain calibration (system.md section
+ * 11). Coded frames of a ColorChecker are averaged; each patch region (a JSON of 24 rectangles,
+ * or a 6 x 4 grid from the centres of the chart's corner patches) gives each LED's mean; the
+ * gains come from NNLS against the simulated patch responses (data/calib.h); a new system file
+ * with the calibrated gains and a report (JSON, and a table on stdout) are written.
+ * With --write-chart CUBE.exr it instead writes a ColorChecker scene on the system's grid (for
+ * trying calibration on frames simulated from it).
+ * What it is not: the fit of `infer --model auto` (that command is `lumosaic fit-auto`). */
 #include <jansson.h>
-#include <limits.h>
-#include <omp.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 #include "cli/cli_util.h"
 #include "cli/commands.h"
+#include "data/calib.h"
 #include "data/cube_io.h"
-#include "data/dataset.h"
-#include "data/synth.h"
-#include "infer/auto.h"
-#include "infer/eval.h"
-#include "models/profile.h"
+#include "data/frames.h"
 
-#define SYNTH_SEED_BASE 0xCA11B0000000ull /* procedural scenes: seed base + seed * 1e6 + i */
-#define TEST_SEED_OFFSET 500000u            /* test scenes: seed base + seed * 1e6 + 5e5 + j */
-#define MAX_TOL 16
+#define MAX_INPUTS 256
 
 static void help(void)
 {
-    printf("usage: lumosaic calibrate --models RUN,RUN[,...] [DATA...] [--synth N]\n"
-           "                          --output FILE [--split val|test|valtest|all] [--bins B]\n"
-           "                          [--measure grad|relgrad] [--noise PERCENT] [--seed S]\n"
-           "                          [--synth-size HxW] [--batch N] [--threads T]\n"
-           "                          [--test-synth N] [--test-tol LIST]\n\n"
-           "Calibrate 'lumosaic infer --model auto': on held-out scenes, per 66 x 64 window\n"
-           "(stride 30 x 32), record a cheap difficulty of the coded frame and each model's\n"
-           "error (K-weighted MSE on 400-700 nm); fit each model's expected PSNR per difficulty\n"
-           "bin (quantiles) and measure its cost (seconds per window on this machine; MACs for\n"
-           "information). Writes FILE (JSON) and prints the table per bin.\n\n"
-           "  --models LIST    2..8 training run folders or .safetensors files, comma-separated\n"
-           "  DATA...          scene files or folders; only scenes of --split are used\n"
-           "  --split S        which DATA scenes (the dataset's split, as training): val, test,\n"
-           "                   valtest (default: both held-out splits) or all\n"
-           "  --synth N        add N procedural scenes (default 0; seeds disjoint from the\n"
-           "                   random 64-bit seeds training draws)\n"
-           "  --synth-size HxW procedural scene size (default 198x256)\n"
-           "  --output FILE    calibration file to write (JSON)\n"
-           "  --bins B         difficulty bins (1..32; default 8)\n"
-           "  --measure M      difficulty: grad = mean same-phase absolute difference\n"
-           "                   (default), relgrad = grad / mean level\n"
-           "  --noise PERCENT  Gaussian noise k of the simulated frames (default 0)\n"
-           "  --seed S         noise and procedural scene seed (default 1)\n"
-           "  --test-synth N   after fitting, measure on N more procedural scenes (default 0;\n"
-           "                   seeds disjoint from training's and the calibration scenes'):\n"
-           "                   every model alone and auto at each --test-tol, PSNR, share of\n"
-           "                   windows per model, seconds per 640x480 frame (estimated from\n"
-           "                   the per-window costs, and measured); table + \"test\" in FILE\n"
-           "  --test-tol LIST  tolerances in dB for --test-synth (default 0,0.25,0.5,1,2)\n"
-           "  --batch N        windows per network call (1..4096; default 8)\n"
-           "  --threads T      OpenMP threads (1..1024; default: all cores)\n"
-           "  --help           this text\n");
+    printf("usage: lumosaic calibrate FRAMES... (--patches RECTS.json | --chart-corners LIST)\n"
+           "                          --output SYSTEM.json [--system FILE] [--reflectance CSV]\n"
+           "                          [--patch-fraction F] [--offset] [--max-error F]\n"
+           "                          [--report FILE]\n"
+           "       lumosaic calibrate --write-chart CUBE.exr [--chart-corners LIST]\n"
+           "                          [--system FILE] [--reflectance CSV]\n\n"
+           "LED gains by non-negative least squares (the paper's calibration): FRAMES (coded\n"
+           "frames of a ColorChecker Classic, files, folders or %%04d patterns; all averaged)\n"
+           "give, per patch region, the mean of each LED's pixels (the 12 x 24 measured\n"
+           "matrix); each LED's response in the system file against each patch's reflectance\n"
+           "gives the simulated one; gains alpha >= 0 minimise the squared difference. Writes\n"
+           "a copy of the system file with \"gains\" calibrated (relative: one factor common to\n"
+           "all LEDs drops out) and a report: per-LED gain, per-patch residual, the fit's\n"
+           "relative error.\n\n"
+           "  FRAMES              frames of the system's sensor size (16-bit PNG/TIFF, EXR)\n"
+           "  --patches FILE      JSON {\"patches\": [[x, y, w, h], ...]}: 24 regions, chart\n"
+           "                      order (row by row from dark skin; pixels)\n"
+           "  --chart-corners L   X1,Y1,X2,Y2,X3,Y3,X4,Y4: centres of patches 1 (dark skin),\n"
+           "                      6 (bluish green), 24 (black) and 19 (white) in the frame;\n"
+           "                      the 24 regions are squares on the 6 x 4 grid they span\n"
+           "  --patch-fraction F  region side / centre spacing with --chart-corners (0..1;\n"
+           "                      default 0.5: away from patch borders)\n"
+           "  --system FILE       system description (default: the bundled prototype)\n"
+           "  --reflectance CSV   the 24 patch reflectances (first 24 value columns; default:\n"
+           "                      the bundled BabelColor table, extended flat past 730 nm)\n"
+           "  --offset            also fit a common dark offset >= 0 (a black level)\n"
+           "  --max-error F       refuse a fit whose relative error exceeds F (0..10; default\n"
+           "                      0.1: frames of another system, or misplaced patches)\n"
+           "  --output FILE       the calibrated system file to write\n"
+           "  --report FILE       the report (default: the output with .report.json)\n"
+           "  --write-chart CUBE  write a chart scene (.exr, the system's grid and sensor size,\n"
+           "                      grey 0.2 around the patches; default corners: centred)\n"
+           "  --help              this text\n\n"
+           "Exit status: 0 done, 1 an output cannot be written, 2 bad usage or input (nothing\n"
+           "written).\n");
 }
 
-typedef struct cal_opts {
-    const char *models, *output, *split_s, *measure_s, *size_s, *tol_s;
-    const char **data;
-    int ndata, split, measure, sh, sw, ntol;
-    long long synth, bins, seed, batch, threads, test_synth;
-    double noise, tol[MAX_TOL];
-} cal_opts;
+typedef struct cal_args {
+    const char *in[MAX_INPUTS];
+    int nin;
+    const char *patches, *corners, *system, *refl, *output, *report, *chart;
+    double frac, max_error;
+    int offset;
+} cal_args;
 
-static int parse_opt(lm_cli *c, cal_opts *o)
+static int parse(lm_cli *c, cal_args *a)
 {
-    int r;
-    if ((r = lm_cli_value(c, "--models", &o->models)) ||
-        (r = lm_cli_value(c, "--output", &o->output)) ||
-        (r = lm_cli_value(c, "--split", &o->split_s)) ||
-        (r = lm_cli_value(c, "--measure", &o->measure_s)) ||
-        (r = lm_cli_value(c, "--synth-size", &o->size_s)) ||
-        (r = lm_cli_value(c, "--test-tol", &o->tol_s)) ||
-        (r = lm_cli_int(c, "--test-synth", 0, 100000, &o->test_synth)) ||
-        (r = lm_cli_int(c, "--synth", 0, 100000, &o->synth)) ||
-        (r = lm_cli_int(c, "--bins", 1, LM_AUTO_MAX_BINS, &o->bins)) ||
-        (r = lm_cli_int(c, "--seed", 0, LLONG_MAX / 2000000, &o->seed)) ||
-        (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
-        (r = lm_cli_threads(c, &o->threads)) ||
-        (r = lm_cli_real(c, "--noise", 0.0, 100.0, &o->noise)))
-        return r < 0 ? 2 : 1;
-    return 0;
-}
-
-/* --test-tol LIST into o->tol. 0 ok, else 2 (printed). */
-static int parse_tol(lm_cli *c, cal_opts *o)
-{
-    char buf[512];
-    const char *s = o->tol_s ? o->tol_s : "0,0.25,0.5,1,2";
-    o->ntol = 0;
-    if (strlen(s) >= sizeof buf || !*s) return lm_cli_error(c, "--test-tol: bad list '%s'", s);
-    strcpy(buf, s);
-    for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
-        double v;
-        if (lm_cli_parse_real(t, &v) || !(v >= 0.0 && v <= 1e6))
-            return lm_cli_error(c, "--test-tol: '%s' is not a tolerance in 0..1e6 dB", t);
-        if (o->ntol == MAX_TOL)
-            return lm_cli_error(c, "--test-tol: more than %d tolerances", MAX_TOL);
-        o->tol[o->ntol++] = v;
-    }
-    if (!o->ntol) return lm_cli_error(c, "--test-tol: bad list '%s'", s);
-    return 0;
-}
-
-static int check_opts(lm_cli *c, cal_opts *o)
-{
-    static const char *const splits[] = {"val", "test", "valtest", "all", NULL};
-    if (!o->models) return lm_cli_error(c, "--models is required (see 'lumosaic calibrate --help')");
-    if (!o->output) return lm_cli_error(c, "--output is required (see 'lumosaic calibrate --help')");
-    if (!o->ndata && !o->synth)
-        return lm_cli_error(c, "no scenes: give DATA (held-out scenes) and/or --synth N");
-    o->split = 2;
-    if (o->split_s) {
-        o->split = -1;
-        for (int i = 0; splits[i]; i++)
-            if (!strcmp(o->split_s, splits[i])) o->split = i;
-        if (o->split < 0)
-            return lm_cli_error(c, "--split '%s': use val, test, valtest or all", o->split_s);
-    }
-    o->measure = lm_auto_measure_parse(o->measure_s ? o->measure_s : "grad");
-    if (o->measure < 0)
-        return lm_cli_error(c, "--measure '%s': use grad or relgrad", o->measure_s);
-    o->sh = 198, o->sw = 256;
-    if (o->size_s && (lm_cli_parse_size(o->size_s, 64, 4096, &o->sh, &o->sw) || o->sh < 66))
-        return lm_cli_error(c, "--synth-size '%s': want HxW, from 66x64 to 4096x4096",
-                            o->size_s);
-    if (parse_tol(c, o)) return 2;
-    return 1;
-}
-
-/* 1: run, 0: help printed, 2: bad usage (printed). */
-static int parse(lm_cli *c, cal_opts *o)
-{
-    *o = (cal_opts){.bins = 8, .seed = 1, .batch = 8};
-    o->data = calloc((size_t)c->argc + 1, sizeof *o->data);
-    if (!o->data) return lm_cli_error(c, "out of memory");
     while (!lm_cli_done(c)) {
+        int r;
         if (lm_cli_is_help(c)) {
             help();
             return 0;
         }
-        int r = parse_opt(c, o);
-        if (r == 2) return 2;
-        if (r == 1) continue;
-        if (lm_cli_positional(c, o->data, &o->ndata)) return 2;
-    }
-    return check_opts(c, o);
-}
-
-typedef struct cal_run {
-    const lm_cli *c;
-    const cal_opts *o;
-    lm_infer_model im[LM_AUTO_MAX_MODELS];
-    lm_model *models[LM_AUTO_MAX_MODELS];
-    lm_auto_calib cal;
-    lm_ctx ctx;
-    char (*scenes)[1024];
-    int nscenes;
-    double *d, *mse, secs[LM_AUTO_MAX_MODELS];  /* samples: n, nmodels x cap */
-    long n, cap;
-} cal_run;
-
-/* Split "A,B,C" and load each model. 0 ok, else an exit status (printed). */
-static int load_models(cal_run *r, lm_err *e)
-{
-    char buf[8192];
-    if (snprintf(buf, sizeof buf, "%s", r->o->models) >= (int)sizeof buf)
-        return lm_cli_error(r->c, "--models: list too long");
-    lm_auto_calib *a = &r->cal;
-    for (char *s = strtok(buf, ","); s; s = strtok(NULL, ",")) {
-        if (a->nmodels == LM_AUTO_MAX_MODELS)
-            return lm_cli_error(r->c, "--models: at most %d models", LM_AUTO_MAX_MODELS);
-        lm_infer_model *im = &r->im[a->nmodels];
-        if (lm_infer_model_load(s, NULL, im, e)) return lm_cli_error(r->c, "%s", e->msg);
-        lm_auto_model *x = &a->models[a->nmodels];
-        char *abs = realpath(im->weights, NULL); /* infer may run from another folder */
-        snprintf(x->path, sizeof x->path, "%s", abs ? abs : im->weights);
-        free(abs);
-        snprintf(x->preset, sizeof x->preset, "%s", im->model->preset);
-        r->models[a->nmodels++] = im->model;
-        if (im->model->mosaic.ty != r->models[0]->mosaic.ty ||
-            im->model->mosaic.tx != r->models[0]->mosaic.tx ||
-            im->model->in_channels != 1 || im->model->out_channels != LM_MODEL_OUT_CHANNELS)
-            return lm_cli_error(r->c, "--models: '%s' does not take the same coded frames as "
-                                "'%s'", s, a->models[0].path);
-    }
-    if (a->nmodels < 2) return lm_cli_error(r->c, "--models: give at least 2 models");
-    return 0;
-}
-
-/* The DATA scenes of the chosen split. 0 ok, else an exit status (printed). */
-static int list_scenes(cal_run *r, lm_err *e)
-{
-    if (!r->o->ndata) return 0;
-    lm_dataset_cfg cfg;
-    lm_dataset_default_cfg(&cfg);
-    cfg.paths = r->o->data;
-    cfg.npaths = r->o->ndata;
-    cfg.sys = &r->im[0].sys;
-    cfg.workers = 0;
-    cfg.synth_fraction = 0.0f;
-    lm_dataset *d = lm_dataset_open(&cfg, e);
-    if (!d) return lm_cli_error(r->c, "%s", e->msg);
-    int total = 0;
-    for (int k = 0; k < 3; k++) total += lm_dataset_num_scenes(d, (lm_data_split)k);
-    r->scenes = calloc((size_t)total + 1, sizeof *r->scenes);
-    for (int k = 0; k < 3 && r->scenes; k++) {
-        lm_data_split s = (lm_data_split)k; /* a borrowed list holds no scene of its split */
-        int keep = r->o->split == 3 ||
-                   (!lm_dataset_split_borrowed(d, s) &&
-                    ((r->o->split == 2 && s != LM_SPLIT_TRAIN) ||
-                     (r->o->split == 0 && s == LM_SPLIT_VAL) ||
-                     (r->o->split == 1 && s == LM_SPLIT_TEST)));
-        for (int i = 0; i < lm_dataset_num_scenes(d, s) && keep; i++) {
-            const char *p = lm_dataset_scene_path(d, s, i);
-            int add = 1;
-            for (int j = 0; j < r->nscenes && add; j++)
-                if (!strcmp(r->scenes[j], p)) add = 0;
-            if (add) snprintf(r->scenes[r->nscenes++], 1024, "%s", p);
+        if (!strcmp(c->argv[c->i], "--models"))
+            return lm_cli_error(c, "--models: the fit of 'infer --model auto' is now 'lumosaic "
+                                "fit-auto' (calibrate fits LED gains from ColorChecker frames)");
+        if ((r = lm_cli_value(c, "--patches", &a->patches)) ||
+            (r = lm_cli_value(c, "--chart-corners", &a->corners)) ||
+            (r = lm_cli_real(c, "--patch-fraction", 1e-6, 1, &a->frac)) ||
+            (r = lm_cli_value(c, "--system", &a->system)) ||
+            (r = lm_cli_value(c, "--reflectance", &a->refl)) ||
+            (r = lm_cli_flag(c, "--offset", &a->offset)) ||
+            (r = lm_cli_real(c, "--max-error", 0, 10, &a->max_error)) ||
+            (r = lm_cli_value(c, "--output", &a->output)) ||
+            (r = lm_cli_value(c, "--report", &a->report)) ||
+            (r = lm_cli_value(c, "--write-chart", &a->chart))) {
+            if (r < 0) return 2;
+            continue;
         }
+        if (a->nin >= MAX_INPUTS) return lm_cli_error(c, "at most %d frame arguments", MAX_INPUTS);
+        if (lm_cli_positional(c, a->in, &a->nin)) return 2;
     }
-    lm_dataset_close(d);
-    if (!r->scenes) return lm_cli_error(r->c, "out of memory"), 1;
-    if (!r->nscenes && !r->o->synth)
-        return lm_cli_error(r->c, "no DATA scene of split '%s' among the %d given (use --synth "
-                            "N for procedural held-out scenes, or --split all)",
-                            r->o->split_s ? r->o->split_s : "valtest", total);
+    if (a->chart) {
+        if (a->nin || a->output || a->patches)
+            return lm_cli_error(c, "--write-chart takes no frames, --output or --patches");
+        return 1;
+    }
+    if (!a->nin) return lm_cli_error(c, "no frames given (see 'lumosaic calibrate --help')");
+    if (!a->output) return lm_cli_error(c, "--output SYSTEM.json is required");
+    if (!a->patches == !a->corners)
+        return lm_cli_error(c, "give the patch regions with one of --patches or --chart-corners");
+    return 1;
+}
+
+static int parse_corners(const lm_cli *c, const char *s, double out[8])
+{
+    char buf[512], *save = NULL;
+    snprintf(buf, sizeof buf, "%s", s);
+    int n = 0;
+    for (char *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
+        if (n == 8 || lm_cli_parse_real(t, &out[n])) n = 9;
+        if (n == 9) break;
+        n++;
+    }
+    if (n != 8)
+        return lm_cli_error(c, "--chart-corners: need 8 numbers X1,Y1,X2,Y2,X3,Y3,X4,Y4 (got "
+                            "'%s')", s);
     return 0;
 }
 
-/* Scene i (DATA scenes first, then the --synth procedural ones, then the --test-synth ones)
- * prepared: cropped, max 1. */
-static lm_status scene_cube(cal_run *r, int i, lm_cube *cube, lm_err *e)
+/* The average of every frame of every input, *out (height x width). */
+static lm_status average_frames(const cal_args *a, float **out, int *h, int *w, int *count,
+                                lm_err *e)
 {
-    const lm_mosaic *mo = &r->models[0]->mosaic;
-    uint64_t k = (uint64_t)(i - r->nscenes); /* procedural index */
-    if (k >= (uint64_t)r->o->synth) k = TEST_SEED_OFFSET + (k - (uint64_t)r->o->synth);
-    lm_status st = i < r->nscenes
-                       ? lm_cube_read(r->scenes[i], cube, e)
-                       : lm_synth_scene(SYNTH_SEED_BASE + (uint64_t)r->o->seed * 1000000u + k,
-                                        r->o->sh, r->o->sw, NULL, cube, e);
-    return st ? st : lm_eval_prepare(cube, mo->ty, mo->tx, e);
-}
-
-/* Scene i prepared and its coded frame simulated (noise stream seed * 7919 + i). */
-static lm_status scene_frame(cal_run *r, int i, lm_cube *cube, float **frame, lm_err *e)
-{
-    *frame = NULL;
-    if (scene_cube(r, i, cube, e)) return e->status;
-    size_t nf;
-    lm_noise_opts no = {.gauss_k = (float)(r->o->noise / 100.0)};
-    lm_rng rng;
-    lm_rng_seed(&rng, (uint64_t)r->o->seed * 7919u + (uint64_t)i);
-    lm_status st = lm_eval_simulate(&r->im[0], cube, &no, &rng, frame, &nf, e);
-    if (st) lm_cube_free(cube);
+    double *acc = NULL;
+    *out = NULL, *count = 0;
+    lm_status st = LM_OK;
+    for (int i = 0; i < a->nin && !st; i++) {
+        lm_frame_seq seq;
+        if ((st = lm_frame_seq_open(a->in[i], &seq, e))) break;
+        if (!acc) {
+            *h = seq.height, *w = seq.width;
+            acc = calloc((size_t)*h * *w, sizeof *acc);
+            if (!acc) st = lm_err_set(e, LM_ERR_NOMEM, "out of memory");
+        } else if (seq.height != *h || seq.width != *w) {
+            st = lm_err_set(e, LM_ERR_FORMAT, "%s: %d x %d frames, the first input's are %d x %d",
+                            a->in[i], seq.width, seq.height, *w, *h);
+        }
+        for (int k = 0; k < seq.count && !st; k++) {
+            lm_frame f;
+            if ((st = lm_frame_seq_read(&seq, k, &f, e))) break;
+            for (size_t p = 0; p < (size_t)*h * *w; p++) acc[p] += f.data[p];
+            lm_frame_free(&f);
+            ++*count;
+        }
+        lm_frame_seq_free(&seq);
+    }
+    float *avg = st ? NULL : malloc((size_t)*h * *w * sizeof *avg);
+    if (!st && !avg) st = lm_err_set(e, LM_ERR_NOMEM, "out of memory");
+    for (size_t p = 0; !st && p < (size_t)*h * *w; p++) avg[p] = (float)(acc[p] / *count);
+    free(acc);
+    *out = avg;
     return st;
 }
 
-/* Make room for n more samples. */
-static lm_status grow(cal_run *r, long n, lm_err *e)
+static lm_status write_report(const char *path, const lm_system *sys, const lm_calib_fit *f,
+                              const double *M, const double *A, int nframes, int offset,
+                              lm_err *e)
 {
-    if (r->n + n <= r->cap) return LM_OK;
-    long cap = 2 * (r->n + n);
-    double *d = malloc(sizeof(double) * cap);
-    double *m = malloc(sizeof(double) * cap * r->cal.nmodels);
-    if (!d || !m) {
-        free(d);
-        free(m);
-        return lm_err_set(e, LM_ERR_NOMEM, "out of memory");
+    json_t *leds = json_array(), *patches = json_array();
+    for (int l = 0; l < sys->nleds; l++)
+        json_array_append_new(leds, json_pack("{s:s, s:f, s:f, s:f, s:f}", "name",
+                              sys->leds[l].name, "gain", f->gain[l], "gain_before",
+                              sys->leds[l].gain, "alpha", f->alpha[l], "rms_rel", f->led_rms[l]));
+    for (int p = 0; p < LM_CALIB_PATCHES; p++) {
+        json_t *m = json_array(), *s = json_array();
+        for (int l = 0; l < sys->nleds; l++) {
+            json_array_append_new(m, json_real(M[l * LM_CALIB_PATCHES + p]));
+            json_array_append_new(s, json_real(f->alpha[l] * A[l * LM_CALIB_PATCHES + p] + f->offset));
+        }
+        json_array_append_new(patches, json_pack("{s:i, s:f, s:o, s:o}", "patch", p + 1,
+                              "rms_rel", f->patch_rms[p], "measured", m, "fitted", s));
     }
-    if (r->n) memcpy(d, r->d, sizeof(double) * r->n);
-    for (int k = 0; k < r->cal.nmodels; k++)
-        if (r->n) memcpy(m + k * cap, r->mse + k * r->cap, sizeof(double) * r->n);
-    free(r->d);
-    free(r->mse);
-    r->d = d, r->mse = m, r->cap = cap;
+    json_t *root = json_pack("{s:s, s:i, s:s, s:f, s:f, s:b, s:o, s:o}", "system", sys->path,
+                             "frames", nframes, "method", "NNLS (Lawson-Hanson active set)",
+                             "relative_error", f->rel_error, "offset", f->offset, "offset_fitted",
+                             offset, "leds", leds, "patches", patches);
+    char tmp[4200];
+    snprintf(tmp, sizeof tmp, "%s.tmp.%d", path, (int)getpid());
+    int rc = json_dump_file(root, tmp, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(8));
+    json_decref(root);
+    if (rc || rename(tmp, path)) {
+        remove(tmp);
+        return lm_err_set(e, LM_ERR_WRITE, "%s: cannot write the report", path);
+    }
     return LM_OK;
 }
 
-/* One scene's samples appended. */
-static lm_status scene_samples(cal_run *r, int i, const lm_tile_opts *to, lm_err *e)
+static void print_table(const lm_system *sys, const lm_calib_fit *f, int nframes)
 {
+    printf("calibrated from %d frame(s): relative error %.4f%s\n", nframes, f->rel_error,
+           f->offset > 0 ? "" : "");
+    if (f->offset > 0) printf("dark offset %.6g\n", f->offset);
+    printf("%-12s %12s %12s %10s\n", "LED", "gain before", "gain", "rms rel");
+    for (int l = 0; l < sys->nleds; l++)
+        printf("%-12s %12.6g %12.6g %10.4f\n", sys->leds[l].name, sys->leds[l].gain, f->gain[l],
+               f->led_rms[l]);
+    printf("patch rms rel:");
+    for (int p = 0; p < LM_CALIB_PATCHES; p++) printf(" %.3f", f->patch_rms[p]);
+    printf("\n");
+}
+
+static void default_corners(const lm_system *sys, double c[8])
+{
+    double pitch = 0.6 * (sys->width / 6.0 < sys->height / 4.0 ? sys->width / 6.0 : sys->height / 4.0);
+    double cx = 0.5 * sys->width, cy = 0.5 * sys->height, dx = 2.5 * pitch, dy = 1.5 * pitch;
+    double v[8] = {cx - dx, cy - dy, cx + dx, cy - dy, cx + dx, cy + dy, cx - dx, cy + dy};
+    memcpy(c, v, sizeof v);
+}
+
+static int write_chart(lm_cli *c, const cal_args *a, const lm_system *sys)
+{
+    double corners[8], C[LM_CALIB_PATCHES * 128];
+    if (a->corners) {
+        if (parse_corners(c, a->corners, corners)) return 2;
+    } else {
+        default_corners(sys, corners);
+    }
+    lm_calib_rect r[LM_CALIB_PATCHES];
     lm_cube cube;
-    float *frame;
-    if (scene_frame(r, i, &cube, &frame, e)) return e->status;
-    int nw = lm_auto_window_count(cube.height, cube.width, to), nm = r->cal.nmodels;
-    double *mse = malloc(sizeof(double) * nw * nm);
-    lm_status st = mse && !grow(r, nw, e) ? LM_OK
-                                          : lm_err_set(e, LM_ERR_NOMEM, "out of memory");
-    if (!st)
-        st = lm_auto_scene(&r->ctx, r->models, nm, r->cal.measure, frame, cube.data, cube.height,
-                           cube.width, to, r->d + r->n, mse, r->secs, e);
-    for (int m = 0; m < nm && !st; m++)
-        memcpy(r->mse + m * r->cap + r->n, mse + (size_t)m * nw, sizeof(double) * nw);
-    if (!st) r->n += nw;
-    free(mse);
-    free(frame);
+    lm_err e = {0};
+    if (sys->nbins > 128) return lm_cli_error(c, "the system's grid has over 128 bins");
+    lm_status st = lm_calib_grid(corners, 0.85, r, &e);
+    if (!st) st = lm_calib_reflectances(sys, a->refl, C, &e);
+    if (!st) st = lm_calib_chart_cube(sys, sys->height, sys->width, r, C, 0.2, &cube, &e);
+    if (st) return lm_cli_error(c, "%s", e.msg);
+    st = lm_cube_write_exr(a->chart, &cube, &e);
     lm_cube_free(&cube);
-    return st;
-}
-
-static void print_table(const cal_run *r)
-{
-    const lm_auto_calib *a = &r->cal;
-    printf("%ld windows from %d scene(s); measure %s\n", r->n, r->nscenes + (int)r->o->synth,
-           lm_auto_measure_name(a->measure));
-    printf("model cost: ");
-    for (int m = 0; m < a->nmodels; m++)
-        printf("%s%s %.3g ms/window (%.3g MMAC)", m ? ", " : "", a->models[m].preset,
-               1e3 * a->models[m].cost, a->models[m].macs / 1e6);
-    printf("\n%-24s %8s", "difficulty bin", "windows");
-    for (int m = 0; m < a->nmodels; m++) printf(" %10.10s", a->models[m].preset);
-    printf("   (expected PSNR, dB)\n");
-    for (int b = 0; b < a->nbins; b++) {
-        char lo[16] = "-inf", hi[16] = "inf", rng[40];
-        if (b > 0) snprintf(lo, sizeof lo, "%.4g", a->edges[b - 1]);
-        if (b < a->nbins - 1) snprintf(hi, sizeof hi, "%.4g", a->edges[b]);
-        snprintf(rng, sizeof rng, "[%s, %s)", lo, hi);
-        printf("%-24s %8ld", rng, a->windows[b]);
-        for (int m = 0; m < a->nmodels; m++) printf(" %10.2f", a->models[m].psnr[b]);
-        printf("\n");
+    if (st) {
+        lm_cli_error(c, "%s", e.msg);
+        return lm_cli_exit_status(st);
     }
-}
-
-/* ---- --test-synth: auto against the fixed models on scenes not calibrated on ------------- */
-typedef struct test_row {
-    int model;                    /* fixed rows: the model; auto rows: -1 */
-    double tol;                   /* auto rows */
-    int choice[LM_AUTO_MAX_BINS]; /* model per bin (fixed rows: `model` everywhere) */
-    int same;                     /* auto row with the choice of an earlier auto row, or -1 */
-    double psnr;                  /* sum over the scenes, then the mean */
-    long win[LM_AUTO_MAX_MODELS];
-    double wall;                  /* seconds: difficulty (auto) + reconstruction */
-} test_row;
-
-typedef struct test_run {
-    test_row rows[LM_AUTO_MAX_MODELS + MAX_TOL];
-    int nrows, best;              /* best: the fixed row of the highest mean PSNR */
-    long windows;                 /* windows of the test scenes */
-    int wpf;                      /* windows per 640 x 480 frame */
-} test_run;
-
-static long row_windows(const test_row *w, int nm)
-{
-    long n = 0;
-    for (int m = 0; m < nm; m++) n += w->win[m];
-    return n;
-}
-
-/* Seconds per 640 x 480 frame from the calibrated per-window costs and the row's shares. */
-static double row_est(const cal_run *r, const test_run *t, const test_row *w)
-{
-    double s = 0.0;
-    long n = row_windows(w, r->cal.nmodels);
-    for (int m = 0; m < r->cal.nmodels; m++)
-        s += n ? (double)w->win[m] / n * r->cal.models[m].cost : 0.0;
-    return s * t->wpf;
-}
-
-/* One test scene through every row that runs (auto rows with a repeated choice do not). */
-static lm_status test_scene(cal_run *r, test_run *t, int i, const lm_tile_opts *to, lm_err *e)
-{
-    const lm_auto_calib *a = &r->cal;
-    const lm_mosaic *mo = &r->models[0]->mosaic;
-    lm_cube cube, pred;
-    float *frame;
-    if (scene_frame(r, i, &cube, &frame, e)) return e->status;
-    const int H = cube.height, W = cube.width, n = lm_auto_window_count(H, W, to);
-    double *d = malloc(sizeof(double) * n);
-    int *wm = malloc(sizeof(int) * n);
-    lm_status st = d && wm ? LM_OK : lm_err_set(e, LM_ERR_NOMEM, "out of memory");
-    double t0 = omp_get_wtime();
-    if (!st) st = lm_auto_frame_difficulty(a->measure, frame, H, W, mo->ty, mo->tx, to,
-                                           lm_nthreads(&r->ctx), d, e);
-    const double tdiff = omp_get_wtime() - t0;
-    t->windows += st ? 0 : n;
-    for (int k = 0; k < t->nrows && !st; k++) {
-        test_row *w = &t->rows[k];
-        if (w->same >= 0) continue;
-        t0 = omp_get_wtime();
-        if (w->model >= 0) {
-            st = lm_tile_infer(&r->ctx, r->models[w->model], frame, H, W, to, &pred, e);
-            w->win[w->model] += st ? 0 : n;
-        } else {
-            for (int j = 0; j < n; j++) wm[j] = w->choice[lm_auto_bin(a, d[j])];
-            st = lm_auto_infer(&r->ctx, r->models, a->nmodels, wm, frame, H, W, to, &pred,
-                               w->win, e);
-        }
-        w->wall += omp_get_wtime() - t0 + (w->model < 0 ? tdiff : 0.0);
-        if (st) break;
-        w->psnr += lm_metric_psnr(pred.data, cube.data, 31, H, W, 0, 31);
-        lm_cube_free(&pred);
-    }
-    free(d);
-    free(wm);
-    free(frame);
-    lm_cube_free(&cube);
-    return st;
-}
-
-/* The rows (fixed models, then auto per tolerance), every test scene, the means. 0 ok, else an
- * exit status (printed). */
-static int test_models(cal_run *r, test_run *t, const lm_tile_opts *to, lm_err *e)
-{
-    const lm_auto_calib *a = &r->cal;
-    const int nm = a->nmodels, first = r->nscenes + (int)r->o->synth;
-    memset(t, 0, sizeof *t);
-    for (int m = 0; m < nm; m++) {
-        test_row *w = &t->rows[t->nrows++];
-        w->model = m, w->same = -1;
-        for (int b = 0; b < a->nbins; b++) w->choice[b] = m;
-    }
-    for (int k = 0; k < r->o->ntol; k++) {
-        test_row *w = &t->rows[t->nrows];
-        w->model = -1, w->same = -1, w->tol = r->o->tol[k];
-        lm_auto_choose(a, w->tol, w->choice);
-        for (int j = nm; j < t->nrows && w->same < 0; j++)
-            if (!memcmp(t->rows[j].choice, w->choice, sizeof(int) * a->nbins)) w->same = j;
-        t->nrows++;
-    }
-    for (int i = 0; i < (int)r->o->test_synth; i++) {
-        double t0 = omp_get_wtime();
-        if (test_scene(r, t, first + i, to, e))
-            return lm_cli_error(r->c, "test scene %d: %s", i + 1, e->msg),
-                   lm_cli_exit_status(e->status);
-        fprintf(stderr, "test scene %d/%lld: %.2f s\n", i + 1, r->o->test_synth,
-                omp_get_wtime() - t0);
-    }
-    for (int k = 0; k < t->nrows; k++) {
-        test_row *w = &t->rows[k];
-        if (w->same >= 0) {
-            int same = w->same;
-            double tol = w->tol;
-            *w = t->rows[same];
-            w->same = same, w->tol = tol;
-        } else {
-            w->psnr /= (double)r->o->test_synth;
-        }
-    }
-    t->best = 0;
-    for (int m = 1; m < nm; m++)
-        if (t->rows[m].psnr > t->rows[t->best].psnr) t->best = m;
-    lm_tile_opts vga = *to;
-    t->wpf = lm_auto_window_count(480, 640, &vga);
+    printf("chart scene: %s (%d x %d, %d bins; corner patch centres", a->chart, sys->width,
+           sys->height, sys->nbins);
+    for (int i = 0; i < 8; i += 2) printf(" %.1f,%.1f", corners[i], corners[i + 1]);
+    printf(")\n");
     return 0;
 }
 
-static void row_name(const cal_run *r, const test_row *w, char *s, size_t n)
+static int calibrate(lm_cli *c, const cal_args *a, const lm_system *sys)
 {
-    if (w->model >= 0) snprintf(s, n, "%s", r->cal.models[w->model].preset);
-    else snprintf(s, n, "auto tol %g", w->tol);
-}
-
-static void print_test(const cal_run *r, const test_run *t)
-{
-    const lm_auto_calib *a = &r->cal;
-    const test_row *b = &t->rows[t->best];
-    printf("\ntest: %lld procedural scene(s) of %dx%d not calibrated on, %ld windows; "
-           "%d windows per 640x480 frame; %d thread(s)\n", r->o->test_synth, r->o->sh,
-           r->o->sw, t->windows, t->wpf, omp_get_max_threads());
-    printf("%-16s %8s %7s %8s %10s %10s %8s %8s  %s\n", "row", "PSNR dB", "vs best", "calib dB",
-           "est s/fr", "meas s/fr", "speedup", "wall s", "windows per model");
-    for (int k = 0; k < t->nrows; k++) {
-        const test_row *w = &t->rows[k];
-        char name[64];
-        row_name(r, w, name, sizeof name);
-        long n = row_windows(w, a->nmodels);
-        printf("%-16s %8.3f %7.3f %8.3f %10.4f %10.4f %7.2fx %8.2f ", name, w->psnr,
-               w->psnr - b->psnr, lm_auto_expected_psnr(a, w->choice, 0), row_est(r, t, w),
-               n ? w->wall * t->wpf / n : 0.0, row_est(r, t, b) / row_est(r, t, w), w->wall);
-        for (int m = 0; m < a->nmodels; m++) /* the models that ran */
-            if (w->win[m]) printf(" %s %.1f%%", a->models[m].preset, 100.0 * w->win[m] / n);
-        if (w->same >= 0) printf("  (same choice as tol %g: reused)", t->rows[w->same].tol);
-        printf("\n");
+    lm_calib_rect r[LM_CALIB_PATCHES];
+    lm_err e = {0};
+    double corners[8];
+    if (a->corners && parse_corners(c, a->corners, corners)) return 2;
+    lm_status st = a->patches ? lm_calib_rects_load(a->patches, r, &e)
+                              : lm_calib_grid(corners, a->frac > 0 ? a->frac : 0.5, r, &e);
+    float *frame = NULL;
+    int h = 0, w = 0, nframes = 0;
+    if (!st) st = average_frames(a, &frame, &h, &w, &nframes, &e);
+    if (!st && (h != sys->height || w != sys->width))
+        st = lm_err_set(&e, LM_ERR_FORMAT, "the frames are %d x %d, the system's sensor (%s) is "
+                        "%d x %d: frames of another system?", w, h, sys->path, sys->width,
+                        sys->height);
+    double *C = malloc((size_t)LM_CALIB_PATCHES * sys->nbins * sizeof *C);
+    double M[LM_SYSTEM_MAX_LEDS * LM_CALIB_PATCHES], A[LM_SYSTEM_MAX_LEDS * LM_CALIB_PATCHES];
+    if (!st && !C) st = lm_err_set(&e, LM_ERR_NOMEM, "out of memory");
+    if (!st) st = lm_calib_measure(sys, frame, h, w, r, M, &e);
+    if (!st) st = lm_calib_reflectances(sys, a->refl, C, &e);
+    if (!st) lm_calib_simulate(sys, C, A);
+    lm_calib_fit fit;
+    if (!st) st = lm_calib_solve(sys, A, M, a->offset, &fit, &e);
+    double maxe = a->max_error >= 0 ? a->max_error : 0.1;
+    if (!st && !(fit.rel_error <= maxe))
+        st = lm_err_set(&e, LM_ERR_FORMAT, "the fit leaves a relative error of %.3f (over "
+                        "--max-error %g): frames of another system, or misplaced patches?",
+                        fit.rel_error, maxe);
+    free(frame);
+    free(C);
+    if (st) return lm_cli_error(c, "%s", e.msg);
+    char report[4096], note[1024];
+    if (a->report) snprintf(report, sizeof report, "%s", a->report);
+    else {
+        size_t n = strlen(a->output);
+        int json = n > 5 && !strcmp(a->output + n - 5, ".json");
+        snprintf(report, sizeof report, "%.*s.report.json", (int)(json ? n - 5 : n), a->output);
     }
-    printf("vs best / speedup: against always %s (the best fixed model on these scenes; speedup "
-           "from the estimated seconds). est: calibrated network seconds per window x windows; "
-           "meas: wall time of the test reconstructions (difficulty, fold and all) per 640x480 "
-           "frame\n", a->models[t->best].preset);
-}
-
-/* The "test" member of the calibration file. */
-static json_t *test_json(const cal_run *r, const test_run *t)
-{
-    const lm_auto_calib *a = &r->cal;
-    const test_row *b = &t->rows[t->best];
-    json_t *rows = json_array();
-    for (int k = 0; k < t->nrows; k++) {
-        const test_row *w = &t->rows[k];
-        long n = row_windows(w, a->nmodels);
-        json_t *share = json_array(), *choice = json_array();
-        for (int m = 0; m < a->nmodels; m++)
-            json_array_append_new(share, json_real(n ? (double)w->win[m] / n : 0.0));
-        for (int c = 0; c < a->nbins; c++)
-            json_array_append_new(choice, json_integer(w->choice[c]));
-        json_t *o = json_pack("{s:s, s:f, s:f, s:f, s:o, s:o, s:f, s:f, s:f, s:f}", "kind",
-                              w->model >= 0 ? "fixed" : "auto", "psnr_db", w->psnr,
-                              "psnr_vs_best_db", w->psnr - b->psnr, "calib_psnr_db",
-                              lm_auto_expected_psnr(a, w->choice, 0), "share", share, "choice",
-                              choice, "est_s_per_frame", row_est(r, t, w),
-                              "measured_s", w->wall, "measured_s_per_frame",
-                              n ? w->wall * t->wpf / n : 0.0, "speedup_est",
-                              row_est(r, t, b) / row_est(r, t, w));
-        if (w->model >= 0)
-            json_object_set_new(o, "model", json_string(a->models[w->model].preset));
-        else
-            json_object_set_new(o, "tol_db", json_real(w->tol));
-        if (w->same >= 0) json_object_set_new(o, "same_choice_as_row", json_integer(w->same));
-        json_array_append_new(rows, o);
+    snprintf(note, sizeof note, "LED gains calibrated by NNLS from %d ColorChecker frame(s) "
+             "(lumosaic calibrate; relative error %.4f) over %s", nframes, fit.rel_error,
+             sys->path);
+    st = lm_calib_write_system(sys, fit.gain, note, a->output, &e);
+    if (!st && (st = write_report(report, sys, &fit, M, A, nframes, a->offset, &e)))
+        remove(a->output);
+    if (st) {
+        lm_cli_error(c, "%s", e.msg);
+        return lm_cli_exit_status(st);
     }
-    json_t *test = json_pack("{s:I, s:[i,i], s:I, s:i, s:i, s:s, s:o}", "scenes",
-                             (json_int_t)r->o->test_synth, "size", r->o->sh, r->o->sw, "windows",
-                             (json_int_t)t->windows, "windows_per_640x480", t->wpf, "threads",
-                             omp_get_max_threads(), "best", a->models[t->best].preset, "rows",
-                             rows);
-    return json_pack("{s:o}", "test", test);
-}
-
-static int calibrate(cal_run *r, lm_err *e)
-{
-    lm_tile_opts to;
-    lm_tile_default_opts(&to);
-    to.batch = (int)r->o->batch;
-    lm_auto_calib *a = &r->cal;
-    a->measure = (lm_auto_measure)r->o->measure;
-    a->win_h = to.win_h, a->win_w = to.win_w, a->stride_y = to.stride_y,
-    a->stride_x = to.stride_x;
-    int total = r->nscenes + (int)r->o->synth;
-    for (int i = 0; i < total; i++) {
-        double t0 = omp_get_wtime();
-        if (scene_samples(r, i, &to, e))
-            return lm_cli_error(r->c, "scene %d (%s): %s", i + 1,
-                                i < r->nscenes ? r->scenes[i] : "procedural", e->msg),
-                   lm_cli_exit_status(e->status);
-        fprintf(stderr, "scene %d/%d: %.2f s\n", i + 1, total, omp_get_wtime() - t0);
-    }
-    for (int m = 0; m < a->nmodels; m++) {
-        lm_profile p;
-        a->models[m].cost = r->secs[m] / (double)r->n;
-        if (a->models[m].cost <= 0.0) a->models[m].cost = 1e-9;
-        if (!lm_model_profile(r->models[m], 1, to.win_h, to.win_w, &p, e)) {
-            a->models[m].macs = p.total_macs;
-            lm_profile_free(&p);
-        }
-    }
-    /* the samples are stored with stride cap per model: pack them for the fit */
-    for (int m = 1; m < a->nmodels; m++)
-        memmove(r->mse + m * r->n, r->mse + m * r->cap, sizeof(double) * r->n);
-    if (lm_auto_fit(a, r->d, r->mse, r->n, (int)r->o->bins, e))
-        return lm_cli_error(r->c, "%s (use fewer --bins or more scenes)", e->msg);
-    print_table(r);
-    fflush(stdout);
-    test_run *t = r->o->test_synth ? calloc(1, sizeof *t) : NULL;
-    if (r->o->test_synth && !t) return lm_cli_error(r->c, "out of memory"), 1;
-    int rc = t ? test_models(r, t, &to, e) : 0;
-    json_t *extra = !rc && t ? test_json(r, t) : NULL;
-    if (!rc && t && !extra) lm_cli_error(r->c, "out of memory"), rc = 1;
-    if (!rc && lm_auto_save_ext(r->o->output, a, extra, e))
-        lm_cli_error(r->c, "%s", e->msg), rc = 1;
-    if (!rc && t) print_test(r, t);
-    json_decref(extra);
-    free(t);
-    return rc;
+    print_table(sys, &fit, nframes);
+    printf("system: %s\nreport: %s\n", a->output, report);
+    return 0;
 }
 
 int lm_cmd_calibrate(int argc, char **argv)
 {
     lm_cli c;
-    cal_opts o;
+    cal_args a = {.frac = -1, .max_error = -1};
     lm_cli_init(&c, "lumosaic calibrate", argc, argv);
-    int rc = parse(&c, &o);
-    if (rc != 1) {
-        free(o.data);
-        return rc;
-    }
-    if (o.threads > 0) omp_set_num_threads((int)o.threads);
-    cal_run r;
-    memset(&r, 0, sizeof r);
-    r.c = &c;
-    r.o = &o;
-    lm_err e;
-    lm_err_clear(&e);
-    rc = load_models(&r, &e);
-    if (!rc) rc = list_scenes(&r, &e);
-    if (!rc && lm_ctx_init(&r.ctx, (int)o.threads) != 0) {
-        lm_cli_error(&c, "out of memory (compute context)");
-        rc = 1;
-    } else if (!rc) {
-        rc = calibrate(&r, &e);
-        lm_ctx_free(&r.ctx);
-    }
-    for (int m = 0; m < LM_AUTO_MAX_MODELS; m++) lm_infer_model_free(&r.im[m]);
-    free(r.scenes);
-    free(r.d);
-    free(r.mse);
-    free(o.data);
-    return rc;
+    int r = parse(&c, &a);
+    if (r != 1) return r;
+    lm_system sys;
+    lm_err e = {0};
+    if (a.system ? lm_system_load(a.system, &sys, &e) : lm_system_default(&sys, &e))
+        return lm_cli_error(&c, "%s", e.msg);
+    r = a.chart ? write_chart(&c, &a, &sys) : calibrate(&c, &a, &sys);
+    lm_system_free(&sys);
+    return r;
 }

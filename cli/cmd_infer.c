@@ -11,7 +11,7 @@
  * the network on an OpenCL device, the weights uploaded once for the run (lm_tile_device).
  * Models with a finite receptive field (linear, rt-*: lm_whole_halo > 0) run on the whole frame
  * in strips (infer/whole.h) unless --tiles. --model auto picks a model per window from a
- * calibration file (infer/auto.h, `lumosaic calibrate`) and prints the share of each model.
+ * calibration file (infer/auto.h, `lumosaic fit-auto`) and prints the share of each model.
  * What it is not: the flow or the alignment scheme themselves (infer/flow.c, infer/align.c). */
 #include <omp.h>
 #include <stdio.h>
@@ -45,7 +45,7 @@ static void help(void)
            "                   per window, the cheapest calibrated model whose expected PSNR\n"
            "                   is within --auto-tol dB of the best model's (patch-wise only;\n"
            "                   prints the share of windows per model)\n"
-           "  --auto FILE      calibration written by 'lumosaic calibrate' (for --model auto)\n"
+           "  --auto FILE      calibration written by 'lumosaic fit-auto' (for --model auto)\n"
            "  --auto-tol DB    accuracy the auto choice may give up per window, in dB of\n"
            "                   expected PSNR (>= 0; default 0.5; 0 = always the best model)\n"
            "  --tiles          patch-wise even for models that can run on the whole frame\n"
@@ -109,7 +109,7 @@ static int parse(lm_cli *c, infer_opts *o)
     if (!o->output) return lm_cli_error(c, "--output is required (see 'lumosaic infer --help')");
     o->is_auto = !strcmp(o->model, "auto");
     if (o->is_auto && !o->auto_file)
-        return lm_cli_error(c, "--model auto needs --auto FILE (see 'lumosaic calibrate')");
+        return lm_cli_error(c, "--model auto needs --auto FILE (see 'lumosaic fit-auto')");
     if (!o->is_auto && o->auto_file)
         return lm_cli_error(c, "--auto is only for --model auto");
     return 1;

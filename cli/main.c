@@ -7,8 +7,9 @@
 static const lm_command commands[] = {
     {"version", lm_cmd_version, "print the version and build configuration"},
     /* one line per command (keep alphabetical after version) */
-    {"calibrate", lm_cmd_calibrate, "calibrate infer --model auto: error vs difficulty, cost"},
+    {"calibrate", lm_cmd_calibrate, "LED gains from ColorChecker frames (NNLS): a new system file"},
     {"eval", lm_cmd_eval, "score a trained model: PSNR/SSIM/MAE/SAM vs noise, rainbow test"},
+    {"fit-auto", lm_cmd_fit_auto, "fit infer --model auto: error vs difficulty, cost per model"},
     {"infer", lm_cmd_infer, "reconstruct 31-band cubes from coded frames with a trained model"},
     {"info", lm_cmd_info, "layer table of a model (shapes, parameters, MACs), presets, system"},
     {"render", lm_cmd_render, "render a spectral cube as an sRGB PNG (D65, CIE 1931)"},

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# auto.sh — end-to-end tests of `lumosaic calibrate` and `lumosaic infer --model auto`: train a
+# auto.sh — end-to-end tests of `lumosaic fit-auto` and `lumosaic infer --model auto`: train a
 # linear and an mcan-tiny model briefly, calibrate them on procedural held-out scenes (auto.json
 # has the fields, one PSNR per bin and model, positive costs, the table is printed); with
 # --test-synth 2 the test table and the "test" object (a row per fixed model and per tolerance,
@@ -29,10 +29,10 @@ F=$T/sim/frames/frame_0000.png
 # same A B: the cubes are equal (largest difference 0)
 same() { local d; d=$("$DIFF" "$1" "$2") && awk -v d="$d" 'BEGIN { exit !(d == 0) }'; }
 
-# ---- calibrate ---------------------------------------------------------------------------
-"$LM" calibrate --models "$T/lin,$T/mc" --synth 2 --synth-size 132x128 --bins 3 \
+# ---- fit-auto ---------------------------------------------------------------------------
+"$LM" fit-auto --models "$T/lin,$T/mc" --synth 2 --synth-size 132x128 --bins 3 \
   --output "$T/auto.json" > "$T/table" 2> "$T/err"
-check "calibrate: $(cat "$T/err")" [ $? -eq 0 ]
+check "fit-auto: $(cat "$T/err")" [ $? -eq 0 ]
 cat "$T/table"
 check "table has a row per bin" [ "$(grep -cE '^\[' "$T/table")" -eq 3 ]
 python3 - "$T/auto.json" <<'PY'
@@ -50,11 +50,11 @@ assert "test" not in j, j  # only with --test-synth
 PY
 check "auto.json fields" [ $? -eq 0 ]
 
-# ---- calibrate --test-synth: auto against the fixed models on other scenes -----------------
-"$LM" calibrate --models "$T/lin,$T/mc" --synth 2 --synth-size 132x128 --bins 3 \
+# ---- fit-auto --test-synth: auto against the fixed models on other scenes -----------------
+"$LM" fit-auto --models "$T/lin,$T/mc" --synth 2 --synth-size 132x128 --bins 3 \
   --test-synth 2 --test-tol 0,0.5,1000 --threads 1 --output "$T/autot.json" > "$T/ttable" \
   2> "$T/err"
-check "calibrate --test-synth: $(cat "$T/err")" [ $? -eq 0 ]
+check "fit-auto --test-synth: $(cat "$T/err")" [ $? -eq 0 ]
 cat "$T/ttable"
 check "test table: a row per fixed model" \
   [ "$(grep -cE '^(linear|mcan-tiny) ' "$T/ttable")" -eq 2 ]
@@ -156,24 +156,24 @@ expect_error "--auto without auto" 2 "only for --model auto" "$T/e4" -- \
   "$LM" infer --model "$T/lin" --auto "$T/auto.json" --input "$F" --output "$T/e4"
 expect_error "negative tol" 2 "--auto-tol" "$T/e5" -- \
   "$LM" infer --model auto --auto "$T/auto.json" --auto-tol -1 --input "$F" --output "$T/e5"
-expect_error "calibrate one model" 2 "at least 2 models" "$T/e6.json" -- \
-  "$LM" calibrate --models "$T/lin" --synth 1 --output "$T/e6.json"
-expect_error "calibrate no scenes" 2 "no scenes" "$T/e7.json" -- \
-  "$LM" calibrate --models "$T/lin,$T/mc" --output "$T/e7.json"
-expect_error "calibrate bad split" 2 "--split" "$T/e8.json" -- \
-  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --split x --output "$T/e8.json"
-expect_error "calibrate bad measure" 2 "--measure" "$T/e9.json" -- \
-  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --measure fft --output "$T/e9.json"
-expect_error "calibrate missing model" 2 "nope" "$T/e10.json" -- \
-  "$LM" calibrate --models "$T/lin,$T/nope" --synth 1 --output "$T/e10.json"
-expect_error "calibrate negative --test-synth" 2 "--test-synth" "$T/e11.json" -- \
-  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --test-synth -1 --output "$T/e11.json"
-expect_error "calibrate bad --test-tol" 2 "--test-tol" "$T/e12.json" -- \
-  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --test-synth 1 --test-tol 0,x \
+expect_error "fit-auto one model" 2 "at least 2 models" "$T/e6.json" -- \
+  "$LM" fit-auto --models "$T/lin" --synth 1 --output "$T/e6.json"
+expect_error "fit-auto no scenes" 2 "no scenes" "$T/e7.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/mc" --output "$T/e7.json"
+expect_error "fit-auto bad split" 2 "--split" "$T/e8.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --split x --output "$T/e8.json"
+expect_error "fit-auto bad measure" 2 "--measure" "$T/e9.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --measure fft --output "$T/e9.json"
+expect_error "fit-auto missing model" 2 "nope" "$T/e10.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/nope" --synth 1 --output "$T/e10.json"
+expect_error "fit-auto negative --test-synth" 2 "--test-synth" "$T/e11.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --test-synth -1 --output "$T/e11.json"
+expect_error "fit-auto bad --test-tol" 2 "--test-tol" "$T/e12.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --test-synth 1 --test-tol 0,x \
   --output "$T/e12.json"
-expect_error "calibrate negative --test-tol" 2 "--test-tol" "$T/e13.json" -- \
-  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --test-synth 1 --test-tol -0.5 \
+expect_error "fit-auto negative --test-tol" 2 "--test-tol" "$T/e13.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --test-synth 1 --test-tol -0.5 \
   --output "$T/e13.json"
-expect_error "calibrate empty --test-tol" 2 "--test-tol" "$T/e14.json" -- \
-  "$LM" calibrate --models "$T/lin,$T/mc" --synth 1 --test-tol , --output "$T/e14.json"
+expect_error "fit-auto empty --test-tol" 2 "--test-tol" "$T/e14.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --test-tol , --output "$T/e14.json"
 finish

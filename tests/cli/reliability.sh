@@ -55,9 +55,9 @@ expect_error "simulate --frames x" 2 "--frames: 'x' is not an integer in 1..1000
   "$LM" simulate --input "$CAVE" --crop --video --frames x --output "$T/n9"
 expect_error "render --exposure 1e999" 2 "--exposure: '1e999' is not a finite number in 1e-12..1e+06" \
   "$T/n10.png" -- "$LM" render --input "$CAVE" --exposure 1e999 --output "$T/n10.png"
-expect_error "calibrate --synth-size 4294967362x256" 2 \
+expect_error "fit-auto --synth-size 4294967362x256" 2 \
   "--synth-size '4294967362x256': want HxW, from 66x64 to 4096x4096" "$T/n11.json" -- \
-  "$LM" calibrate --models a --synth 1 --synth-size 4294967362x256 --output "$T/n11.json"
+  "$LM" fit-auto --models a --synth 1 --synth-size 4294967362x256 --output "$T/n11.json"
 expect_error "simulate --motion rotate:1e300" 2 "every number in -1e6..1e6" "$T/n12" -- \
   "$LM" simulate --input "$CAVE" --crop --video --frames 2 --motion rotate:1e300 --output "$T/n12"
 printf '{"version": 1, "measure": "grad", "window": [4294967362, 64], "stride": [30, 32], "edges": [], "windows": [1], "models": [{"model": "x", "cost_s_per_window": 1, "psnr": [30]}]}' > "$T/auto.json"
@@ -100,10 +100,10 @@ expect_error "infer: output cannot be written" 1 "cannot create a folder: Not a 
 expect_error "eval: output cannot be written" 1 "cannot create a folder: Not a directory" \
   "$T/afile/ev" -- "$LM" eval --model "$R" "$CAVE" --split all --noise 0 --rainbow 0 \
   --output "$T/afile/ev"
-"$LM" calibrate --models "$R,$R" --synth 1 --synth-size 66x64 --bins 1 \
+"$LM" fit-auto --models "$R,$R" --synth 1 --synth-size 66x64 --bins 1 \
   --output "$T/afile/auto.json" > /dev/null 2> "$T/cal.err"
-check "calibrate: output cannot be written: exit 1" [ $? -eq 1 ]
-check "calibrate: output cannot be written: the reason: $(cat "$T/cal.err")" \
+check "fit-auto: output cannot be written: exit 1" [ $? -eq 1 ]
+check "fit-auto: output cannot be written: the reason: $(cat "$T/cal.err")" \
   grep -q "auto: cannot write '$T/afile/auto.json': Not a directory" "$T/cal.err"
 expect_error "render: output cannot be written" 1 "x.png: write failed" "$T/afile/x.png" -- \
   "$LM" render --input "$CAVE" --output "$T/afile/x.png"
