@@ -106,9 +106,10 @@ static int print_plan(const lm_study_cfg *cfg, const char *dir)
     const lm_train_cfg *t = &cfg->train;
     printf("study %s -> %s\npresets:", cfg->path, dir);
     for (int i = 0; i < cfg->npresets; i++) printf(" %s", cfg->presets[i]);
-    printf("\ntraining: %ld iterations, patch %dx%d, batch %d x %d, lr %g, synthetic share %g, "
-           "seed %llu\ndata:", t->iterations, t->patch_h, t->patch_w, t->batch, t->accum_steps,
-           (double)t->lr, (double)t->synth_fraction, (unsigned long long)t->seed);
+    printf("\ntraining: %ld iterations, patch %dx%d, batch %d x %d, lr %g, narrowband synthetic "
+           "share %g, procedural share %g, seed %llu\ndata:", t->iterations, t->patch_h,
+           t->patch_w, t->batch, t->accum_steps, (double)t->lr, (double)t->synth_fraction,
+           (double)t->procedural_fraction, (unsigned long long)t->seed);
     for (int i = 0; i < t->ndata; i++) printf(" %s", t->data[i]);
     printf("\nnoise %%:");
     for (int k = 0; k < cfg->nnoise; k++) printf(" %g", 100.0 * cfg->noise[k]);

@@ -75,7 +75,7 @@ void lm_dataset_default_cfg(lm_dataset_cfg *cfg)
     *cfg = (lm_dataset_cfg){.patch_h = 66, .patch_w = 64, .synth_fraction = 0.33f,
                             .noise_min = 0.0f, .noise_max = 0.15f, .flips = 1, .seed = 1,
                             .workers = 2, .cache_scenes = 0, .val_patches = 64,
-                            .val_noise = 0.0f, .synth_narrowband = 0.5f};
+                            .val_noise = 0.0f, .procedural_fraction = 0.0f};
 }
 
 /* ---- split: group keys and the hash ---------------------------------------------------- */
@@ -505,8 +505,11 @@ static lm_status plan_sample(const lm_dataset *d, lm_data_split split, long i, s
     lm_dataset_sample_info *in = &p->info;
     in->scene = -1;
     in->noise_k = train ? k : c->val_noise;
+    (void)u_kind; /* drawn still: the other draws of a sample keep their place in the stream */
     if (train && u_synth < c->synth_fraction) {
-        in->kind = u_kind < c->synth_narrowband ? LM_SAMPLE_NARROWBAND : LM_SAMPLE_PROCEDURAL;
+        in->kind = LM_SAMPLE_NARROWBAND;
+    } else if (train && u_synth < c->synth_fraction + c->procedural_fraction) {
+        in->kind = LM_SAMPLE_PROCEDURAL;
     } else {
         int n = d->count[split];
         if (n == 0)
@@ -781,10 +784,10 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
 {
     static const char *names[3] = {"train", "val", "test"};
     const lm_dataset_cfg *c = &d->cfg;
-    fprintf(f, "dataset: %d scenes in %d groups; patch %d x %d; synthetic %.0f%% (%.0f%% of them "
-            "narrowband, the rest procedural); noise k ~ U[%g, %g]; flips %s; seed %llu; %d "
+    fprintf(f, "dataset: %d scenes in %d groups; patch %d x %d; narrowband synthetic %.0f%%, "
+            "procedural %.0f%%; noise k ~ U[%g, %g]; flips %s; seed %llu; %d "
             "workers; cache %d scenes\n", d->nscenes, d->ngroups, c->patch_h, c->patch_w,
-            100.0 * c->synth_fraction, 100.0 * c->synth_narrowband, c->noise_min, c->noise_max,
+            100.0 * c->synth_fraction, 100.0 * c->procedural_fraction, c->noise_min, c->noise_max,
             c->flips ? "on" : "off", (unsigned long long)c->seed, d->nthreads, d->cache_cap);
     fprintf(f, "  split by scene group (name without a _crop<N> or _<height|width> tag): test "
             "and val take %d of the %d groups each (a tenth, rounded), by hash rank\n",
@@ -819,10 +822,11 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
         return lm_err_set(err, LM_ERR_SHAPE, "dataset: patch %d x %d is not a positive multiple "
                           "of the %d x %d tile", c->patch_h, c->patch_w, s->tile_rows,
                           s->tile_cols);
-    if (!(c->synth_fraction >= 0.0f && c->synth_fraction <= 1.0f) ||
-        !(c->synth_narrowband >= 0.0f && c->synth_narrowband <= 1.0f))
-        return lm_err_set(err, LM_ERR_ARG, "dataset: synth_fraction and synth_narrowband must "
-                          "be in [0, 1] (got %g, %g)", c->synth_fraction, c->synth_narrowband);
+    if (!(c->synth_fraction >= 0.0f && c->procedural_fraction >= 0.0f &&
+          c->synth_fraction + c->procedural_fraction <= 1.0f))
+        return lm_err_set(err, LM_ERR_ARG, "dataset: synth_fraction and procedural_fraction must "
+                          "be >= 0 with a sum <= 1 (got %g, %g)", c->synth_fraction,
+                          c->procedural_fraction);
     if (!(c->noise_min >= 0.0f && c->noise_max >= c->noise_min && isfinite(c->noise_max)) ||
         !(c->val_noise >= 0.0f && isfinite(c->val_noise)))
         return lm_err_set(err, LM_ERR_ARG, "dataset: need 0 <= noise_min <= noise_max and "
@@ -832,9 +836,10 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
         c->val_patches < 0 || c->npaths < 0 || (c->npaths > 0 && !c->paths))
         return lm_err_set(err, LM_ERR_ARG, "dataset: need 0 <= workers <= %d, cache_scenes >= 0, "
                           "val_patches >= 0 and a path list", DS_MAX_WORKERS);
-    if (c->npaths == 0 && c->synth_fraction < 1.0f)
+    if (c->npaths == 0 && c->synth_fraction + c->procedural_fraction < 1.0f)
         return lm_err_set(err, LM_ERR_ARG, "dataset: no scene paths given (only a fully "
-                          "synthetic dataset, synth_fraction 1, needs none)");
+                          "synthetic dataset, synth_fraction + procedural_fraction = 1, needs "
+                          "none)");
     return LM_OK;
 }
 
@@ -864,7 +869,8 @@ lm_dataset *lm_dataset_open(const lm_dataset_cfg *cfg, lm_err *err)
     pthread_cond_init(&d->done_cv, NULL);
     lm_status st = open_scenes(d, err);
     d->cfg.paths = NULL; /* the caller's list is only read during open */
-    if (st == LM_OK && cfg->synth_fraction > 0.0f) st = lm_synth_palette_load(&d->pal, err);
+    if (st == LM_OK && cfg->synth_fraction + cfg->procedural_fraction > 0.0f)
+        st = lm_synth_palette_load(&d->pal, err);
     lm_rng base;
     lm_rng_seed(&base, cfg->seed);
     for (int k = 0; k < 3; k++) d->rng[k] = lm_rng_split(&base, 0x5EED0000u + (uint64_t)k);

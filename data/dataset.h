@@ -37,7 +37,11 @@ typedef struct lm_dataset_cfg {
     int npaths;
     const lm_system *sys;       /* forward model (not owned) */
     int patch_h, patch_w;       /* multiples of the tile (default 66 x 64) */
-    float synth_fraction;       /* in [0, 1]: share of synthetic samples (paper: 0.33) */
+    float synth_fraction;       /* in [0, 1]: share of the paper's synthetic samples, textureless
+                                 * patches of narrowband Gaussian spectra (paper: 0.33) */
+    float procedural_fraction;  /* in [0, 1 - synth_fraction]: share of procedural scenes
+                                 * (data/synth.h: textured regions of varied spectra; not in the
+                                 * paper); the rest are real scenes */
     float noise_min, noise_max; /* Gaussian noise k ~ U[min, max] x max clean value (0, 0.15) */
     int flips;                  /* random horizontal/vertical flips (training split only) */
     uint64_t seed;
@@ -51,8 +55,6 @@ typedef struct lm_dataset_cfg {
     int sensor_clip;            /* 1: after the noise, clip to [0, 1] (the full scale), as a
                                  * sensor or a 16-bit PNG frame holds values (default 0) */
     int sensor_bits;            /* quantise to this many bits (0 = off, 16 = PNG) */
-    float synth_narrowband;     /* share of synthetic samples that are narrowband textureless
-                                 * patches; the rest are procedural scenes (default 0.5) */
 } lm_dataset_cfg;
 
 typedef struct lm_dataset lm_dataset;

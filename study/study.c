@@ -442,7 +442,8 @@ static lm_status train_preset(const lm_study_cfg *cfg, const char *dir, const ru
                  (double)cfg->drop_minutes);
     }
     snprintf(tc.model, sizeof tc.model, "%s", rs->preset);
-    if (rs->synth >= 0.0f) tc.synth_fraction = rs->synth;
+    if (rs->synth >= 0.0f) /* the narrowband sweep: that share, no procedural scenes */
+        tc.synth_fraction = rs->synth, tc.procedural_fraction = 0.0f;
     if (snprintf(tc.output, sizeof tc.output, "%s", rundir) >= (int)sizeof tc.output ||
         (rs->base && snprintf(tc.base, sizeof tc.base, "%s/runs/%s", dir, rs->base) >=
                          (int)sizeof tc.base))

@@ -590,7 +590,7 @@ static void test_synthetic_share(void)
 {
     const char *paths[1] = {g_pospath};
     lm_dataset_cfg cfg = base_cfg(paths, 1);
-    cfg.synth_fraction = 0.33f;
+    cfg.synth_fraction = 0.33f; /* the paper's share: narrowband patches only */
     lm_err e;
     lm_err_clear(&e);
     lm_dataset *d = lm_dataset_open(&cfg, &e);
@@ -603,8 +603,22 @@ static void test_synthetic_share(void)
         CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
         n[info.kind]++;
     }
-    CHECK_CLOSE((n[1] + n[2]) / (double)N, 0.33, 0.025, 0);
-    CHECK_CLOSE(n[1] / (double)(n[1] + n[2]), 0.5, 0.05, 0);
+    CHECK_CLOSE(n[LM_SAMPLE_NARROWBAND] / (double)N, 0.33, 0.025, 0);
+    CHECK(n[LM_SAMPLE_PROCEDURAL] == 0);
+    lm_dataset_close(d);
+    cfg.synth_fraction = 0.2f; /* and procedural scenes as their own share */
+    cfg.procedural_fraction = 0.3f;
+    d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    if (!d) return;
+    memset(n, 0, sizeof n);
+    for (long i = 0; i < N; i++) {
+        lm_dataset_sample_info info;
+        CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        n[info.kind]++;
+    }
+    CHECK_CLOSE(n[LM_SAMPLE_NARROWBAND] / (double)N, 0.2, 0.025, 0);
+    CHECK_CLOSE(n[LM_SAMPLE_PROCEDURAL] / (double)N, 0.3, 0.025, 0);
     /* the samples are what the info says: narrowband = uniform target, procedural = not */
     size_t np = (size_t)PH * PW;
     float raw[PH * PW], t[33 * PH * PW];
@@ -625,12 +639,17 @@ static void test_synthetic_share(void)
     }
     CHECK(checked[1] > 0 && checked[2] > 0);
     lm_dataset_close(d);
-    cfg.synth_fraction = 1.0f; /* fully synthetic: no scene needed */
+    cfg.synth_fraction = 0.5f; /* fully synthetic: no scene needed */
+    cfg.procedural_fraction = 0.5f;
     cfg.npaths = 0;
     d = lm_dataset_open(&cfg, &e);
     CHECK_MSG(d != NULL, "%s", e.msg);
     if (d) CHECK(lm_dataset_batch(d, 3, 1, raw, t, &e) == LM_OK);
     lm_dataset_close(d);
+    cfg.procedural_fraction = 0.6f; /* over 1 in all */
+    lm_err_clear(&e);
+    CHECK(lm_dataset_open(&cfg, &e) == NULL && e.status == LM_ERR_ARG);
+    CHECK(strstr(e.msg, "procedural_fraction") != NULL);
 }
 
 /* ---- cache ------------------------------------------------------------------------------ */

@@ -41,7 +41,10 @@ static const field fields[] = {
     FLD("model", F_STR, model, "NAME", "model preset (lumosaic info --list)", 0, 0),
     FLD("system", F_STR, system, "FILE", "system description (default: bundled)", 0, 0),
     FLD("data", F_LIST, data, "PATH", "scene file or folder (repeatable)", 0, 0),
-    FLD("synth_fraction", F_FLOAT, synth_fraction, "F", "share of synthetic samples", 0, 1),
+    FLD("synth_fraction", F_FLOAT, synth_fraction, "F", "share of the paper's synthetic samples "
+        "(textureless narrowband spectra)", 0, 1),
+    FLD("procedural_fraction", F_FLOAT, procedural_fraction, "F", "share of procedural scenes "
+        "(textured, varied spectra; not in the paper)", 0, 1),
     FLD("patch", F_PATCH, patch_h, "HxW", "patch size, multiples of the tile (66x64)", 1,
         MAX_PATCH),
     FLD("batch", F_INT, batch, "N", "samples per forward pass (14)", 1, MAX_BATCH),
@@ -448,8 +451,12 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     for (const char *p = c->snapshots; *p; p++)
         if (!strchr("0123456789.,", *p))
             BAD("'snapshots': must be minutes separated by commas (got '%s')", c->snapshots);
-    if (c->ndata == 0 && c->synth_fraction < 1)
-        BAD("'data': no scenes given (add --data PATH, or set synth_fraction to 1)%s", "");
+    if (c->synth_fraction + c->procedural_fraction > 1.0f)
+        BAD("'procedural_fraction': synth_fraction + procedural_fraction must be <= 1 (got %g)",
+            (double)(c->synth_fraction + c->procedural_fraction));
+    if (c->ndata == 0 && c->synth_fraction + c->procedural_fraction < 1)
+        BAD("'data': no scenes given (add --data PATH, or make synth_fraction + "
+            "procedural_fraction 1)%s", "");
     return LM_OK;
 }
 #undef BAD
@@ -474,13 +481,14 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
         "checkpoint_interval", (json_int_t)c->checkpoint_interval,
         "log_interval", (json_int_t)c->log_interval, "output", c->output);
     if (root)
-        json_object_update_new(root, json_pack("{s:s, s:I, s:f, s:s, s:i, s:f, s:f, s:s, s:i, s:i, s:s}", "fit", c->fit,
+        json_object_update_new(root, json_pack("{s:s, s:I, s:f, s:s, s:i, s:f, s:f, s:s, s:i, s:i, s:s, s:f}", "fit", c->fit,
                                "fit_patches", (json_int_t)c->fit_patches,
                                "fit_synth", (double)c->fit_synth, "base", c->base,
                                "base_trainable", c->base_trainable,
                                "res_init", (double)c->res_init, "minutes", (double)c->minutes,
                                "snapshots", c->snapshots, "sensor_clip", c->sensor_clip,
-                               "sensor_bits", c->sensor_bits, "clock", c->clock));
+                               "sensor_bits", c->sensor_bits, "clock", c->clock,
+                               "procedural_fraction", (double)c->procedural_fraction));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

@@ -38,7 +38,9 @@ typedef struct lm_train_cfg {
     char system[LM_TRAIN_PATH_LEN]; /* system description file; "" = bundled default */
     char data[LM_TRAIN_MAX_PATHS][LM_TRAIN_PATH_LEN];
     int ndata;
-    float synth_fraction;           /* share of synthetic samples (paper 0.33) */
+    float synth_fraction;           /* share of the paper's synthetic samples: textureless
+                                     * narrowband patches (paper 0.33) */
+    float procedural_fraction;      /* share of procedural scenes (not in the paper; 0) */
     int patch_h, patch_w;           /* 66 x 64 */
     int batch, accum_steps;         /* 14, 2 */
     long iterations;                /* optimizer updates (paper 50,000) */
