@@ -1,5 +1,7 @@
 /* test_opencl_models.c — CPU vs OpenCL agreement of whole models: for linear, han-tiny (LAM and
- * CSAM scales set non-zero), mcan-tiny and srnet-tiny (with a response map), the same weights
+ * CSAM scales set non-zero), mcan-tiny and srnet-tiny (with a response map), rt-8, rt-16, lmmse,
+ * lmmse-5-rf6, a residual rt-8 on lmmse-5 and the RGB baseline mst-tiny (3 channels in, 31
+ * out; attention over the whole input), the same weights
  * and input run forward + L1 loss + backward on a CPU ctx and on an OpenCL ctx (parameters
  * swapped onto the device for the step, lm_tensors_swap_to_device); the outputs, the loss, the
  * input gradient and every parameter gradient are compared, and the worst absolute and relative
@@ -78,7 +80,8 @@ static run_out run_model(lm_ctx *c, lm_model *m, const float *x, const float *ta
     lm_tensor *saved = malloc((size_t)np * sizeof *saved);
     for (int i = 0; i < np; i++) ps[i] = &m->params.items[i]->t;
     lm_tensor *xt = lm_tensor_from(c, 4, shape, x);
-    lm_tensor *tt = lm_tensor_from(c, 4, (int[]){shape[0], 33, shape[2], shape[3]}, target);
+    lm_tensor *tt = lm_tensor_from(c, 4, (int[]){shape[0], m->out_channels, shape[2], shape[3]},
+                                   target);
     lm_tensor_set_requires_grad(xt, 1);
     lm_tensors_swap_to_device(c, ps, np, saved);
     lm_tensor *y = lm_model_forward(c, m, xt);
@@ -140,8 +143,8 @@ static void check_model_on(const char *preset, const char *base, int B, int H, i
     lm_param *g2 = lm_params_find(&m->params, "csa.gamma");
     if (g1) g1->t.data[0] = 0.3f;
     if (g2) g2->t.data[0] = 0.7f;
-    int shape[4] = {B, 1, H, W};
-    long nx = (long)B * H * W, ny = nx * 33;
+    int shape[4] = {B, m->in_channels, H, W}; /* 3 for the RGB baseline (MST++) */
+    long nx = (long)B * m->in_channels * H * W, ny = (long)B * H * W * m->out_channels;
     float *x = malloc((size_t)nx * sizeof(float)), *target = malloc((size_t)ny * sizeof(float));
     lm_rng r;
     lm_rng_seed(&r, 11);
@@ -183,6 +186,7 @@ static void test_models(void)
     check_model("han-tiny", 2, 12, 16);
     check_model("mcan-tiny", 2, 12, 16);
     check_model("srnet-tiny", 2, 24, 20);
+    check_model("mst-tiny", 1, 16, 16); /* RGB input; attention across the whole frame */
 }
 
 /* A host parameter in a device op without the swap is an error naming the kernel, not a
