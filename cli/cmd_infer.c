@@ -434,10 +434,8 @@ int lm_cmd_infer(int argc, char **argv)
         have_ctx = 1;
         if (lm_tile_device_open(&r.dev, o.device, r.im.model, &r.ctx, &e))
             rc = fail(&c, &e, 0);
-        else if (r.dev.backend->device != LM_DEVICE_CPU) {
+        else if (r.dev.backend->device != LM_DEVICE_CPU)
             fprintf(stderr, "device: %s\n", lm_tile_device_name(&r.dev));
-            r.whole = 0; /* the strip path (infer/whole.c) is host-only: windows on the device */
-        }
     }
     if (!rc) rc = lm_cli_stage_dir(&c, o.output, r.tmp, sizeof r.tmp);
     if (!rc) {

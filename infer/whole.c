@@ -38,16 +38,32 @@ static lm_status whole_check(const lm_model *m, int height, int width, const lm_
     return LM_OK;
 }
 
-/* Rows [y0, y1) of channels [ch0, ch0 + nch) of y (1 x C x h x W, frame row a at row 0). */
-static void strip_store(lm_ctx *c, const lm_tensor *y, int a, int y0, int y1, int ch0, int nch,
-                        int height, float *out)
+/* Rows [y0, y1) of channels [ch0, ch0 + nch) of y (1 x C x h x W, contiguous, frame row a at
+ * row 0). A device tensor is read to the host first (scratch: *buf, grown as needed). */
+static lm_status strip_store(lm_ctx *c, const lm_tensor *y, int a, int y0, int y1, int ch0,
+                             int nch, int height, float *out, float **buf, size_t *cap,
+                             lm_err *err)
 {
     const int W = y->shape[3], h = y->shape[2];
     const size_t plane = (size_t)height * W, n = (size_t)(y1 - y0) * W;
+    const float *src = y->data;
+    if (y->device != LM_DEVICE_CPU) {
+        size_t need = (size_t)lm_tensor_numel(y);
+        if (need > *cap) {
+            float *p = realloc(*buf, need * sizeof *p);
+            if (!p) return lm_err_set(err, LM_ERR_NOMEM, "whole: out of memory (strip)");
+            *buf = p, *cap = need;
+        }
+        if (lm_tensor_read(c, y, *buf))
+            return lm_err_set(err, lm_ctx_status(c) ? lm_ctx_status(c) : LM_ERR_BACKEND,
+                              "whole: reading a strip from the device: %s", lm_ctx_message(c));
+        src = *buf;
+    }
     #pragma omp parallel for schedule(static) num_threads(lm_nthreads(c))
     for (int k = 0; k < nch; k++)
         memcpy(out + k * plane + (size_t)y0 * W,
-               y->data + ((size_t)(ch0 + k) * h + (y0 - a)) * W, sizeof(float) * n);
+               src + ((size_t)(ch0 + k) * h + (y0 - a)) * W, sizeof(float) * n);
+    return LM_OK;
 }
 
 /* One strip: frame rows [a, b) through the model; ctx error moved into err. */
@@ -81,14 +97,17 @@ lm_status lm_whole_forward(lm_ctx *c, lm_model *m, const float *frame, int heigh
     S = (S + ty - 1) / ty * ty;
     lm_infer_set_noise(m, frame, height, width);
     int grad = lm_ctx_set_grad(c, 0);
+    float *buf = NULL; /* a device's strip, read back */
+    size_t cap = 0;
     for (int y0 = 0; y0 < height && !st; y0 += S) {
         int y1 = y0 + S < height ? y0 + S : height;
         int a = y0 - halo > 0 ? y0 - halo : 0, b = y1 + halo < height ? y1 + halo : height;
         lm_tensor *y;
         st = strip_run(c, m, frame, width, a, b, &y, err);
-        if (!st) strip_store(c, y, a, y0, y1, ch0, nch, height, out);
+        if (!st) st = strip_store(c, y, a, y0, y1, ch0, nch, height, out, &buf, &cap, err);
         lm_ctx_reset(c);
     }
+    free(buf);
     lm_ctx_set_grad(c, grad);
     return st;
 }

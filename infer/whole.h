@@ -12,6 +12,8 @@
  * mosaic phase. Models with global context (attention, global pooling: han, mcan, srnet) have
  * no finite receptive field and are refused (use infer/tile.h).
  *
+ * On a ctx with a device backend (the model's parameters on the device, lm_tile_device_open)
+ * each strip runs on the device and is read back.
  * The lm_ctx passed in is the per-strip arena: it is lm_ctx_reset after every strip, so the
  * caller must hold no tensors in it. Grad mode is off during the call and restored afterwards.
  * What it is not: patch-wise inference with blending (infer/tile.h) or model loading. */

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # infer_opencl.sh — `lumosaic infer` and `lumosaic eval` with --device opencl against the CPU:
-# a briefly trained linear model and a few-iteration mcan-tiny (convolutions, attention) each
-# reconstruct the same simulated frame on both devices — the cubes agree (max abs difference
-# <= 1e-4); LM_DEVICE=opencl selects the device without the option (a "device:" line names
+# a briefly trained linear model, a few-iteration rt-8 (whole frame in strips, and windows with
+# --tiles) and mcan-tiny (convolutions, attention; windows) each reconstruct the same simulated
+# frame on both devices — the cubes agree (max abs difference <= 1e-4); LM_DEVICE=opencl selects the device without the option (a "device:" line names
 # it); eval's metrics agree (PSNR within 1e-3 dB, incl. a --motion row); an unknown device is
 # refused (one line, exit 2, no output left). Exits 77 (skipped) only when no OpenCL platform
 # exists (`clinfo -l` lists none).
@@ -18,23 +18,33 @@ DIFF=$3
 check "simulate: $(cat "$T/log")" [ -s "$T/sim/frames/frame_0000.png" ]
 F=$T/sim/frames/frame_0000.png
 
-for m in linear mcan-tiny; do
+# linear and rt-8 run on the whole frame in strips (infer/whole.c) on both devices, and also
+# in windows with --tiles; mcan-tiny (global attention) runs in windows
+for m in linear mcan-tiny rt-8; do
   it=60; [ $m = linear ] || it=3
   "$LM" train --model $m --data "$CAVE" --iterations $it --batch 2 --accum-steps 1 --lr 5e-3 \
     --synth-fraction 0 --noise 0,0 --val-patches 1 --output "$T/run_$m" --quiet > "$T/log" 2>&1
   check "train $m: $(cat "$T/log")" [ -s "$T/run_$m/model.safetensors" ]
-  # --tiles: on the cpu, linear would run on the whole frame (infer/whole.c, host-only); the
-  # device runs windows, so compare window against window
-  "$LM" infer --model "$T/run_$m" --input "$F" --output "$T/cpu_$m" --device cpu --tiles 2> "$T/err"
-  check "$m infer cpu: $(cat "$T/err")" [ $? -eq 0 ]
-  "$LM" infer --model "$T/run_$m" --input "$F" --output "$T/cl_$m" --device opencl 2> "$T/err"
-  check "$m infer opencl: $(cat "$T/err")" [ $? -eq 0 ]
-  check "$m: opencl names its device" grep -q '^device: ' "$T/err"
-  d=$("$DIFF" "$T/cpu_$m/cube_0000.exr" "$T/cl_$m/cube_0000.exr")
-  echo "$m: max |cpu - opencl| = $d"
-  check "$m: cpu and opencl cubes agree (max abs diff $d <= 1e-4)" \
-    awk -v d="$d" 'BEGIN { exit !(d != "" && d <= 1e-4) }'
+  for tiles in "" --tiles; do
+    [ -n "$tiles" ] && [ $m = mcan-tiny ] && continue
+    "$LM" infer --model "$T/run_$m" --input "$F" --output "$T/cpu_$m$tiles" --device cpu $tiles \
+      2> "$T/err"
+    check "$m infer cpu $tiles: $(cat "$T/err")" [ $? -eq 0 ]
+    "$LM" infer --model "$T/run_$m" --input "$F" --output "$T/cl_$m$tiles" --device opencl \
+      $tiles 2> "$T/err"
+    check "$m infer opencl $tiles: $(cat "$T/err")" [ $? -eq 0 ]
+    check "$m: opencl names its device" grep -q '^device: ' "$T/err"
+    d=$("$DIFF" "$T/cpu_$m$tiles/cube_0000.exr" "$T/cl_$m$tiles/cube_0000.exr")
+    echo "$m $tiles: max |cpu - opencl| = $d"
+    check "$m $tiles: cpu and opencl cubes agree (max abs diff $d <= 1e-4)" \
+      awk -v d="$d" 'BEGIN { exit !(d != "" && d <= 1e-4) }'
+  done
 done
+# the strips really ran on the device: the whole-frame and window results differ (window
+# borders), and the device matched the cpu's whole-frame result above
+d=$("$DIFF" "$T/cpu_rt-8/cube_0000.exr" "$T/cpu_rt-8--tiles/cube_0000.exr")
+check "rt-8: strips and windows differ ($d), so opencl ran strips" \
+  awk -v d="$d" 'BEGIN { exit !(d != "" && d > 1e-3) }'
 
 # LM_DEVICE picks the device when --device is not given
 LM_DEVICE=opencl "$LM" infer --model "$T/run_linear" --input "$F" --output "$T/env" 2> "$T/err"
