@@ -7,6 +7,7 @@
 #include <unistd.h>
 #include "cli/cli_util.h"
 #include "cli/commands.h"
+#include "train/dist.h"
 #include "train/train.h"
 
 static void help(void)
@@ -103,6 +104,8 @@ int lm_cmd_train(int argc, char **argv)
     train_args a = {0};
     lm_train_cfg cfg;
     lm_cli_init(&c, "lumosaic train", argc, argv);
+    /* under mpirun: data-parallel ranks (train/dist.h); rank 0 writes and prints */
+    int rank = lm_dist_init(NULL, NULL) > 1 ? lm_dist_rank() : 0;
     int r = first_pass(&c, &a);
     if (r == 1) r = load_base(&c, &a, &cfg);
     if (r == 1) {
@@ -122,15 +125,17 @@ int lm_cmd_train(int argc, char **argv)
      * where trimming and regrowing them made steps 2-30x slower here (bench_train). */
     mallopt(M_MMAP_THRESHOLD, 128 * 1024);
     if (lm_cli_signals_init(&c, 1)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
-    lm_train_opts o = {.resume = a.resume, .stop_after = (long)a.stop_after, .progress = !a.quiet,
-                       .interrupt = lm_cli_signal_flag()};
+    lm_train_opts o = {.resume = a.resume, .stop_after = (long)a.stop_after,
+                       .progress = !a.quiet && rank == 0, .interrupt = lm_cli_signal_flag()};
     lm_train_result res;
     lm_status st = lm_train_session(&cfg, &o, &res, &e);
     if (st) { /* a NaN loss is the run failing (1), not bad input */
-        lm_cli_error(&c, "%s", e.msg);
+        if (rank) lm_cli_error(&c, "rank %d: %s", rank, e.msg);
+        else lm_cli_error(&c, "%s", e.msg);
         return st == LM_ERR_NUMERIC ? LM_EXIT_FAILED : lm_cli_exit_status(st);
     }
     int sig = atomic_load(lm_cli_signal_flag());
+    if (rank) return sig ? 128 + sig : 0; /* rank 0 reports */
     if (sig) { /* SIGINT / SIGTERM: the step finished and the checkpoint is on disk */
         if (res.interrupted)
             lm_cli_error(&c, "interrupted (%s) at iteration %ld: checkpoint written to %s "
@@ -151,6 +156,10 @@ int lm_cmd_train(int argc, char **argv)
     }
     printf("trained %s for %ld iterations (%.1f s this run), final loss %.6f\n", cfg.model,
            res.iterations_done, res.seconds, res.last_loss);
+    if (lm_dist_size() > 1)
+        printf("data-parallel: %d processes x batch %d (global batch %d); gradient sums took "
+               "%.2f s on rank 0\n", lm_dist_size(), cfg.batch, lm_dist_size() * cfg.batch,
+               lm_dist_comm_seconds());
     if (res.validated)
         printf("validation: PSNR %.3f dB  SSIM %.4f  MAE %.5f  SAM %.3f deg\n", res.val.psnr,
                res.val.ssim, res.val.mae, res.val.sam);

@@ -704,7 +704,8 @@ static lm_status batch_pooled(lm_dataset *d, long index, int B, float *raw, floa
     pthread_mutex_lock(&d->mu);
     if (s) s->batch = 0;
     lm_err ignore = {LM_OK, ""};
-    if (st == LM_OK) slot_start(d, index + 1, B, &ignore); /* prefetch the next batch */
+    if (st == LM_OK) /* prefetch the batch asked for next */
+        slot_start(d, index + (d->cfg.batch_stride > 1 ? d->cfg.batch_stride : 1), B, &ignore);
     pthread_mutex_unlock(&d->mu);
     return st;
 }

@@ -55,6 +55,9 @@ typedef struct lm_dataset_cfg {
     int sensor_clip;            /* 1: after the noise, clip to [0, 1] (the full scale), as a
                                  * sensor or a 16-bit PNG frame holds values (default 0) */
     int sensor_bits;            /* quantise to this many bits (0 = off, 16 = PNG) */
+    int batch_stride;           /* the caller asks for batch index + stride after index (data-
+                                 * parallel ranks take every stride-th batch): what the workers
+                                 * prepare ahead (0 or 1 = the next one) */
 } lm_dataset_cfg;
 
 typedef struct lm_dataset lm_dataset;

@@ -5,6 +5,7 @@
 #include <inttypes.h>
 #include <stdlib.h>
 #include <string.h>
+#include "train/dist.h"
 
 #define CKPT_FORMAT "lumosaic-checkpoint-1"
 
@@ -41,7 +42,8 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
                                    const lm_train_cfg *cfg, lm_err *err)
 {
     char path[LM_TRAIN_PATH_LEN + 64], it[32], nb[32], step[32], seed[32], thr[16], hash[32];
-    char secs[32];
+    char secs[32], ranks[16];
+    snprintf(ranks, sizeof ranks, "%d", lm_dist_size());
     snprintf(secs, sizeof secs, "%.3f", opts ? opts->elapsed : 0.0);
     snprintf(it, sizeof it, "%ld", iteration);
     snprintf(nb, sizeof nb, "%ld", next_batch);
@@ -55,9 +57,9 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
         snprintf(step, sizeof step, "%ld", opt->step);
         const char *meta[] = {"format", CKPT_FORMAT, "step", step, "iteration", it,
                               "next_batch", nb, "seed", seed, "threads", thr, "seconds", secs,
-                              "clock", cfg->clock[0] ? cfg->clock : "wall"};
+                              "clock", cfg->clock[0] ? cfg->clock : "wall", "ranks", ranks};
         dir_file(path, sizeof path, dir, "optimizer.safetensors");
-        lm_status st = lm_params_save(&v, path, meta, 8, err);
+        lm_status st = lm_params_save(&v, path, meta, 9, err);
         lm_params_free(&v);
         if (st) return st;
     }
@@ -77,6 +79,17 @@ int lm_train_checkpoint_cpu_clock(const char *dir)
     int cpu = s && !strcmp(s, "cpu");
     free(s);
     return cpu;
+}
+
+int lm_train_checkpoint_ranks(const char *dir)
+{
+    char path[LM_TRAIN_PATH_LEN + 64];
+    dir_file(path, sizeof path, dir, "optimizer.safetensors");
+    lm_err e = {0};
+    char *s = lm_safetensors_meta(path, "ranks", &e);
+    long v = s ? strtol(s, NULL, 10) : 1;
+    free(s);
+    return v >= 1 && v <= 1000000 ? (int)v : 1;
 }
 
 double lm_train_checkpoint_seconds(const char *dir)

@@ -5,6 +5,7 @@
 #include "data/rgbcam.h"
 #include "data/dataset.h"
 #include "data/spectra.h"
+#include "train/dist.h"
 #include "train/fit_lmmse.h"
 #include "data/mosaic.h"
 #include <errno.h>
@@ -51,6 +52,7 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.val_noise = cfg->val_noise;
     dc.sensor_clip = cfg->sensor_clip;
     dc.sensor_bits = cfg->sensor_bits;
+    dc.batch_stride = lm_dist_size(); /* rank r takes every N-th batch (train.c) */
     if (clean) { /* the fit adds noise, clipping and quantisation itself */
         dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
         dc.sensor_clip = dc.sensor_bits = 0;
@@ -221,11 +223,15 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
     if (!st && !closed && !strcmp(cfg->fit, "closed"))
         st = lm_err_set(err, LM_ERR_ARG, "config: field 'fit': model %s has no closed form (only "
                         "lmmse presets)", cfg->model);
+    if (!st && closed && lm_dist_size() > 1)
+        st = lm_err_set(err, LM_ERR_ARG, "%s is fitted in closed form in one process (seconds): "
+                        "run it without mpirun", cfg->model);
     if (!st && closed && opts.resume)
         st = lm_err_set(err, LM_ERR_ARG, "resume: %s is fitted in closed form, nothing to resume "
                         "(use --fit sgd to fine-tune)", cfg->model);
     if (!st && !(d = open_data(cfg, &sys, closed, err))) st = err->status;
-    if (!st && opts.progress) lm_dataset_describe(d, opts.progress_out ? opts.progress_out : stderr);
+    if (!st && opts.progress && lm_dist_rank() == 0)
+        lm_dataset_describe(d, opts.progress_out ? opts.progress_out : stderr);
     if (!st && closed) {
         st = fit_closed(cfg, m, d, &opts, res, err);
     } else if (!st && m->in_channels == 3) {

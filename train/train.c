@@ -13,6 +13,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include "train/dist.h"
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -46,6 +47,7 @@ typedef struct loop {
     long it_res;                  /* time budget: iteration and time of the first resolution */
     double t_res;
     int cpu_clock;                /* cfg->clock "cpu": training time is the process's CPU time */
+    int rank, nranks;             /* data-parallel ranks (train/dist.h); rank 0 writes files */
 } loop;
 
 static double now_s(void)
@@ -153,7 +155,10 @@ static lm_status micro_step(loop *L, long index, double *loss_sum, lm_err *err)
 {
     const lm_train_cfg *cfg = L->cfg;
     int B = cfg->batch, H = cfg->patch_h, W = cfg->patch_w;
-    if (L->src->batch(L->src->user, index, B, L->raw, L->target, err)) return err->status;
+    /* rank r of N takes global batch index * N + r: the N ranks' batches together are the
+     * samples one process would draw with batch N x B */
+    long gi = index * L->nranks + L->rank;
+    if (L->src->batch(L->src->user, gi, B, L->raw, L->target, err)) return err->status;
     lm_ctx *c = &L->ctx;
     lm_ctx_reset(c);
     params_in(L);
@@ -201,6 +206,14 @@ static lm_status iteration(loop *L, long it, double *loss, lm_err *err)
         if (!isfinite(sum)) break;
     }
     *loss = sum / cfg->accum_steps;
+    if (L->nranks > 1) { /* the gradient and the loss averaged over the ranks */
+        lm_params *p = &L->model->params;
+        lm_dist_sum_float(p->grad, p->total);
+        float inv = 1.0f / (float)L->nranks;
+        for (size_t i = 0; i < p->total; i++) p->grad[i] *= inv;
+        lm_dist_sum_double(loss, 1);
+        *loss /= L->nranks;
+    }
     if (isfinite(*loss) && grads_finite(&L->model->params)) {
         lm_adam_step(&L->opt, &L->model->params, lm_nthreads(&L->ctx));
         return LM_OK;
@@ -237,8 +250,9 @@ static lm_status validate(loop *L, lm_metrics *out, lm_err *err)
     lm_ctx *c = &L->ctx;
     int old = lm_ctx_set_grad(c, 0);
     lm_status st = LM_OK;
-    for (int i0 = 0; i0 < n && !st; i0 += cfg->batch) {
+    for (int i0 = 0, k = 0; i0 < n && !st; i0 += cfg->batch, k++) {
         int b = n - i0 < cfg->batch ? n - i0 : cfg->batch;
+        if (k % L->nranks != L->rank) continue; /* ranks share the batches; summed below */
         for (int j = 0; j < b && !st; j++)
             st = L->src->eval_sample(L->src->user, i0 + j, L->raw + j * rn, L->target + j * tn, err);
         if (st) break;
@@ -263,6 +277,13 @@ static lm_status validate(loop *L, lm_metrics *out, lm_err *err)
     }
     lm_ctx_set_grad(c, old);
     lm_ctx_reset(c);
+    if (!st && L->nranks > 1) { /* every rank's share of the batches, summed */
+        double v[6] = {acc.sum.psnr, acc.sum.ssim, acc.sum.mae, acc.sum.sam,
+                       (double)acc.sum.sam_pixels, (double)acc.n};
+        lm_dist_sum_double(v, 6);
+        acc.sum.psnr = v[0], acc.sum.ssim = v[1], acc.sum.mae = v[2], acc.sum.sam = v[3];
+        acc.sum.sam_pixels = (long)v[4], acc.n = (long)v[5];
+    }
     *out = lm_metrics_acc_mean(&acc);
     return st;
 }
@@ -277,7 +298,7 @@ static void fmt_time(char *buf, size_t n, double s)
 
 static void progress(loop *L, long done, double loss, float lr, int final)
 {
-    if (!L->opts->progress) return;
+    if (!L->opts->progress || L->rank) return;
     FILE *f = L->opts->progress_out ? L->opts->progress_out : stderr;
     double t = now_s(), el = t - L->t0;
     long total = L->total, here = done - L->it0;
@@ -392,7 +413,7 @@ static lm_status setup(loop *L, lm_err *err)
     lm_adam_cfg ac;
     lm_train_cfg_adam(cfg, &ac);
     if (lm_adam_init(&L->opt, &L->model->params, &ac, err)) return err->status;
-    return lm_train_make_dir_top(cfg->output, L->made, sizeof L->made, err);
+    return L->rank ? LM_OK : lm_train_make_dir_top(cfg->output, L->made, sizeof L->made, err);
 }
 
 static void teardown(loop *L)
@@ -419,6 +440,7 @@ static lm_status begin(loop *L, long *start, lm_err *err)
     if (!L->opts->resume) {
         char path[LM_TRAIN_PATH_LEN + 16];
         snprintf(path, sizeof path, "%s/config.json", cfg->output);
+        if (L->rank) return LM_OK; /* rank 0 writes the run folder */
         if (lm_train_cfg_save(cfg, path, err)) return err->status;
         return open_log(L, 0, 0, err);
     }
@@ -437,7 +459,13 @@ static lm_status begin(loop *L, long *start, lm_err *err)
                           "position %ld, the run expects seed %llu and position %ld",
                           L->opts->resume, (unsigned long long)seed, nb,
                           (unsigned long long)cfg->seed, *start * cfg->accum_steps);
-    return open_log(L, 1, *start, err);
+    int ranks = lm_train_checkpoint_ranks(L->opts->resume);
+    if (ranks != L->nranks)
+        return lm_err_set(err, LM_ERR_ARG, "resume %s: the run was trained by %d process(es), "
+                          "this run has %d; another count changes the global batch (processes x "
+                          "batch) and the sample stream, so resume with %d (mpirun -np %d, or "
+                          "no mpirun for 1)", L->opts->resume, ranks, L->nranks, ranks, ranks);
+    return L->rank ? LM_OK : open_log(L, 1, *start, err);
 }
 
 /* Seconds of training so far, over every invocation (resume restores the checkpoint's). */
@@ -482,7 +510,7 @@ static void resolve_budget(loop *L, long done, double *next_mark, long *end)
     snprintf(path, sizeof path, "%s/config.json", cfg->output);
     lm_err e2;
     lm_err_clear(&e2);
-    lm_train_cfg_save(&rc, path, &e2); /* best effort: the checkpoint is what resume needs */
+    if (!L->rank) lm_train_cfg_save(&rc, path, &e2); /* best effort: resume needs the checkpoint */
 }
 
 /* Snapshots: the weights at each mark of cfg->snapshots (minutes of training time), into
@@ -490,6 +518,7 @@ static void resolve_budget(loop *L, long done, double *next_mark, long *end)
 static lm_status snapshots(loop *L, long it, lm_err *err)
 {
     const lm_train_cfg *cfg = L->cfg;
+    if (L->rank) return LM_OK; /* rank 0 writes */
     char list[sizeof cfg->snapshots], *save = NULL;
     snprintf(list, sizeof list, "%s", cfg->snapshots);
     double el = elapsed(L);
@@ -509,6 +538,21 @@ static lm_status snapshots(loop *L, long it, lm_err *err)
         L->snap_done = mark;
     }
     return LM_OK;
+}
+
+/* Data-parallel ranks take every decision of rank 0's clock (the schedule's length, the end)
+ * and stop together when any rank is signalled: one rank leaving the loop alone would leave
+ * the others waiting in the next gradient sum. */
+static void sync_control(loop *L, long *end, int *out_of_time, int *stop_now, int *signalled)
+{
+    long v[4] = {L->total, *end, *out_of_time, *stop_now};
+    lm_dist_bcast_long(v, 4);
+    L->total = v[0];
+    L->opt.cfg.total_steps = v[0];
+    *end = v[1], *out_of_time = (int)v[2], *stop_now = (int)v[3];
+    long sig = *signalled;
+    lm_dist_max_long(&sig, 1);
+    *signalled = (int)sig;
 }
 
 static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err)
@@ -534,6 +578,7 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
         int out_of_time = budget > 0 && el >= budget;
         int stop_now = L->opts->stop_seconds > 0 && el >= L->opts->stop_seconds;
         int signalled = L->opts->interrupt ? atomic_load(L->opts->interrupt) : 0;
+        if (L->nranks > 1) sync_control(L, &end, &out_of_time, &stop_now, &signalled);
         if (out_of_time || stop_now || signalled) end = it + 1;
         res->interrupted = signalled;
         int last = it + 1 == end;
@@ -548,7 +593,8 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
         if (log_row(L, it + 1, loss, lr, val ? &res->val : NULL, err)) return err->status;
         progress(L, it + 1, loss, lr, last);
         if (snapshots(L, it + 1, err)) return err->status;
-        if ((cfg->checkpoint_interval > 0 && (it + 1) % cfg->checkpoint_interval == 0) || last) {
+        if (((cfg->checkpoint_interval > 0 && (it + 1) % cfg->checkpoint_interval == 0) || last) &&
+            !L->rank) {
             lm_train_opts o2 = *L->opts;
             o2.elapsed = elapsed(L);
             if (lm_train_save_checkpoint(cfg->output, L->model, &L->opt, it + 1,
@@ -575,7 +621,8 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
         return lm_err_set(err, LM_ERR_ARG, "config: field 'patch': %dx%d is not a multiple of the "
                           "%d x %d tile", cfg->patch_h, cfg->patch_w, model->mosaic.ty,
                           model->mosaic.tx);
-    loop L = {.cfg = cfg, .opts = opts, .src = src, .model = model, .total = cfg->iterations};
+    loop L = {.cfg = cfg, .opts = opts, .src = src, .model = model, .total = cfg->iterations,
+              .rank = lm_dist_rank(), .nranks = lm_dist_size()};
     L.tty = isatty(fileno(opts->progress_out ? opts->progress_out : stderr));
     long start = 0;
     lm_status st = setup(&L, err);
@@ -591,7 +638,7 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
     res->seconds = train_s(&L) - L.t_train0;
     teardown(&L);
     /* a fresh run that failed before its first iteration completed leaves no run folder */
-    if (st && !opts->resume && L.saved < 0 && res->iterations_done == 0)
+    if (st && !L.rank && !opts->resume && L.saved < 0 && res->iterations_done == 0)
         lm_train_discard_dir(cfg->output, L.made);
     return st;
 }

@@ -201,6 +201,8 @@ double lm_train_checkpoint_seconds(const char *dir);
 /* 1 when that checkpoint counted training time on the CPU clock (cfg.clock "cpu"); 0: wall
  * (also checkpoints from before the field). */
 int lm_train_checkpoint_cpu_clock(const char *dir);
+/* Data-parallel processes that trained that checkpoint (metadata "ranks"; 1 if absent). */
+int lm_train_checkpoint_ranks(const char *dir);
 /* mkdir -p. */
 lm_status lm_train_make_dir(const char *path, lm_err *err);
 /* mkdir -p that also gives the outermost folder it created (top, n bytes; "" if path existed). */
