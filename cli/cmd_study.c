@@ -12,6 +12,7 @@
 #include "cli/commands.h"
 #include "study/charts.h"
 #include "study/study.h"
+#include "train/dist.h"
 
 static void help(void)
 {
@@ -144,6 +145,10 @@ static int run(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const ch
         lm_cli_error(c, "%s", e.msg);
         return status_code(st);
     }
+    if (lm_dist_rank() > 0) { /* under mpirun: rank 0 scores and writes */
+        lm_study_free(&s);
+        return 0;
+    }
     int charts = !a->no_charts, rc = 0;
     if (charts && (lm_charts_write(cfg, &s, dir, &e) || lm_charts_render(dir, &e))) {
         lm_cli_error(c, "%s", e.msg);
@@ -187,6 +192,7 @@ int lm_cmd_study(int argc, char **argv)
                             a.config);
     if (a.dry_run) return print_plan(&cfg, dir);
     if (a.worker) return worker(&c, &a, &cfg, dir);
+    lm_dist_init(NULL, NULL); /* under mpirun: presets trained by the ranks in turn */
     if (!a.no_charts && !lm_charts_gnuplot_available()) {
         fprintf(stderr, "lumosaic study: gnuplot not found on PATH (install gnuplot, or pass "
                         "--no-charts)\n");

@@ -126,7 +126,8 @@ int lm_cmd_train(int argc, char **argv)
     mallopt(M_MMAP_THRESHOLD, 128 * 1024);
     if (lm_cli_signals_init(&c, 1)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
     lm_train_opts o = {.resume = a.resume, .stop_after = (long)a.stop_after,
-                       .progress = !a.quiet && rank == 0, .interrupt = lm_cli_signal_flag()};
+                       .progress = !a.quiet && rank == 0, .interrupt = lm_cli_signal_flag(),
+                       .data_parallel = 1};
     lm_train_result res;
     lm_status st = lm_train_session(&cfg, &o, &res, &e);
     if (st) { /* a NaN loss is the run failing (1), not bad input */

@@ -16,6 +16,7 @@
 #include "data/synth.h"
 #include "models/profile.h"
 #include "study/study.h"
+#include "train/dist.h"
 
 /* The stream of the study seed that procedural held-out scene seeds come from. The dataset
  * draws its samples from streams 0x5EED0000 + split of the same seed, so these seeds are
@@ -607,10 +608,26 @@ static lm_status train_side_by_side(const lm_study_cfg *cfg, const char *dir, co
         }
         int base = 0;
         for (int j = 0; j < n; j++) base |= rs[j].base && !strcmp(rs[j].base, rs[i].name);
-        if (base) st = lm_study_train_one(cfg, dir, rs[i].name, stop_s, o, err);
-        else names[k++] = rs[i].name;
+        if (base && lm_dist_rank() == 0) st = lm_study_train_one(cfg, dir, rs[i].name, stop_s, o, err);
+        else if (!base) names[k++] = rs[i].name;
     }
-    return st || !k ? st : lm_study_spawn(cfg, dir, names, k, stop_s, o, err);
+    if (lm_dist_size() > 1) { /* the bases (rank 0's) are there before any rank goes on */
+        long bad = st != LM_OK;
+        lm_dist_max_long(&bad, 1);
+        if (!st && bad) st = lm_err_set(err, LM_ERR_NUMERIC, "study: rank 0 failed on a base");
+    }
+    if (st || !k) return st;
+    if (lm_dist_size() > 1) { /* MPI ranks: rank r trains names r, r + N, ...; then all wait */
+        for (int i = lm_dist_rank(); i < k && !st; i += lm_dist_size())
+            st = lm_study_train_one(cfg, dir, names[i], stop_s, o, err);
+        long bad = st != LM_OK;
+        lm_dist_max_long(&bad, 1); /* one rank's failure fails the study on every rank */
+        if (!st && bad)
+            st = lm_err_set(err, LM_ERR_NUMERIC, "study: another rank's training failed (its "
+                            "message is above)");
+        return st;
+    }
+    return lm_study_spawn(cfg, dir, names, k, stop_s, o, err);
 }
 
 /* Early-drop phase: every unfinished preset trained to drop_minutes, scored there (clean PSNR
@@ -677,13 +694,28 @@ lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_
     for (int i = 0; i < LM_STUDY_MAX_PRESETS; i++) drop_psnr[i] = NAN;
     for (int i = 0; i < cfg->npresets; i++) rs[i] = preset_spec(cfg, i, net[i]);
     int drop = cfg->drop_minutes > 0 && cfg->train.minutes > cfg->drop_minutes;
-    if (!st && drop && o.jobs > 1)
+    int ranks = lm_dist_size(), side = o.jobs > 1 || ranks > 1;
+    if (!st && drop && side)
         st = train_side_by_side(cfg, dir, rs, cfg->npresets, dropped, &o,
                                 cfg->drop_minutes * 60.0, err);
-    if (!st && drop)
+    if (!st && drop && lm_dist_rank() == 0) /* scored once, on rank 0 */
         st = drop_phase(cfg, dir, rs, cfg->npresets, &h, &o, dropped, drop_psnr, err);
-    if (!st && o.jobs > 1)
+    if (drop && ranks > 1) { /* every rank learns the drops (and whether rank 0 failed) */
+        long v[LM_STUDY_MAX_PRESETS + 1];
+        for (int i = 0; i < cfg->npresets; i++) v[i] = dropped[i];
+        v[cfg->npresets] = st != LM_OK;
+        lm_dist_bcast_long(v, (size_t)cfg->npresets + 1);
+        for (int i = 0; i < cfg->npresets; i++) dropped[i] = (int)v[i];
+        if (!st && v[cfg->npresets])
+            st = lm_err_set(err, LM_ERR_NUMERIC, "study: rank 0 failed in the drop check");
+    }
+    if (!st && side)
         st = train_side_by_side(cfg, dir, rs, cfg->npresets, dropped, &o, 0.0, err);
+    if (!st && lm_dist_rank() > 0) { /* the serial phases (scores, timing) are rank 0's */
+        held_free(&h);
+        out->runs = json_array();
+        return LM_OK;
+    }
     out->runs = json_array();
     for (int i = 0; !st && i < cfg->npresets; i++) {
         json_t *rec = NULL;

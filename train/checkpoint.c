@@ -43,7 +43,7 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
 {
     char path[LM_TRAIN_PATH_LEN + 64], it[32], nb[32], step[32], seed[32], thr[16], hash[32];
     char secs[32], ranks[16];
-    snprintf(ranks, sizeof ranks, "%d", lm_dist_size());
+    snprintf(ranks, sizeof ranks, "%d", opts && opts->data_parallel ? lm_dist_size() : 1);
     snprintf(secs, sizeof secs, "%.3f", opts ? opts->elapsed : 0.0);
     snprintf(it, sizeof it, "%ld", iteration);
     snprintf(nb, sizeof nb, "%ld", next_batch);

@@ -30,7 +30,7 @@ lm_train_source lm_train_source_dataset(lm_dataset *d)
     return (lm_train_source){d, ds_batch, ds_count, ds_eval};
 }
 
-static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int clean,
+static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int clean, int dp,
                              lm_err *err)
 {
     const char *paths[LM_TRAIN_MAX_PATHS];
@@ -52,7 +52,7 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.val_noise = cfg->val_noise;
     dc.sensor_clip = cfg->sensor_clip;
     dc.sensor_bits = cfg->sensor_bits;
-    dc.batch_stride = lm_dist_size(); /* rank r takes every N-th batch (train.c) */
+    dc.batch_stride = dp ? lm_dist_size() : 1; /* rank r takes every N-th batch (train.c) */
     if (clean) { /* the fit adds noise, clipping and quantisation itself */
         dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
         dc.sensor_clip = dc.sensor_bits = 0;
@@ -223,14 +223,14 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
     if (!st && !closed && !strcmp(cfg->fit, "closed"))
         st = lm_err_set(err, LM_ERR_ARG, "config: field 'fit': model %s has no closed form (only "
                         "lmmse presets)", cfg->model);
-    if (!st && closed && lm_dist_size() > 1)
+    if (!st && closed && opts.data_parallel && lm_dist_size() > 1)
         st = lm_err_set(err, LM_ERR_ARG, "%s is fitted in closed form in one process (seconds): "
                         "run it without mpirun", cfg->model);
     if (!st && closed && opts.resume)
         st = lm_err_set(err, LM_ERR_ARG, "resume: %s is fitted in closed form, nothing to resume "
                         "(use --fit sgd to fine-tune)", cfg->model);
-    if (!st && !(d = open_data(cfg, &sys, closed, err))) st = err->status;
-    if (!st && opts.progress && lm_dist_rank() == 0)
+    if (!st && !(d = open_data(cfg, &sys, closed, opts.data_parallel, err))) st = err->status;
+    if (!st && opts.progress && (!opts.data_parallel || lm_dist_rank() == 0))
         lm_dataset_describe(d, opts.progress_out ? opts.progress_out : stderr);
     if (!st && closed) {
         st = fit_closed(cfg, m, d, &opts, res, err);

@@ -622,7 +622,8 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
                           "%d x %d tile", cfg->patch_h, cfg->patch_w, model->mosaic.ty,
                           model->mosaic.tx);
     loop L = {.cfg = cfg, .opts = opts, .src = src, .model = model, .total = cfg->iterations,
-              .rank = lm_dist_rank(), .nranks = lm_dist_size()};
+              .rank = opts->data_parallel ? lm_dist_rank() : 0,
+              .nranks = opts->data_parallel ? lm_dist_size() : 1};
     L.tty = isatty(fileno(opts->progress_out ? opts->progress_out : stderr));
     long start = 0;
     lm_status st = setup(&L, err);

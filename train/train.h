@@ -151,6 +151,9 @@ typedef struct lm_train_opts {
                                 * (nonzero, e.g. the signal's number): the run finishes the
                                 * current iteration, writes its checkpoint and returns LM_OK
                                 * with res->interrupted = the flag's value */
+    int data_parallel;         /* 1: this process is one of lm_dist_size() data-parallel ranks
+                                * of one run (`mpirun ... lumosaic train`); 0: it trains alone
+                                * (also under mpirun, e.g. a study's rank training its preset) */
 } lm_train_opts;
 
 typedef struct lm_train_result {

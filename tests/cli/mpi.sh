@@ -6,7 +6,8 @@
 # (--stop-after) and resumed with 2 ranks it ends where the uninterrupted run ends; resuming it
 # in one process is refused (one line, exit 2, saying what to do); (3) a rank killed with
 # SIGKILL ends the job with a non-zero status, not a hang (timeout 120 s); (4) closed-form fits
-# are refused under mpirun (exit non-zero, the reason printed, no model written).
+# are refused under mpirun (exit non-zero, the reason printed, no model written); (5) `study`
+# under mpirun spreads the presets over the ranks and scores them as one process does.
 # usage: mpi.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
@@ -62,6 +63,31 @@ check "resumed = uninterrupted ($(cmp_params "$T/two0/model.safetensors" \
   "$T/res/model.safetensors" 1e-6
 expect_error "resume a 2-rank run in one process" 2 "trained by 2 process(es)" "$T/none" -- \
   "$LM" train --resume "$T/two0" --iterations 30 --quiet
+
+# the study under mpirun: presets trained by the ranks in turn, scored by rank 0: the same
+# held-out scores as one process
+cat > "$T/s.json" <<JSON
+{"version": 1, "presets": ["lmmse-5", "linear", "rt-8+lmmse-5"], "data": ["$CAVE"],
+ "iterations": 30, "seed": 1, "patch": [33, 32],
+ "train": {"batch": 2, "accum_steps": 1, "lr": 0.002, "val_interval": 10, "val_patches": 2,
+           "checkpoint_interval": 10, "log_interval": 10, "fit_patches": 64},
+ "noise": [0, 10], "eval_scenes": 2, "eval_size": "96x96", "rainbow": 0, "frame": "120x160",
+ "timing_repeats": 1}
+JSON
+"$LM" study --config "$T/s.json" --output "$T/s1" --threads 1 --quiet --no-charts > /dev/null \
+  2> "$T/err"
+check "study, one process: $(tail -1 "$T/err")" [ $? -eq 0 ]
+$MPI "$LM" study --config "$T/s.json" --output "$T/s2" --threads 1 --quiet --no-charts \
+  > "$T/out" 2> "$T/err"
+check "study, 2 ranks: $(tail -1 "$T/err")" [ $? -eq 0 ]
+check "study, 2 ranks: one summary (rank 0)" [ "$(grep -c '^results:' "$T/out")" -eq 1 ]
+check "study, 2 ranks: the same scores as one process" python3 - "$T/s1" "$T/s2" <<'PY'
+import json, sys
+a, b = (json.load(open(d + "/results.json"))["runs"] for d in sys.argv[1:3])
+assert [r["preset"] for r in a] == [r["preset"] for r in b]
+for ra, rb in zip(a, b):
+    assert [l["psnr"] for l in ra["eval"]["levels"]] == [l["psnr"] for l in rb["eval"]["levels"]], ra["preset"]
+PY
 
 # a killed rank ends the job (non-zero), it does not hang
 $MPI "$LM" train $C --batch 2 --workers 0 --iterations 100000 --output "$T/kill" \
