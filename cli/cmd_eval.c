@@ -494,7 +494,7 @@ static int run(eval_run *r)
         return lm_cli_error(r->c, "out of memory (compute context)"), 1;
     r->have_ctx = 1;
     if (lm_tile_device_open(&r->dev, r->o->device, r->im.model, &r->ctx, &e)) return fail(r->c, &e);
-    if (r->dev.backend->device != LM_DEVICE_CPU && !strcmp(r->im.model->family, "mst"))
+    if (r->dev.backend->device != LM_DEVICE_CPU && !lm_model_has(r->im.model, LM_CAP_OPENCL))
         return lm_cli_error(r->c, "--device %s: MST++ models (%s) run on the CPU only",
                             lm_tile_device_name(&r->dev), r->im.model->preset), 2;
     if (r->dev.backend->device != LM_DEVICE_CPU)

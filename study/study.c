@@ -231,7 +231,7 @@ static lm_status count_costs(lm_model *m, const lm_study_cfg *cfg, json_t *rec, 
         return LM_OK;
     }
     lm_profile p;
-    int whole = !strcmp(m->family, "mst"); /* MST++ runs on the whole frame (lm_eval_reconstruct) */
+    int whole = lm_model_has(m, LM_CAP_WHOLE_FRAME); /* as lm_eval_reconstruct runs it */
     lm_status st = whole ? lm_model_profile(m, 1, cfg->frame_h, cfg->frame_w, &p, err)
                          : lm_model_profile(m, 1, to.win_h, to.win_w, &p, err);
     if (!st) {

@@ -570,7 +570,7 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
     if (!res) res = &dummy;
     memset(res, 0, sizeof *res);
     if (lm_train_cfg_validate(cfg, err)) return err->status;
-    if (model->in_channels == 1 &&
+    if (!lm_model_has(model, LM_CAP_RGB_INPUT) && /* the coded frame: whole tiles */
         (cfg->patch_h % model->mosaic.ty || cfg->patch_w % model->mosaic.tx))
         return lm_err_set(err, LM_ERR_ARG, "config: field 'patch': %dx%d is not a multiple of the "
                           "%d x %d tile", cfg->patch_h, cfg->patch_w, model->mosaic.ty,
