@@ -1,5 +1,5 @@
 /* conditions.c — adverse capture conditions and the 3-dB failure point (conditions.h).
- * What it is not: the study loop over scenes and models (study/conditions.c). */
+ * What it is not: the study loop over scenes and models (study/conds.c). */
 #include "infer/conditions.h"
 #include <math.h>
 #include <stdlib.h>
