@@ -25,6 +25,7 @@
 #include "cli/commands.h"
 #include "data/cube_io.h"
 #include "data/dataset.h"
+#include "data/util.h"
 #include "infer/eval.h"
 
 static void help(void)
@@ -204,47 +205,28 @@ static int fail(const lm_cli *c, const lm_err *e)
     return lm_cli_exit_status(e->status);
 }
 
-static int seen(const eval_run *r, const char *path)
-{
-    for (int i = 0; i < r->nsc; i++)
-        if (!strcmp(r->sc[i].path, path)) return 1;
-    return 0;
-}
-
 /* The scenes of the chosen split among those the DATA paths name: the dataset's list of that
  * split, or every list for `all`. A borrowed list (fewer than 3 scenes, no scene of its own
  * in that split) is skipped: its scenes are in their own split's list. */
 static int list_scenes(eval_run *r, lm_err *e)
 {
-    lm_dataset_cfg cfg;
-    lm_dataset_default_cfg(&cfg);
-    cfg.paths = r->o->data;
-    cfg.npaths = r->o->ndata;
-    cfg.sys = &r->im.sys;
-    cfg.workers = 0;
-    cfg.synth_fraction = 0.0f;
-    lm_dataset *d = lm_dataset_open(&cfg, e);
-    if (!d) return fail(r->c, e);
-    int total = 0;
-    for (int k = 0; k < 3; k++) total += lm_dataset_num_scenes(d, (lm_data_split)k);
-    r->sc = calloc((size_t)total + 1, sizeof *r->sc);
+    lm_dataset_scene *ls;
+    int nls;
+    if (lm_dataset_list_scenes((const char *const *)r->o->data, r->o->ndata, &r->im.sys, -1, &ls,
+                               &nls, e))
+        return fail(r->c, e);
+    r->sc = calloc((size_t)nls + 1, sizeof *r->sc);
     if (!r->sc) {
-        lm_dataset_close(d);
+        free(ls);
         return lm_cli_error(r->c, "out of memory"), 1;
     }
-    for (int k = 0; k < 3; k++) {
-        if (lm_dataset_split_borrowed(d, (lm_data_split)k)) continue;
-        for (int i = 0; i < lm_dataset_num_scenes(d, (lm_data_split)k); i++) {
-            const char *name = lm_dataset_scene_name(d, (lm_data_split)k, i);
-            const char *path = lm_dataset_scene_path(d, (lm_data_split)k, i);
-            if (seen(r, path)) continue;
-            scene_res *s = &r->sc[r->nsc++];
-            snprintf(s->name, sizeof s->name, "%s", name);
-            snprintf(s->path, sizeof s->path, "%s", path);
-            s->split = (lm_data_split)k;
-        }
+    for (int i = 0; i < nls; i++) {
+        scene_res *s = &r->sc[r->nsc++];
+        snprintf(s->name, sizeof s->name, "%s", ls[i].name);
+        snprintf(s->path, sizeof s->path, "%s", ls[i].path);
+        s->split = ls[i].split;
     }
-    lm_dataset_close(d);
+    free(ls);
     static const lm_data_split want[3] = {LM_SPLIT_TEST, LM_SPLIT_VAL, LM_SPLIT_TRAIN};
     int given = r->nsc;
     if (r->o->split < 3) {
@@ -256,13 +238,6 @@ static int list_scenes(eval_run *r, lm_err *e)
         return lm_cli_error(r->c, "no scene of split '%s' among the %d given (try --split all)",
                             split_names[r->o->split], given);
     return 0;
-}
-
-static uint64_t fnv1a(const char *s)
-{
-    uint64_t h = 1469598103934665603ull;
-    for (; *s; s++) h = (h ^ (unsigned char)*s) * 1099511628211ull;
-    return h;
 }
 
 /* The --motion speeds on one prepared scene. */
@@ -308,7 +283,7 @@ static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
         lm_cube cube;
         if (lm_cube_read(s->path, &cube, e)) return fail(r->c, e);
         lm_status st = lm_eval_prepare(&cube, r->im.model->mosaic.ty, r->im.model->mosaic.tx, e);
-        lm_rng rs = lm_rng_split(&base, fnv1a(s->name));
+        lm_rng rs = lm_rng_split(&base, lm_fnv1a_str(LM_FNV1A_BASIS_SHORT, s->name));
         if (!st) st = lm_eval_scene(&r->ctx, &r->im, &cube, r->o->k, r->o->nnoise, to, &rs,
                                     s->m, e);
         if (!st) st = scene_motion(r, s, &cube, to, e);

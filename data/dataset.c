@@ -11,6 +11,7 @@
 #include "data/image.h"
 #include "data/spectra.h"
 #include "data/synth.h"
+#include "data/util.h"
 #include <dirent.h>
 #include <math.h>
 #include <pthread.h>
@@ -82,9 +83,7 @@ void lm_dataset_default_cfg(lm_dataset_cfg *cfg)
 /* FNV-1a, then a splitmix finaliser. */
 static uint64_t split_hash(const char *s)
 {
-    uint64_t h = 0xcbf29ce484222325ull;
-    for (const unsigned char *p = (const unsigned char *)s; *p; p++)
-        h = (h ^ *p) * 0x100000001b3ull;
+    uint64_t h = lm_fnv1a_str(LM_FNV1A_BASIS, s);
     h = (h ^ (h >> 30)) * 0xBF58476D1CE4E5B9ull;
     h = (h ^ (h >> 27)) * 0x94D049BB133111EBull;
     return h ^ (h >> 31);
@@ -113,12 +112,6 @@ int lm_dataset_group_key(const char *name, int height, int width, char *out, siz
 }
 
 /* ---- scene discovery -------------------------------------------------------------------- */
-static int is_dir(const char *p)
-{
-    struct stat st;
-    return stat(p, &st) == 0 && S_ISDIR(st.st_mode);
-}
-
 static const char *base_name(const char *p) { return strrchr(p, '/') ? strrchr(p, '/') + 1 : p; }
 
 /* Number of CAVE band images `*_ms_NN.png|tif|tiff` directly in dir; first receives band 01. */
@@ -167,7 +160,7 @@ static void cave_band_dir(const char *dir, char *out, size_t n)
         char sub[DS_PATH_MAX];
         if (de->d_name[0] == '.') continue;
         snprintf(sub, sizeof sub, "%s/%s", dir, de->d_name);
-        if (is_dir(sub) && cave_bands_in(sub, NULL, 0) > 0) {
+        if (lm_is_dir(sub) && cave_bands_in(sub, NULL, 0) > 0) {
             if (found++ == 0) snprintf(out, n, "%s", sub);
         } else if (is_cube_file(de->d_name)) {
             other++;
@@ -206,7 +199,7 @@ static lm_status scan_folder(lm_dataset *d, const char *dir, lm_err *err)
         const char *nm = ents[i]->d_name;
         snprintf(sub, sizeof sub, "%s/%s", dir, nm);
         if (st == LM_OK && nm[0] != '.') {
-            if (is_dir(sub)) {
+            if (lm_is_dir(sub)) {
                 cave_band_dir(sub, bands, sizeof bands);
                 if (bands[0]) st = add_scene(d, bands, base_name(bands), err);
             } else if (is_cube_file(nm)) {
@@ -762,6 +755,49 @@ const char *lm_dataset_scene_path(const lm_dataset *d, lm_data_split split, int 
 int lm_dataset_split_borrowed(const lm_dataset *d, lm_data_split split)
 {
     return (int)split >= 0 && split <= LM_SPLIT_TEST ? d->borrowed[split] : 0;
+}
+
+static int listed(const lm_dataset_scene *s, int n, const char *path)
+{
+    for (int i = 0; i < n; i++)
+        if (!strcmp(s[i].path, path)) return 1;
+    return 0;
+}
+
+lm_status lm_dataset_list_scenes(const char *const *paths, int npaths, const lm_system *sys,
+                                 int split, lm_dataset_scene **out, int *n, lm_err *err)
+{
+    *out = NULL;
+    *n = 0;
+    lm_dataset_cfg cfg;
+    lm_dataset_default_cfg(&cfg);
+    cfg.paths = paths;
+    cfg.npaths = npaths;
+    cfg.sys = sys;
+    cfg.workers = 0;
+    cfg.synth_fraction = 0.0f;
+    lm_dataset *d = lm_dataset_open(&cfg, err);
+    if (!d) return err->status;
+    int total = 0;
+    for (int k = 0; k < 3; k++) total += d->count[k];
+    lm_dataset_scene *s = calloc((size_t)total + 1, sizeof *s);
+    if (!s) {
+        lm_dataset_close(d);
+        return lm_err_set(err, LM_ERR_NOMEM, "out of memory");
+    }
+    for (int k = 0; k < 3; k++) {
+        if ((split >= 0 && k != split) || d->borrowed[k]) continue;
+        for (int i = 0; i < d->count[k]; i++) {
+            const scene *sc = &d->scenes[d->list[k][i]];
+            if (listed(s, *n, sc->path)) continue;
+            snprintf(s[*n].name, sizeof s->name, "%s", sc->name);
+            snprintf(s[*n].path, sizeof s->path, "%s", sc->path);
+            s[(*n)++].split = (lm_data_split)k;
+        }
+    }
+    lm_dataset_close(d);
+    *out = s;
+    return LM_OK;
 }
 
 int lm_dataset_split_of_scene(const lm_dataset *d, const char *name_or_path)
