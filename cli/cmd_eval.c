@@ -73,14 +73,15 @@ static void help(void)
 }
 
 typedef struct eval_opts {
-    const char *model, *output, *system, *device;
+    const char *model, *output, *system;
+    lm_cli_common com; /* --threads, --device, --seed */
     const char **data;
     int ndata, split; /* split: 0 test, 1 val, 2 train, 3 all */
     float k[LM_EVAL_MAX_NOISE];
     int nnoise;
     double speed[LM_EVAL_MAX_MOTION];
     int nmotion;
-    long long seed, threads, rainbow, batch;
+    long long rainbow, batch;
     int noise_oracle, clip;
     long long bits;
 } eval_opts;
@@ -130,10 +131,9 @@ static int parse_opt(lm_cli *c, eval_opts *o)
     if ((r = lm_cli_value(c, "--model", &o->model)) ||
         (r = lm_cli_value(c, "--output", &o->output)) ||
         (r = lm_cli_value(c, "--system", &o->system)) ||
-        (r = lm_cli_value(c, "--device", &o->device)) ||
+        (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE | LM_CLI_SEED,
+                               (long long)1 << 62, &o->com)) ||
         (r = lm_cli_choice(c, "--split", split_names, &o->split)) ||
-        (r = lm_cli_int(c, "--seed", 0, (long long)1 << 62, &o->seed)) ||
-        (r = lm_cli_threads(c, &o->threads)) ||
         (r = lm_cli_int(c, "--rainbow", 0, 4096, &o->rainbow)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
         (r = lm_cli_value(c, "--noise", &noise)) ||
@@ -152,7 +152,7 @@ static int parse_opt(lm_cli *c, eval_opts *o)
 /* 1: run, 0: help printed, 2: bad usage (printed). */
 static int parse(lm_cli *c, eval_opts *o)
 {
-    *o = (eval_opts){.seed = 1, .rainbow = 256, .batch = 8, .nnoise = 5,
+    *o = (eval_opts){.com.seed = 1, .rainbow = 256, .batch = 8, .nnoise = 5,
                      .k = {0.0f, 0.05f, 0.10f, 0.15f, 0.20f}};
     o->data = calloc((size_t)c->argc + 1, sizeof *o->data);
     if (!o->data) return lm_cli_error(c, "out of memory");
@@ -274,7 +274,7 @@ static void motion_means(eval_run *r)
 static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
 {
     lm_rng base;
-    lm_rng_seed(&base, (uint64_t)r->o->seed);
+    lm_rng_seed(&base, (uint64_t)r->o->com.seed);
     lm_metrics_acc acc[LM_EVAL_MAX_NOISE];
     memset(acc, 0, sizeof acc);
     for (int i = 0; i < r->nsc; i++) {
@@ -364,7 +364,7 @@ static void write_json(FILE *f, const eval_run *r)
     fprintf(f, "{\n  \"model\": ");
     json_str(f, r->im.weights);
     fprintf(f, ",\n  \"split\": \"%s\",\n  \"seed\": %lld,\n  \"noise_percent\": [",
-            split_names[o->split], o->seed);
+            split_names[o->split], o->com.seed);
     for (int n = 0; n < o->nnoise; n++) fprintf(f, "%s%g", n ? ", " : "", 100.0 * o->k[n]);
     fprintf(f, "],\n  \"scenes\": [\n");
     for (int i = 0; i < r->nsc; i++) {
@@ -465,10 +465,10 @@ static int run(eval_run *r)
         r->tmp[0] = '\0';
         return rc;
     }
-    if (lm_ctx_init(&r->ctx, (int)r->o->threads) != 0)
+    if (lm_ctx_init(&r->ctx, (int)r->o->com.threads) != 0)
         return lm_cli_error(r->c, "out of memory (compute context)"), 1;
     r->have_ctx = 1;
-    if (lm_tile_device_open(&r->dev, r->o->device, r->im.model, &r->ctx, &e)) return fail(r->c, &e);
+    if (lm_tile_device_open(&r->dev, r->o->com.device, r->im.model, &r->ctx, &e)) return fail(r->c, &e);
     if (r->dev.backend->device != LM_DEVICE_CPU && !lm_model_has(r->im.model, LM_CAP_OPENCL))
         return lm_cli_error(r->c, "--device %s: MST++ models (%s) run on the CPU only",
                             lm_tile_device_name(&r->dev), r->im.model->preset), 2;
@@ -494,7 +494,7 @@ int lm_cmd_eval(int argc, char **argv)
     lm_cli_init(&c, "lumosaic eval", argc, argv);
     int rc = parse(&c, &o);
     if (rc == 1) {
-        if (o.threads > 0) omp_set_num_threads((int)o.threads);
+        lm_cli_common_apply(&o.com);
         if (lm_cli_signals_init(&c, 0)) {
             free(o.data);
             return lm_cli_error(&c, "cannot install signal handlers"), 1;
