@@ -155,15 +155,12 @@ int lm_cli_real(lm_cli *c, const char *name, double lo, double hi, double *out)
     return 1;
 }
 
-int lm_cli_threads(lm_cli *c, long long *out)
-{
-    return lm_cli_int(c, "--threads", 1, LM_MAX_THREADS, out);
-}
-
 int lm_cli_common_opt(lm_cli *c, unsigned which, long long seed_max, lm_cli_common *o)
 {
     int r = 0;
-    if ((which & LM_CLI_THREADS) && (r = lm_cli_threads(c, &o->threads))) return r;
+    if ((which & LM_CLI_THREADS) && /* the same bound for every command */
+        (r = lm_cli_int(c, "--threads", 1, LM_MAX_THREADS, &o->threads)))
+        return r;
     if ((which & LM_CLI_DEVICE) && (r = lm_cli_value(c, "--device", &o->device))) return r;
     if ((which & LM_CLI_SEED) && (r = lm_cli_int(c, "--seed", 0, seed_max, &o->seed))) return r;
     if ((which & LM_CLI_QUIET) && (r = lm_cli_flag(c, "--quiet", &o->quiet))) return r;

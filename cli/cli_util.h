@@ -35,8 +35,6 @@ int lm_cli_flag(lm_cli *c, const char *name, int *flag);
 /* A value that must be an integer in [lo, hi] / a finite real in [lo, hi]. */
 int lm_cli_int(lm_cli *c, const char *name, long long lo, long long hi, long long *out);
 int lm_cli_real(lm_cli *c, const char *name, double lo, double hi, double *out);
-/* "--threads T": an integer in 1..LM_MAX_THREADS (the same bound for every command). */
-int lm_cli_threads(lm_cli *c, long long *out);
 /* The options shared by the commands, spelt, bounded and applied the same way everywhere;
  * a command names those it takes (help texts stay with each command). */
 typedef struct lm_cli_common {
