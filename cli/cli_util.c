@@ -7,6 +7,7 @@
 #include <errno.h>
 #include <ftw.h>
 #include <math.h>
+#include <omp.h>
 #include <pthread.h>
 #include <semaphore.h>
 #include <signal.h>
@@ -154,9 +155,21 @@ int lm_cli_real(lm_cli *c, const char *name, double lo, double hi, double *out)
     return 1;
 }
 
-int lm_cli_threads(lm_cli *c, long long *out)
+int lm_cli_common_opt(lm_cli *c, unsigned which, long long seed_max, lm_cli_common *o)
 {
-    return lm_cli_int(c, "--threads", 1, LM_MAX_THREADS, out);
+    int r = 0;
+    if ((which & LM_CLI_THREADS) && /* the same bound for every command */
+        (r = lm_cli_int(c, "--threads", 1, LM_MAX_THREADS, &o->threads)))
+        return r;
+    if ((which & LM_CLI_DEVICE) && (r = lm_cli_value(c, "--device", &o->device))) return r;
+    if ((which & LM_CLI_SEED) && (r = lm_cli_int(c, "--seed", 0, seed_max, &o->seed))) return r;
+    if ((which & LM_CLI_QUIET) && (r = lm_cli_flag(c, "--quiet", &o->quiet))) return r;
+    return 0;
+}
+
+void lm_cli_common_apply(const lm_cli_common *o)
+{
+    if (o->threads > 0) omp_set_num_threads((int)o->threads);
 }
 
 int lm_cli_choice(lm_cli *c, const char *name, const char *const *choices, int *out)

@@ -35,8 +35,22 @@ int lm_cli_flag(lm_cli *c, const char *name, int *flag);
 /* A value that must be an integer in [lo, hi] / a finite real in [lo, hi]. */
 int lm_cli_int(lm_cli *c, const char *name, long long lo, long long hi, long long *out);
 int lm_cli_real(lm_cli *c, const char *name, double lo, double hi, double *out);
-/* "--threads T": an integer in 1..LM_MAX_THREADS (the same bound for every command). */
-int lm_cli_threads(lm_cli *c, long long *out);
+/* The options shared by the commands, spelt, bounded and applied the same way everywhere;
+ * a command names those it takes (help texts stay with each command). */
+typedef struct lm_cli_common {
+    long long threads;  /* --threads T: 1..LM_MAX_THREADS; 0 = not given (all cores) */
+    const char *device; /* --device D: the backend's name; NULL = not given (env LM_DEVICE,
+                         * else cpu; lm_backend_open checks the name) */
+    long long seed;     /* --seed S: 0..seed_max; the caller's default when not given */
+    int quiet;          /* --quiet: no progress output */
+} lm_cli_common;
+enum { LM_CLI_THREADS = 1u, LM_CLI_DEVICE = 2u, LM_CLI_SEED = 4u, LM_CLI_QUIET = 8u };
+/* Match one of the common options in `which` (LM_CLI_* flags), --seed in [0, seed_max]:
+ * returns as the matchers above (1, 0 or -1 with the error printed). */
+int lm_cli_common_opt(lm_cli *c, unsigned which, long long seed_max, lm_cli_common *o);
+/* Set for the process what the common options set: OpenMP's thread count when --threads was
+ * given. */
+void lm_cli_common_apply(const lm_cli_common *o);
 /* A value that must be one of the NULL-terminated `choices`; *out = its index. */
 int lm_cli_choice(lm_cli *c, const char *name, const char *const *choices, int *out);
 

@@ -25,6 +25,7 @@
 #include "cli/commands.h"
 #include "data/cube_io.h"
 #include "data/dataset.h"
+#include "data/util.h"
 #include "infer/eval.h"
 
 static void help(void)
@@ -72,14 +73,15 @@ static void help(void)
 }
 
 typedef struct eval_opts {
-    const char *model, *output, *system, *device;
+    const char *model, *output, *system;
+    lm_cli_common com; /* --threads, --device, --seed */
     const char **data;
     int ndata, split; /* split: 0 test, 1 val, 2 train, 3 all */
     float k[LM_EVAL_MAX_NOISE];
     int nnoise;
     double speed[LM_EVAL_MAX_MOTION];
     int nmotion;
-    long long seed, threads, rainbow, batch;
+    long long rainbow, batch;
     int noise_oracle, clip;
     long long bits;
 } eval_opts;
@@ -129,10 +131,9 @@ static int parse_opt(lm_cli *c, eval_opts *o)
     if ((r = lm_cli_value(c, "--model", &o->model)) ||
         (r = lm_cli_value(c, "--output", &o->output)) ||
         (r = lm_cli_value(c, "--system", &o->system)) ||
-        (r = lm_cli_value(c, "--device", &o->device)) ||
+        (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE | LM_CLI_SEED,
+                               (long long)1 << 62, &o->com)) ||
         (r = lm_cli_choice(c, "--split", split_names, &o->split)) ||
-        (r = lm_cli_int(c, "--seed", 0, (long long)1 << 62, &o->seed)) ||
-        (r = lm_cli_threads(c, &o->threads)) ||
         (r = lm_cli_int(c, "--rainbow", 0, 4096, &o->rainbow)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
         (r = lm_cli_value(c, "--noise", &noise)) ||
@@ -151,7 +152,7 @@ static int parse_opt(lm_cli *c, eval_opts *o)
 /* 1: run, 0: help printed, 2: bad usage (printed). */
 static int parse(lm_cli *c, eval_opts *o)
 {
-    *o = (eval_opts){.seed = 1, .rainbow = 256, .batch = 8, .nnoise = 5,
+    *o = (eval_opts){.com.seed = 1, .rainbow = 256, .batch = 8, .nnoise = 5,
                      .k = {0.0f, 0.05f, 0.10f, 0.15f, 0.20f}};
     o->data = calloc((size_t)c->argc + 1, sizeof *o->data);
     if (!o->data) return lm_cli_error(c, "out of memory");
@@ -204,47 +205,28 @@ static int fail(const lm_cli *c, const lm_err *e)
     return lm_cli_exit_status(e->status);
 }
 
-static int seen(const eval_run *r, const char *path)
-{
-    for (int i = 0; i < r->nsc; i++)
-        if (!strcmp(r->sc[i].path, path)) return 1;
-    return 0;
-}
-
 /* The scenes of the chosen split among those the DATA paths name: the dataset's list of that
  * split, or every list for `all`. A borrowed list (fewer than 3 scenes, no scene of its own
  * in that split) is skipped: its scenes are in their own split's list. */
 static int list_scenes(eval_run *r, lm_err *e)
 {
-    lm_dataset_cfg cfg;
-    lm_dataset_default_cfg(&cfg);
-    cfg.paths = r->o->data;
-    cfg.npaths = r->o->ndata;
-    cfg.sys = &r->im.sys;
-    cfg.workers = 0;
-    cfg.synth_fraction = 0.0f;
-    lm_dataset *d = lm_dataset_open(&cfg, e);
-    if (!d) return fail(r->c, e);
-    int total = 0;
-    for (int k = 0; k < 3; k++) total += lm_dataset_num_scenes(d, (lm_data_split)k);
-    r->sc = calloc((size_t)total + 1, sizeof *r->sc);
+    lm_dataset_scene *ls;
+    int nls;
+    if (lm_dataset_list_scenes((const char *const *)r->o->data, r->o->ndata, &r->im.sys, -1, &ls,
+                               &nls, e))
+        return fail(r->c, e);
+    r->sc = calloc((size_t)nls + 1, sizeof *r->sc);
     if (!r->sc) {
-        lm_dataset_close(d);
+        free(ls);
         return lm_cli_error(r->c, "out of memory"), 1;
     }
-    for (int k = 0; k < 3; k++) {
-        if (lm_dataset_split_borrowed(d, (lm_data_split)k)) continue;
-        for (int i = 0; i < lm_dataset_num_scenes(d, (lm_data_split)k); i++) {
-            const char *name = lm_dataset_scene_name(d, (lm_data_split)k, i);
-            const char *path = lm_dataset_scene_path(d, (lm_data_split)k, i);
-            if (seen(r, path)) continue;
-            scene_res *s = &r->sc[r->nsc++];
-            snprintf(s->name, sizeof s->name, "%s", name);
-            snprintf(s->path, sizeof s->path, "%s", path);
-            s->split = (lm_data_split)k;
-        }
+    for (int i = 0; i < nls; i++) {
+        scene_res *s = &r->sc[r->nsc++];
+        snprintf(s->name, sizeof s->name, "%s", ls[i].name);
+        snprintf(s->path, sizeof s->path, "%s", ls[i].path);
+        s->split = ls[i].split;
     }
-    lm_dataset_close(d);
+    free(ls);
     static const lm_data_split want[3] = {LM_SPLIT_TEST, LM_SPLIT_VAL, LM_SPLIT_TRAIN};
     int given = r->nsc;
     if (r->o->split < 3) {
@@ -256,13 +238,6 @@ static int list_scenes(eval_run *r, lm_err *e)
         return lm_cli_error(r->c, "no scene of split '%s' among the %d given (try --split all)",
                             split_names[r->o->split], given);
     return 0;
-}
-
-static uint64_t fnv1a(const char *s)
-{
-    uint64_t h = 1469598103934665603ull;
-    for (; *s; s++) h = (h ^ (unsigned char)*s) * 1099511628211ull;
-    return h;
 }
 
 /* The --motion speeds on one prepared scene. */
@@ -299,7 +274,7 @@ static void motion_means(eval_run *r)
 static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
 {
     lm_rng base;
-    lm_rng_seed(&base, (uint64_t)r->o->seed);
+    lm_rng_seed(&base, (uint64_t)r->o->com.seed);
     lm_metrics_acc acc[LM_EVAL_MAX_NOISE];
     memset(acc, 0, sizeof acc);
     for (int i = 0; i < r->nsc; i++) {
@@ -308,7 +283,7 @@ static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
         lm_cube cube;
         if (lm_cube_read(s->path, &cube, e)) return fail(r->c, e);
         lm_status st = lm_eval_prepare(&cube, r->im.model->mosaic.ty, r->im.model->mosaic.tx, e);
-        lm_rng rs = lm_rng_split(&base, fnv1a(s->name));
+        lm_rng rs = lm_rng_split(&base, lm_fnv1a_str(LM_FNV1A_BASIS_SHORT, s->name));
         if (!st) st = lm_eval_scene(&r->ctx, &r->im, &cube, r->o->k, r->o->nnoise, to, &rs,
                                     s->m, e);
         if (!st) st = scene_motion(r, s, &cube, to, e);
@@ -389,7 +364,7 @@ static void write_json(FILE *f, const eval_run *r)
     fprintf(f, "{\n  \"model\": ");
     json_str(f, r->im.weights);
     fprintf(f, ",\n  \"split\": \"%s\",\n  \"seed\": %lld,\n  \"noise_percent\": [",
-            split_names[o->split], o->seed);
+            split_names[o->split], o->com.seed);
     for (int n = 0; n < o->nnoise; n++) fprintf(f, "%s%g", n ? ", " : "", 100.0 * o->k[n]);
     fprintf(f, "],\n  \"scenes\": [\n");
     for (int i = 0; i < r->nsc; i++) {
@@ -490,11 +465,11 @@ static int run(eval_run *r)
         r->tmp[0] = '\0';
         return rc;
     }
-    if (lm_ctx_init(&r->ctx, (int)r->o->threads) != 0)
+    if (lm_ctx_init(&r->ctx, (int)r->o->com.threads) != 0)
         return lm_cli_error(r->c, "out of memory (compute context)"), 1;
     r->have_ctx = 1;
-    if (lm_tile_device_open(&r->dev, r->o->device, r->im.model, &r->ctx, &e)) return fail(r->c, &e);
-    if (r->dev.backend->device != LM_DEVICE_CPU && !strcmp(r->im.model->family, "mst"))
+    if (lm_tile_device_open(&r->dev, r->o->com.device, r->im.model, &r->ctx, &e)) return fail(r->c, &e);
+    if (r->dev.backend->device != LM_DEVICE_CPU && !lm_model_has(r->im.model, LM_CAP_OPENCL))
         return lm_cli_error(r->c, "--device %s: MST++ models (%s) run on the CPU only",
                             lm_tile_device_name(&r->dev), r->im.model->preset), 2;
     if (r->dev.backend->device != LM_DEVICE_CPU)
@@ -519,7 +494,7 @@ int lm_cmd_eval(int argc, char **argv)
     lm_cli_init(&c, "lumosaic eval", argc, argv);
     int rc = parse(&c, &o);
     if (rc == 1) {
-        if (o.threads > 0) omp_set_num_threads((int)o.threads);
+        lm_cli_common_apply(&o.com);
         if (lm_cli_signals_init(&c, 0)) {
             free(o.data);
             return lm_cli_error(&c, "cannot install signal handlers"), 1;

@@ -72,7 +72,8 @@ typedef struct cal_opts {
     const char *models, *output, *split_s, *measure_s, *size_s, *tol_s;
     const char **data;
     int ndata, split, measure, sh, sw, ntol;
-    long long synth, bins, seed, batch, threads, test_synth;
+    long long synth, bins, batch, test_synth;
+    lm_cli_common com; /* --threads, --seed */
     double noise, tol[MAX_TOL];
 } cal_opts;
 
@@ -88,9 +89,8 @@ static int parse_opt(lm_cli *c, cal_opts *o)
         (r = lm_cli_int(c, "--test-synth", 0, 100000, &o->test_synth)) ||
         (r = lm_cli_int(c, "--synth", 0, 100000, &o->synth)) ||
         (r = lm_cli_int(c, "--bins", 1, LM_AUTO_MAX_BINS, &o->bins)) ||
-        (r = lm_cli_int(c, "--seed", 0, LLONG_MAX / 2000000, &o->seed)) ||
+        (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_SEED, LLONG_MAX / 2000000, &o->com)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
-        (r = lm_cli_threads(c, &o->threads)) ||
         (r = lm_cli_real(c, "--noise", 0.0, 100.0, &o->noise)))
         return r < 0 ? 2 : 1;
     return 0;
@@ -145,7 +145,7 @@ static int check_opts(lm_cli *c, cal_opts *o)
 /* 1: run, 0: help printed, 2: bad usage (printed). */
 static int parse(lm_cli *c, cal_opts *o)
 {
-    *o = (cal_opts){.bins = 8, .seed = 1, .batch = 8};
+    *o = (cal_opts){.bins = 8, .com.seed = 1, .batch = 8};
     o->data = calloc((size_t)c->argc + 1, sizeof *o->data);
     if (!o->data) return lm_cli_error(c, "out of memory");
     while (!lm_cli_done(c)) {
@@ -251,7 +251,7 @@ static lm_status scene_cube(cal_run *r, int i, lm_cube *cube, lm_err *e)
     if (k >= (uint64_t)r->o->synth) k = TEST_SEED_OFFSET + (k - (uint64_t)r->o->synth);
     lm_status st = i < r->nscenes
                        ? lm_cube_read(r->scenes[i], cube, e)
-                       : lm_synth_scene(SYNTH_SEED_BASE + (uint64_t)r->o->seed * 1000000u + k,
+                       : lm_synth_scene(SYNTH_SEED_BASE + (uint64_t)r->o->com.seed * 1000000u + k,
                                         r->o->sh, r->o->sw, NULL, cube, e);
     return st ? st : lm_eval_prepare(cube, mo->ty, mo->tx, e);
 }
@@ -264,7 +264,7 @@ static lm_status scene_frame(cal_run *r, int i, lm_cube *cube, float **frame, lm
     size_t nf;
     lm_noise_opts no = {.gauss_k = (float)(r->o->noise / 100.0)};
     lm_rng rng;
-    lm_rng_seed(&rng, (uint64_t)r->o->seed * 7919u + (uint64_t)i);
+    lm_rng_seed(&rng, (uint64_t)r->o->com.seed * 7919u + (uint64_t)i);
     lm_status st = lm_eval_simulate(&r->im[0], cube, &no, &rng, frame, &nf, e);
     if (st) lm_cube_free(cube);
     return st;
@@ -587,7 +587,7 @@ int lm_cmd_fit_auto(int argc, char **argv)
         free(o.data);
         return rc;
     }
-    if (o.threads > 0) omp_set_num_threads((int)o.threads);
+    lm_cli_common_apply(&o.com);
     cal_run r;
     memset(&r, 0, sizeof r);
     r.c = &c;
@@ -596,7 +596,7 @@ int lm_cmd_fit_auto(int argc, char **argv)
     lm_err_clear(&e);
     rc = load_models(&r, &e);
     if (!rc) rc = list_scenes(&r, &e);
-    if (!rc && lm_ctx_init(&r.ctx, (int)o.threads) != 0) {
+    if (!rc && lm_ctx_init(&r.ctx, (int)o.com.threads) != 0) {
         lm_cli_error(&c, "out of memory (compute context)");
         rc = 1;
     } else if (!rc) {

@@ -71,8 +71,9 @@ static void help(void)
 }
 
 typedef struct infer_opts {
-    const char *model, *input, *output, *system, *device, *auto_file;
-    long long batch, threads;
+    const char *model, *input, *output, *system, *auto_file;
+    lm_cli_common com; /* --threads, --device */
+    long long batch;
     double auto_tol, noise_level;
     int no_align, tiles, is_auto;
 } infer_opts;
@@ -91,13 +92,12 @@ static int parse(lm_cli *c, infer_opts *o)
             (r = lm_cli_value(c, "--input", &o->input)) ||
             (r = lm_cli_value(c, "--output", &o->output)) ||
             (r = lm_cli_value(c, "--system", &o->system)) ||
-            (r = lm_cli_value(c, "--device", &o->device)) ||
             (r = lm_cli_value(c, "--auto", &o->auto_file)) ||
             (r = lm_cli_real(c, "--auto-tol", 0.0, 1e6, &o->auto_tol)) ||
             (r = lm_cli_real(c, "--noise-level", 0.0, 1.0, &o->noise_level)) ||
             (r = lm_cli_flag(c, "--tiles", &o->tiles)) ||
             (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
-            (r = lm_cli_threads(c, &o->threads)) ||
+            (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE, 0, &o->com)) ||
             (r = lm_cli_flag(c, "--no-align", &o->no_align))) {
             if (r < 0) return 2;
             continue;
@@ -189,7 +189,7 @@ static int align_init(infer_run *r, lm_err *e)
     a->ph = r->seq.height / a->ty;
     a->pw = r->seq.width / a->tx;
     lm_flow_default_opts(&a->fo, LM_FLOW_MEDIUM);
-    a->fo.nthreads = r->o->threads > 0 ? (int)r->o->threads : omp_get_max_threads();
+    a->fo.nthreads = r->o->com.threads > 0 ? (int)r->o->com.threads : omp_get_max_threads();
     int need = lm_flow_min_size(&a->fo);
     if (a->ph < need || a->pw < need) {
         fprintf(stderr, "lumosaic infer: warning: sub-images %dx%d are smaller than %dx%d: "
@@ -365,7 +365,7 @@ static int open_auto(infer_run *r, lm_err *e)
 {
     lm_auto_calib *a = &r->cal;
     if (lm_auto_load(r->o->auto_file, a, e)) return fail(r->c, e, 0);
-    if (r->o->device && strcmp(r->o->device, "cpu"))
+    if (r->o->com.device && strcmp(r->o->com.device, "cpu"))
         return lm_cli_error(r->c, "--model auto runs on the cpu only");
     for (int m = 0; m < a->nmodels; m++) {
         lm_infer_model *im = m ? &r->more[m] : &r->im;
@@ -417,7 +417,7 @@ int lm_cmd_infer(int argc, char **argv)
     lm_cli_init(&c, "lumosaic infer", argc, argv);
     int rc = parse(&c, &o);
     if (rc != 1) return rc;
-    if (o.threads > 0) omp_set_num_threads((int)o.threads);
+    lm_cli_common_apply(&o.com);
     if (lm_cli_signals_init(&c, 0)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
     infer_run r;
     memset(&r, 0, sizeof r);
@@ -427,12 +427,12 @@ int lm_cmd_infer(int argc, char **argv)
     lm_err_clear(&e);
     rc = open_inputs(&r, &e);
     int have_ctx = 0;
-    if (!rc && lm_ctx_init(&r.ctx, (int)o.threads) != 0) {
+    if (!rc && lm_ctx_init(&r.ctx, (int)o.com.threads) != 0) {
         lm_cli_error(&c, "out of memory (compute context)");
         rc = 1;
     } else if (!rc) {
         have_ctx = 1;
-        if (lm_tile_device_open(&r.dev, o.device, r.im.model, &r.ctx, &e))
+        if (lm_tile_device_open(&r.dev, o.com.device, r.im.model, &r.ctx, &e))
             rc = fail(&c, &e, 0);
         else if (r.dev.backend->device != LM_DEVICE_CPU)
             fprintf(stderr, "device: %s\n", lm_tile_device_name(&r.dev));

@@ -26,7 +26,7 @@ static void help(void)
 typedef struct render_opts {
     const char *input, *output;
     double exposure;
-    long long threads;
+    lm_cli_common com; /* --threads */
 } render_opts;
 
 /* 1: run, 0: help printed, 2: bad usage (printed). */
@@ -42,7 +42,7 @@ static int parse(lm_cli *c, render_opts *o)
         if ((r = lm_cli_value(c, "--input", &o->input)) ||
             (r = lm_cli_value(c, "--output", &o->output)) ||
             (r = lm_cli_real(c, "--exposure", 1e-12, 1e6, &o->exposure)) ||
-            (r = lm_cli_threads(c, &o->threads))) {
+            (r = lm_cli_common_opt(c, LM_CLI_THREADS, 0, &o->com))) {
             if (r < 0) return 2;
             continue;
         }
@@ -62,7 +62,7 @@ int lm_cmd_render(int argc, char **argv)
     lm_cli_init(&c, "lumosaic render", argc, argv);
     int r = parse(&c, &o);
     if (r != 1) return r;
-    if (o.threads > 0) omp_set_num_threads((int)o.threads);
+    lm_cli_common_apply(&o.com);
     lm_cube cube;
     lm_err e;
     lm_err_clear(&e);

@@ -75,7 +75,8 @@ typedef struct sim_opts {
     const char *input, *output, *system;
     int crop, clip, bucket0, video, format;
     double noise, photons, read_noise;
-    long long bits, seed, frames, samples, threads;
+    long long bits, frames, samples;
+    lm_cli_common com; /* --threads, --seed */
     lm_motion motion;
     int nmotion;
 } sim_opts;
@@ -150,8 +151,7 @@ static int parse_one(lm_cli *c, sim_opts *o)
         (r = lm_cli_real(c, "--poisson", 0, 1e12, &o->photons)) ||
         (r = lm_cli_real(c, "--read-noise", 0, 1e6, &o->read_noise)) ||
         (r = lm_cli_int(c, "--bits", 1, 24, &o->bits)) ||
-        (r = lm_cli_int(c, "--seed", 0, 0x7fffffffffffffffLL, &o->seed)) ||
-        (r = lm_cli_threads(c, &o->threads)) ||
+        (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_SEED, 0x7fffffffffffffffLL, &o->com)) ||
         (r = lm_cli_choice(c, "--format", FORMATS, &o->format)))
         return r;
     if ((r = lm_cli_int(c, "--frames", 1, 10000, &o->frames)) ||
@@ -166,7 +166,7 @@ static int parse_one(lm_cli *c, sim_opts *o)
 static int parse(lm_cli *c, sim_opts *o)
 {
     memset(o, 0, sizeof *o);
-    o->seed = 1;
+    o->com.seed = 1;
     o->frames = -1;
     o->samples = -1;
     while (!lm_cli_done(c)) {
@@ -279,16 +279,16 @@ static lm_status simulate_one(const sim_run *r, int i, lm_rng *rng, lm_cube *gt,
     lm_noise_opts nz = {(float)o->noise, o->photons, (float)o->read_noise, o->clip, (int)o->bits,
                         0.0f};
     if (!o->video) {
-        lm_forward_opts fo = {.noise = nz, .nthreads = (int)o->threads};
+        lm_forward_opts fo = {.noise = nz, .nthreads = (int)o->com.threads};
         *gt = r->gt0;
         return lm_forward_simulate(r->sys, &r->sim, &fo, rng, r->b1, o->bucket0 ? r->b0 : NULL, e);
     }
     lm_video_opts vo = {.motion = o->motion, .samples = (int)o->samples, .noise = nz,
-                        .nthreads = (int)o->threads};
+                        .nthreads = (int)o->com.threads};
     lm_status st = lm_video_frame(r->sys, &r->sim, &vo, i, rng, r->b1, o->bucket0 ? r->b0 : NULL,
                                   NULL, e);
     double t = 1e-6 * (lm_video_frame_start_us(r->sys, i) + lm_video_gt_time_us(r->sys));
-    return st ? st : lm_video_warp(&r->gt0, &o->motion, t, gt, (int)o->threads, e);
+    return st ? st : lm_video_warp(&r->gt0, &o->motion, t, gt, (int)o->com.threads, e);
 }
 
 /* Bucket 0 sees every other LED: its files hold bucket 0 / (LEDs - 1), white = 1 like bucket 1
@@ -394,7 +394,7 @@ static json_t *summary_json(const sim_run *r, const lm_cube *in)
         "system", "path", s->path, "name", s->name, "tile", s->tile_rows, s->tile_cols,
         "exposure_us", lm_system_exposure_us(s), "frame_period_us", s->frame_period_us,
         "noise", "gauss_k", o->noise, "photons", o->photons, "read_noise", o->read_noise, "clip",
-        o->clip, "bits", o->bits, "seed", o->seed, "format", FORMATS[o->format], "bucket0",
+        o->clip, "bits", o->bits, "seed", o->com.seed, "format", FORMATS[o->format], "bucket0",
         o->bucket0, "bucket0_scale", bucket0_scale(s), "video", video, "frames", r->files);
 }
 
@@ -415,7 +415,7 @@ static int run(const lm_cli *c, sim_run *r, const lm_cube *in)
         if ((status = out_path(c, r, subs[k], path, sizeof path)) == 0 && mkdir(path, 0777))
             status = (lm_cli_error(c, "%s: cannot create a folder: %s", path, strerror(errno)),
                       LM_EXIT_FAILED);
-    lm_rng_seed(&r->rng, (uint64_t)r->o->seed);
+    lm_rng_seed(&r->rng, (uint64_t)r->o->com.seed);
     if (!status) status = run_frames(c, r);
     json_t *js = status ? NULL : summary_json(r, in);
     if (!status && (out_path(c, r, "simulate.json", path, sizeof path) ||
@@ -438,7 +438,7 @@ int lm_cmd_simulate(int argc, char **argv)
     lm_cli_init(&c, "lumosaic simulate", argc, argv);
     int status = parse(&c, &o);
     if (status != 1) return status;
-    if (o.threads > 0) omp_set_num_threads((int)o.threads);
+    lm_cli_common_apply(&o.com);
     if (lm_cli_signals_init(&c, 0)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
     lm_system sys;
     lm_cube in;

@@ -49,9 +49,10 @@ static void help(void)
 
 typedef struct study_args {
     const char *config, *output, *worker;
-    long long threads, jobs;
+    long long jobs;
+    lm_cli_common com; /* --threads, --quiet */
     double stop;                /* --stop-seconds (-1: not given) */
-    int no_charts, quiet, dry_run;
+    int no_charts, dry_run;
 } study_args;
 
 static int parse(lm_cli *c, study_args *a)
@@ -64,13 +65,12 @@ static int parse(lm_cli *c, study_args *a)
         }
         if ((r = lm_cli_value(c, "--config", &a->config)) ||
             (r = lm_cli_value(c, "--output", &a->output)) ||
-            (r = lm_cli_threads(c, &a->threads)) ||
+            (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_QUIET, 0, &a->com)) ||
             (r = lm_cli_int(c, "--jobs", 1, 64, &a->jobs)) ||
             (r = lm_cli_value(c, "--worker", &a->worker)) ||
             (r = lm_cli_real(c, "--stop-seconds", 0, 1e9, &a->stop)) ||
             (r = lm_cli_flag(c, "--no-charts", &a->no_charts)) ||
-            (r = lm_cli_flag(c, "--dry-run", &a->dry_run)) ||
-            (r = lm_cli_flag(c, "--quiet", &a->quiet))) {
+            (r = lm_cli_flag(c, "--dry-run", &a->dry_run))) {
             if (r < 0) return 2;
             continue;
         }
@@ -138,7 +138,7 @@ static int run(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const ch
 {
     lm_err e = {0};
     lm_study s;
-    lm_study_opts o = {.threads = (int)a->threads, .progress = !a->quiet, .log = stderr,
+    lm_study_opts o = {.threads = (int)a->com.threads, .progress = !a->com.quiet, .log = stderr,
                        .jobs = a->jobs > 1 ? (int)a->jobs : 1};
     lm_status st = lm_study_run(cfg, dir, &o, &s, &e);
     if (st) {
@@ -167,9 +167,9 @@ static int run(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const ch
 static int worker(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const char *dir)
 {
     double stop = a->stop > 0 ? a->stop : 0.0;
-    if (a->threads > 0) omp_set_num_threads((int)a->threads);
+    lm_cli_common_apply(&a->com);
     mallopt(M_MMAP_THRESHOLD, 128 * 1024);
-    lm_study_opts o = {.threads = (int)a->threads, .progress = !a->quiet, .log = stderr, .jobs = 1};
+    lm_study_opts o = {.threads = (int)a->com.threads, .progress = !a->com.quiet, .log = stderr, .jobs = 1};
     lm_err e = {0};
     lm_status st = lm_study_train_one(cfg, dir, a->worker, stop, &o, &e);
     if (st) lm_cli_error(c, "%s", e.msg);
@@ -198,7 +198,7 @@ int lm_cmd_study(int argc, char **argv)
                         "--no-charts)\n");
         return 1;
     }
-    if (a.threads > 0) omp_set_num_threads((int)a.threads);
+    lm_cli_common_apply(&a.com);
     /* As in `lumosaic train`: a fixed mmap threshold keeps big per-step buffers off the heap. */
     mallopt(M_MMAP_THRESHOLD, 128 * 1024);
     int rc = run(&c, &a, &cfg, dir);

@@ -34,7 +34,7 @@ static void help(void)
 typedef struct train_args {
     const char *config, *resume;
     long long stop_after;
-    int quiet;
+    lm_cli_common com; /* --quiet (threads, device and seed are run-config fields) */
 } train_args;
 
 /* First pass: --config / --resume / --help (they decide where the values start from). */
@@ -64,7 +64,7 @@ static int second_pass(lm_cli *c, train_args *a, lm_train_cfg *cfg)
         const char *v;
         if ((r = lm_cli_value(c, "--config", &v)) || (r = lm_cli_value(c, "--resume", &v)) ||
             (r = lm_cli_int(c, "--stop-after", 1, 1000000000000LL, &a->stop_after)) ||
-            (r = lm_cli_flag(c, "--quiet", &a->quiet))) {
+            (r = lm_cli_common_opt(c, LM_CLI_QUIET, 0, &a->com))) {
             if (r < 0) return 2;
             continue;
         }
@@ -126,7 +126,7 @@ int lm_cmd_train(int argc, char **argv)
     mallopt(M_MMAP_THRESHOLD, 128 * 1024);
     if (lm_cli_signals_init(&c, 1)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
     lm_train_opts o = {.resume = a.resume, .stop_after = (long)a.stop_after,
-                       .progress = !a.quiet && rank == 0, .interrupt = lm_cli_signal_flag(),
+                       .progress = !a.com.quiet && rank == 0, .interrupt = lm_cli_signal_flag(),
                        .data_parallel = 1};
     lm_train_result res;
     lm_status st = lm_train_session(&cfg, &o, &res, &e);

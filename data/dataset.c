@@ -1,74 +1,23 @@
-/* dataset.c — scene listing, split by scene group (quotas by hash rank), lazy LRU cube cache,
- * sample synthesis and a small worker pool that prepares the next batch ahead (dataset.h).
+/* dataset.c — scene listing, split by scene group (quotas by hash rank) and sample synthesis
+ * (dataset.h); the cube cache is dataset_cache.c, the worker pool dataset_workers.c.
  * What it is: a sample is a pure function of (seed, split, index): every random choice is
  * drawn from lm_rng_split(split generator, index) in a fixed order (sample_plan), so worker
  * threads, the cache state and the order of preparation never change the numbers.
  * What it is not: a file reader (cube_io.h), the forward model (forward.h) or the synthetic
  * generators (synth.h). */
-#include "data/dataset.h"
+#include "data/dataset_internal.h"
 #include "data/cube_io.h"
 #include "data/forward.h"
 #include "data/image.h"
 #include "data/spectra.h"
 #include "data/synth.h"
+#include "data/util.h"
 #include <dirent.h>
 #include <math.h>
-#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
 #include <sys/stat.h>
-
-#define DS_PATH_MAX 4096
-#define DS_MAX_WORKERS LM_DATASET_MAX_WORKERS
-
-typedef struct scene {
-    char *path;          /* what lm_cube_read opens */
-    char *name;          /* file name without extension, or the CAVE band folder's name */
-    char *group;         /* group key (lm_dataset_group_key): hashed for the split */
-    uint64_t hash;       /* split_hash(group) */
-    int height, width;
-    lm_data_split split; /* by the rule; the lists may also borrow (build_splits) */
-} scene;
-
-typedef struct cache_entry {
-    int scene;           /* -1: empty */
-    int pins;            /* samples using it now (not evictable) */
-    unsigned long last_use;
-    lm_cube cube;
-} cache_entry;
-
-typedef struct batch_slot {
-    long index;
-    int batch;           /* 0: free */
-    int next, done, inflight, cancel;
-    int cap;             /* items the buffers hold */
-    float *raw, *target;
-    lm_status status;
-    int err_item;
-    lm_err err;
-} batch_slot;
-
-struct lm_dataset {
-    lm_dataset_cfg cfg;
-    scene *scenes;
-    int nscenes;
-    int *list[3], count[3], borrowed[3];
-    int ngroups;         /* scene groups (assign_splits) */
-    int too_small;       /* scenes smaller than the patch (in no list) */
-    lm_synth_palette pal;
-    lm_rng rng[3];
-    pthread_mutex_t mu;  /* cache and worker pool */
-    pthread_cond_t work_cv, done_cv;
-    cache_entry *cache;
-    int cache_cap, cached, max_cached;
-    unsigned long tick;
-    long loads;
-    pthread_t threads[DS_MAX_WORKERS];
-    int nthreads, stop;
-    batch_slot slot[2];
-    batch_slot *wanted;
-};
 
 void lm_dataset_default_cfg(lm_dataset_cfg *cfg)
 {
@@ -82,9 +31,7 @@ void lm_dataset_default_cfg(lm_dataset_cfg *cfg)
 /* FNV-1a, then a splitmix finaliser. */
 static uint64_t split_hash(const char *s)
 {
-    uint64_t h = 0xcbf29ce484222325ull;
-    for (const unsigned char *p = (const unsigned char *)s; *p; p++)
-        h = (h ^ *p) * 0x100000001b3ull;
+    uint64_t h = lm_fnv1a_str(LM_FNV1A_BASIS, s);
     h = (h ^ (h >> 30)) * 0xBF58476D1CE4E5B9ull;
     h = (h ^ (h >> 27)) * 0x94D049BB133111EBull;
     return h ^ (h >> 31);
@@ -113,12 +60,6 @@ int lm_dataset_group_key(const char *name, int height, int width, char *out, siz
 }
 
 /* ---- scene discovery -------------------------------------------------------------------- */
-static int is_dir(const char *p)
-{
-    struct stat st;
-    return stat(p, &st) == 0 && S_ISDIR(st.st_mode);
-}
-
 static const char *base_name(const char *p) { return strrchr(p, '/') ? strrchr(p, '/') + 1 : p; }
 
 /* Number of CAVE band images `*_ms_NN.png|tif|tiff` directly in dir; first receives band 01. */
@@ -167,7 +108,7 @@ static void cave_band_dir(const char *dir, char *out, size_t n)
         char sub[DS_PATH_MAX];
         if (de->d_name[0] == '.') continue;
         snprintf(sub, sizeof sub, "%s/%s", dir, de->d_name);
-        if (is_dir(sub) && cave_bands_in(sub, NULL, 0) > 0) {
+        if (lm_is_dir(sub) && cave_bands_in(sub, NULL, 0) > 0) {
             if (found++ == 0) snprintf(out, n, "%s", sub);
         } else if (is_cube_file(de->d_name)) {
             other++;
@@ -206,7 +147,7 @@ static lm_status scan_folder(lm_dataset *d, const char *dir, lm_err *err)
         const char *nm = ents[i]->d_name;
         snprintf(sub, sizeof sub, "%s/%s", dir, nm);
         if (st == LM_OK && nm[0] != '.') {
-            if (is_dir(sub)) {
+            if (lm_is_dir(sub)) {
                 cave_band_dir(sub, bands, sizeof bands);
                 if (bands[0]) st = add_scene(d, bands, base_name(bands), err);
             } else if (is_cube_file(nm)) {
@@ -367,119 +308,6 @@ static lm_status build_splits(lm_dataset *d, lm_err *err)
     return LM_OK;
 }
 
-/* ---- cache ------------------------------------------------------------------------------ */
-typedef struct scene_ref {
-    int entry;          /* cache entry pinned, or -1: priv holds a private copy */
-    lm_cube priv;
-    const lm_cube *cube;
-} scene_ref;
-
-static int cache_find(const lm_dataset *d, int s)
-{
-    for (int e = 0; e < d->cache_cap; e++)
-        if (d->cache[e].scene == s) return e;
-    return -1;
-}
-
-/* An empty entry, else the least recently used unpinned one (evicted), else -1. */
-static int cache_victim(lm_dataset *d)
-{
-    int best = -1;
-    for (int e = 0; e < d->cache_cap; e++) {
-        cache_entry *c = &d->cache[e];
-        if (c->scene < 0) return e;
-        if (c->pins == 0 && (best < 0 || c->last_use < d->cache[best].last_use)) best = e;
-    }
-    if (best >= 0) {
-        lm_cube_free(&d->cache[best].cube);
-        d->cache[best].scene = -1;
-        d->cached--;
-    }
-    return best;
-}
-
-static lm_status load_checked(const lm_dataset *d, int s, lm_cube *c, lm_err *err)
-{
-    const scene *sc = &d->scenes[s];
-    lm_status st = lm_cube_read(sc->path, c, err);
-    if (st != LM_OK) return st;
-    int grid = c->bands == LM_GRID31_COUNT && fabsf(c->wavelength[0] - 400.0f) < 0.5f &&
-               fabsf(c->wavelength[30] - 700.0f) < 0.5f;
-    if (!grid || c->height != sc->height || c->width != sc->width) {
-        st = lm_err_set(err, LM_ERR_FORMAT, "%s: read %d bands of %d x %d; the dataset expected "
-                        "31 bands 400..700 nm of %d x %d (file changed?)", sc->path, c->bands,
-                        c->height, c->width, sc->height, sc->width);
-        lm_cube_free(c);
-        return st;
-    }
-    /* system.md §10: every scene is divided by its own maximum, for training as for scoring. */
-    float mx = lm_cube_max(c);
-    if (!(mx > 0.0f) || !isfinite(mx)) {
-        st = lm_err_set(err, LM_ERR_NUMERIC, "%s: the cube's maximum is %g; a scene needs a "
-                        "positive, finite maximum to be normalised", sc->path, (double)mx);
-        lm_cube_free(c);
-        return st;
-    }
-    size_t n = (size_t)c->bands * (size_t)c->height * (size_t)c->width;
-    for (size_t i = 0; i < n; i++) c->data[i] /= mx;
-    return LM_OK;
-}
-
-/* Under the lock: pin entry r->entry for a sample. */
-static void pin(lm_dataset *d, scene_ref *r)
-{
-    d->cache[r->entry].pins++;
-    d->cache[r->entry].last_use = ++d->tick;
-    r->cube = &d->cache[r->entry].cube;
-}
-
-static lm_status scene_acquire(lm_dataset *d, int s, scene_ref *r, lm_err *err)
-{
-    memset(r, 0, sizeof *r);
-    pthread_mutex_lock(&d->mu);
-    r->entry = cache_find(d, s);
-    if (r->entry >= 0) pin(d, r);
-    pthread_mutex_unlock(&d->mu);
-    if (r->entry >= 0) return LM_OK;
-    lm_cube c;
-    lm_status st = load_checked(d, s, &c, err); /* outside the lock: workers load in parallel */
-    if (st != LM_OK) return st;
-    pthread_mutex_lock(&d->mu);
-    d->loads++;
-    r->entry = cache_find(d, s); /* another thread may have loaded it meanwhile */
-    if (r->entry >= 0) {
-        lm_cube_free(&c);
-    } else if ((r->entry = cache_victim(d)) >= 0) {
-        d->cache[r->entry].scene = s;
-        d->cache[r->entry].cube = c;
-        d->cached++;
-        d->max_cached = d->cached > d->max_cached ? d->cached : d->max_cached;
-    }
-    if (r->entry >= 0) {
-        pin(d, r);
-    } else {
-        r->priv = c; /* every entry pinned: use it once, uncached */
-        r->cube = &r->priv;
-    }
-    pthread_mutex_unlock(&d->mu);
-    return LM_OK;
-}
-
-static void scene_release(lm_dataset *d, scene_ref *r)
-{
-    pthread_mutex_lock(&d->mu);
-    if (r->entry >= 0) d->cache[r->entry].pins--;
-    pthread_mutex_unlock(&d->mu);
-    if (r->entry < 0) lm_cube_free(&r->priv);
-}
-
-void lm_dataset_get_stats(lm_dataset *d, lm_dataset_stats *st)
-{
-    pthread_mutex_lock(&d->mu);
-    *st = (lm_dataset_stats){d->loads, d->cached, d->max_cached};
-    pthread_mutex_unlock(&d->mu);
-}
-
 /* ---- one sample ------------------------------------------------------------------------- */
 typedef struct sample_plan {
     lm_dataset_sample_info info;
@@ -554,7 +382,7 @@ static lm_status sample_cube(lm_dataset *d, sample_plan *p, lm_data_split split,
     if (in->kind == LM_SAMPLE_PROCEDURAL) {
         st = lm_synth_scene(p->synth_seed, ph, pw, &d->pal, &src, err);
     } else {
-        st = scene_acquire(d, d->list[split][in->scene], &ref, err);
+        st = lm_ds_scene_acquire(d, d->list[split][in->scene], &ref, err);
         if (st == LM_OK) src = *ref.cube;
     }
     if (st == LM_OK) st = lm_cube_alloc(out, LM_GRID31_COUNT, ph, pw, LM_GRID31_START, 10.0f);
@@ -569,12 +397,12 @@ static lm_status sample_cube(lm_dataset *d, sample_plan *p, lm_data_split split,
             }
     }
     if (in->kind == LM_SAMPLE_PROCEDURAL) lm_cube_free(&src);
-    else if (ref.cube) scene_release(d, &ref);
+    else if (ref.cube) lm_ds_scene_release(d, &ref);
     return st;
 }
 
-static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, float *raw, float *target,
-                             lm_err *err)
+lm_status lm_ds_make_sample(lm_dataset *d, lm_data_split split, long i, float *raw,
+                            float *target, lm_err *err)
 {
     sample_plan p;
     lm_status st = plan_sample(d, split, i, &p, err);
@@ -599,133 +427,6 @@ static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, float *
     return st;
 }
 
-/* ---- worker pool ------------------------------------------------------------------------ */
-static size_t raw_items(const lm_dataset *d) { return (size_t)d->cfg.patch_h * d->cfg.patch_w; }
-
-static batch_slot *find_job(lm_dataset *d)
-{
-    if (d->wanted && !d->wanted->cancel && d->wanted->next < d->wanted->batch) return d->wanted;
-    for (int k = 0; k < 2; k++) {
-        batch_slot *s = &d->slot[k];
-        if (s->batch > 0 && !s->cancel && s->next < s->batch) return s;
-    }
-    return NULL;
-}
-
-static void *worker_main(void *arg)
-{
-    lm_dataset *d = arg;
-    size_t n = raw_items(d);
-    pthread_mutex_lock(&d->mu);
-    for (;;) {
-        batch_slot *s = NULL;
-        while (!d->stop && !(s = find_job(d))) pthread_cond_wait(&d->work_cv, &d->mu);
-        if (d->stop) break;
-        int j = s->next++;
-        long i = s->index * s->batch + j;
-        s->inflight++;
-        pthread_mutex_unlock(&d->mu);
-        lm_err e = {LM_OK, ""};
-        lm_status st = make_sample(d, LM_SPLIT_TRAIN, i, s->raw + (size_t)j * n,
-                                   s->target + (size_t)j * LM_TARGET_CHANNELS * n, &e);
-        pthread_mutex_lock(&d->mu);
-        s->inflight--;
-        s->done++;
-        if (st != LM_OK && (s->status == LM_OK || j < s->err_item)) {
-            s->status = st;
-            s->err_item = j;
-            s->err = e;
-        }
-        pthread_cond_broadcast(&d->done_cv);
-    }
-    pthread_mutex_unlock(&d->mu);
-    return NULL;
-}
-
-/* Under the lock: a free slot set up for (index, B). */
-static batch_slot *slot_start(lm_dataset *d, long index, int B, lm_err *err)
-{
-    /* batch_pooled frees every other slot first, so one is always free */
-    batch_slot *s = d->slot[0].batch == 0 ? &d->slot[0] : &d->slot[1];
-    if (s->cap < B) {
-        size_t n = raw_items(d) * (size_t)B;
-        float *raw = realloc(s->raw, n * sizeof(float));
-        if (raw) s->raw = raw;
-        float *tg = raw ? realloc(s->target, n * LM_TARGET_CHANNELS * sizeof(float)) : NULL;
-        if (tg) s->target = tg;
-        if (!raw || !tg) {
-            lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory for a batch of %d", B);
-            return NULL;
-        }
-        s->cap = B;
-    }
-    s->index = index;
-    s->batch = B;
-    s->next = s->done = s->inflight = s->cancel = 0;
-    s->status = LM_OK;
-    s->err_item = B;
-    lm_err_clear(&s->err);
-    pthread_cond_broadcast(&d->work_cv);
-    return s;
-}
-
-static lm_status batch_pooled(lm_dataset *d, long index, int B, float *raw, float *target,
-                              lm_err *err)
-{
-    pthread_mutex_lock(&d->mu);
-    batch_slot *s = NULL, *stale = NULL;
-    for (int k = 0; k < 2; k++) {
-        batch_slot *c = &d->slot[k];
-        if (c->batch == 0) continue;
-        if (c->index == index && c->batch == B && !c->cancel) s = c;
-        else stale = c;
-    }
-    if (stale) { /* a prefetch nobody asked for: stop it */
-        stale->cancel = 1;
-        while (stale->inflight > 0) pthread_cond_wait(&d->done_cv, &d->mu);
-        stale->batch = 0;
-    }
-    if (!s) s = slot_start(d, index, B, err);
-    lm_status st = s ? LM_OK : LM_ERR_NOMEM;
-    if (s) {
-        d->wanted = s;
-        while (s->done < B) pthread_cond_wait(&d->done_cv, &d->mu);
-        d->wanted = NULL;
-        st = s->status;
-        if (st != LM_OK) lm_err_set(err, st, "%s", s->err.msg);
-        s->cancel = 1; /* completed: no worker touches it; keep it out of find_job */
-    }
-    pthread_mutex_unlock(&d->mu);
-    if (st == LM_OK) {
-        size_t n = raw_items(d) * (size_t)B;
-        memcpy(raw, s->raw, n * sizeof(float));
-        memcpy(target, s->target, n * LM_TARGET_CHANNELS * sizeof(float));
-    }
-    pthread_mutex_lock(&d->mu);
-    if (s) s->batch = 0;
-    lm_err ignore = {LM_OK, ""};
-    if (st == LM_OK) /* prefetch the batch asked for next */
-        slot_start(d, index + (d->cfg.batch_stride > 1 ? d->cfg.batch_stride : 1), B, &ignore);
-    pthread_mutex_unlock(&d->mu);
-    return st;
-}
-
-lm_status lm_dataset_batch(lm_dataset *d, long index, int batch, float *raw, float *target,
-                           lm_err *err)
-{
-    if (index < 0 || batch < 1 || !raw || !target)
-        return lm_err_set(err, LM_ERR_ARG, "dataset batch: need index >= 0, batch >= 1 and "
-                          "buffers (got %ld, %d)", index, batch);
-    if (d->nthreads > 0) return batch_pooled(d, index, batch, raw, target, err);
-    size_t n = raw_items(d);
-    for (int j = 0; j < batch; j++) {
-        lm_status st = make_sample(d, LM_SPLIT_TRAIN, index * batch + j, raw + (size_t)j * n,
-                                   target + (size_t)j * LM_TARGET_CHANNELS * n, err);
-        if (st != LM_OK) return st;
-    }
-    return LM_OK;
-}
-
 /* ---- evaluation samples, accessors ------------------------------------------------------ */
 int lm_dataset_eval_count(const lm_dataset *d, lm_data_split split)
 {
@@ -742,7 +443,7 @@ lm_status lm_dataset_eval_sample(lm_dataset *d, lm_data_split split, int i, floa
     if (i < 0 || i >= lm_dataset_eval_count(d, split))
         return lm_err_set(err, LM_ERR_ARG, "dataset eval sample: index %d outside 0..%d", i,
                           lm_dataset_eval_count(d, split) - 1);
-    return make_sample(d, split, i, raw, target, err);
+    return lm_ds_make_sample(d, split, i, raw, target, err);
 }
 
 int lm_dataset_num_scenes(const lm_dataset *d, lm_data_split split)
@@ -763,6 +464,49 @@ const char *lm_dataset_scene_path(const lm_dataset *d, lm_data_split split, int 
 int lm_dataset_split_borrowed(const lm_dataset *d, lm_data_split split)
 {
     return (int)split >= 0 && split <= LM_SPLIT_TEST ? d->borrowed[split] : 0;
+}
+
+static int listed(const lm_dataset_scene *s, int n, const char *path)
+{
+    for (int i = 0; i < n; i++)
+        if (!strcmp(s[i].path, path)) return 1;
+    return 0;
+}
+
+lm_status lm_dataset_list_scenes(const char *const *paths, int npaths, const lm_system *sys,
+                                 int split, lm_dataset_scene **out, int *n, lm_err *err)
+{
+    *out = NULL;
+    *n = 0;
+    lm_dataset_cfg cfg;
+    lm_dataset_default_cfg(&cfg);
+    cfg.paths = paths;
+    cfg.npaths = npaths;
+    cfg.sys = sys;
+    cfg.workers = 0;
+    cfg.synth_fraction = 0.0f;
+    lm_dataset *d = lm_dataset_open(&cfg, err);
+    if (!d) return err->status;
+    int total = 0;
+    for (int k = 0; k < 3; k++) total += d->count[k];
+    lm_dataset_scene *s = calloc((size_t)total + 1, sizeof *s);
+    if (!s) {
+        lm_dataset_close(d);
+        return lm_err_set(err, LM_ERR_NOMEM, "out of memory");
+    }
+    for (int k = 0; k < 3; k++) {
+        if ((split >= 0 && k != split) || d->borrowed[k]) continue;
+        for (int i = 0; i < d->count[k]; i++) {
+            const scene *sc = &d->scenes[d->list[k][i]];
+            if (listed(s, *n, sc->path)) continue;
+            snprintf(s[*n].name, sizeof s->name, "%s", sc->name);
+            snprintf(s[*n].path, sizeof s->path, "%s", sc->path);
+            s[(*n)++].split = (lm_data_split)k;
+        }
+    }
+    lm_dataset_close(d);
+    *out = s;
+    return LM_OK;
 }
 
 int lm_dataset_split_of_scene(const lm_dataset *d, const char *name_or_path)
@@ -850,13 +594,7 @@ static lm_status open_scenes(lm_dataset *d, lm_err *err)
     for (int p = 0; p < d->cfg.npaths && st == LM_OK; p++) st = add_path(d, d->cfg.paths[p], err);
     for (int i = 0; i < d->nscenes && st == LM_OK; i++) st = probe_scene(&d->scenes[i], err);
     if (st == LM_OK) st = build_splits(d, err);
-    if (st != LM_OK) return st;
-    d->cache_cap = d->cfg.cache_scenes > 0 && d->cfg.cache_scenes < d->nscenes
-                   ? d->cfg.cache_scenes : d->nscenes;
-    d->cache = calloc((size_t)(d->cache_cap + 1), sizeof *d->cache);
-    if (!d->cache) return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory");
-    for (int e = 0; e < d->cache_cap; e++) d->cache[e].scene = -1;
-    return LM_OK;
+    return st != LM_OK ? st : lm_ds_cache_init(d, err);
 }
 
 lm_dataset *lm_dataset_open(const lm_dataset_cfg *cfg, lm_err *err)
@@ -875,12 +613,7 @@ lm_dataset *lm_dataset_open(const lm_dataset_cfg *cfg, lm_err *err)
     lm_rng base;
     lm_rng_seed(&base, cfg->seed);
     for (int k = 0; k < 3; k++) d->rng[k] = lm_rng_split(&base, 0x5EED0000u + (uint64_t)k);
-    for (int t = 0; t < cfg->workers && st == LM_OK; t++) {
-        if (pthread_create(&d->threads[t], NULL, worker_main, d) != 0)
-            st = lm_err_set(err, LM_ERR_NOMEM, "dataset: cannot start worker thread %d", t);
-        else
-            d->nthreads++;
-    }
+    if (st == LM_OK) st = lm_ds_workers_start(d, err);
     if (st != LM_OK) {
         lm_dataset_close(d);
         return NULL;
@@ -891,14 +624,8 @@ lm_dataset *lm_dataset_open(const lm_dataset_cfg *cfg, lm_err *err)
 void lm_dataset_close(lm_dataset *d)
 {
     if (!d) return;
-    pthread_mutex_lock(&d->mu);
-    d->stop = 1;
-    pthread_cond_broadcast(&d->work_cv);
-    pthread_mutex_unlock(&d->mu);
-    for (int t = 0; t < d->nthreads; t++) pthread_join(d->threads[t], NULL);
-    for (int k = 0; k < 2; k++) free(d->slot[k].raw), free(d->slot[k].target);
-    for (int e = 0; e < d->cache_cap && d->cache; e++) lm_cube_free(&d->cache[e].cube);
-    free(d->cache);
+    lm_ds_workers_stop(d);
+    lm_ds_cache_free(d);
     for (int i = 0; i < d->nscenes; i++)
         free(d->scenes[i].path), free(d->scenes[i].name), free(d->scenes[i].group);
     free(d->scenes);

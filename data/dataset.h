@@ -117,6 +117,19 @@ int lm_dataset_split_borrowed(const lm_dataset *d, lm_data_split split);
 const char *lm_dataset_scene_name(const lm_dataset *d, lm_data_split split, int i);
 const char *lm_dataset_scene_path(const lm_dataset *d, lm_data_split split, int i);
 
+/* One scene of lm_dataset_list_scenes. */
+typedef struct lm_dataset_scene {
+    char name[256], path[1024];
+    lm_data_split split; /* the scene's own split (never a borrowed list's) */
+} lm_dataset_scene;
+/* The scenes the DATA paths name, split as lm_dataset_open splits them (opened with no workers
+ * and no synthetic samples, then closed): the list of `split`, or of every split for split < 0
+ * (train, val, test, in that order), each in list order; borrowed lists are skipped and each
+ * path comes once. *out (free() it) holds *n scenes (possibly none). Errors: those of
+ * lm_dataset_open; LM_ERR_NOMEM ("out of memory"). */
+lm_status lm_dataset_list_scenes(const char *const *paths, int npaths, const lm_system *sys,
+                                 int split, lm_dataset_scene **out, int *n, lm_err *err);
+
 typedef enum lm_sample_kind {
     LM_SAMPLE_SCENE = 0,       /* a patch of a real scene */
     LM_SAMPLE_NARROWBAND = 1,  /* synthetic: textureless Gaussian spectrum */

@@ -8,6 +8,7 @@
 #include "data/cube_io.h"
 #include "data/image.h"
 #include "data/limits.h"
+#include "data/util.h"
 #include <dirent.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -38,12 +39,6 @@ static int band_number(const char *name)
     while (p > name && p[-1] >= '0' && p[-1] <= '9') p--;
     if (p == dot || dot - p > 3 || p - name < 4 || strncasecmp(p - 4, "_ms_", 4) != 0) return 0;
     return atoi(p) > 0 ? atoi(p) : -1;
-}
-
-static int is_dir(const char *path)
-{
-    struct stat st;
-    return stat(path, &st) == 0 && S_ISDIR(st.st_mode);
 }
 
 /* Collect the band files of one folder. Band numbers outside 1..31 and duplicates are errors. */
@@ -88,7 +83,7 @@ static lm_status scan_nested(const char *dir, cave_bands *cb, lm_err *e)
         char sub[CAVE_PATH_MAX];
         if (de->d_name[0] == '.') continue;
         snprintf(sub, sizeof sub, "%s/%s", dir, de->d_name);
-        if (!is_dir(sub)) continue;
+        if (!lm_is_dir(sub)) continue;
         cave_bands t;
         lm_err ignore = {LM_OK, ""};
         lm_status st = scan_bands(sub, &t, &ignore); /* a failing folder is still a candidate:
@@ -170,7 +165,7 @@ static lm_status read_bands(const cave_bands *cb, lm_cube *cube, lm_err *e)
 lm_status lm_cube_read_cave(const char *dir, lm_cube *cube, lm_err *e)
 {
     memset(cube, 0, sizeof *cube);
-    if (!is_dir(dir)) {
+    if (!lm_is_dir(dir)) {
         struct stat st;
         return lm_err_set(e, LM_ERR_IO, stat(dir, &st) == 0
                           ? "%s: is a file, expected a CAVE scene folder" : "%s: no such folder",

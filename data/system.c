@@ -5,6 +5,7 @@
  * What it is not: a writer of system files, or the simulator. */
 #include "data/system.h"
 #include "data/spectra.h"
+#include "data/util.h"
 #include <jansson.h>
 #include <math.h>
 #include <stdarg.h>
@@ -558,9 +559,10 @@ uint64_t lm_file_hash(const char *path)
 {
     FILE *f = path && path[0] ? fopen(path, "rb") : NULL;
     if (!f) return 0;
-    uint64_t h = 1469598103934665603ull;
-    int ch;
-    while ((ch = fgetc(f)) != EOF) h = (h ^ (uint64_t)(unsigned char)ch) * 1099511628211ull;
+    uint64_t h = LM_FNV1A_BASIS_SHORT;
+    unsigned char buf[4096];
+    size_t got;
+    while ((got = fread(buf, 1, sizeof buf, f)) > 0) h = lm_fnv1a(h, buf, got);
     fclose(f);
     return h;
 }

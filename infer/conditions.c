@@ -1,5 +1,5 @@
 /* conditions.c — adverse capture conditions and the 3-dB failure point (conditions.h).
- * What it is not: the study loop over scenes and models (study/conditions.c). */
+ * What it is not: the study loop over scenes and models (study/conds.c). */
 #include "infer/conditions.h"
 #include <math.h>
 #include <stdlib.h>
@@ -66,9 +66,9 @@ int lm_cond_default_levels(lm_cond_family f, double *levels)
     return cnt[f];
 }
 
-int lm_cond_applies(lm_cond_family f, int in_channels)
+int lm_cond_applies(lm_cond_family f, int rgb_input)
 {
-    return in_channels == 1 || (f != LM_COND_LED_GAIN && f != LM_COND_MOTION);
+    return !rgb_input || (f != LM_COND_LED_GAIN && f != LM_COND_MOTION);
 }
 
 uint64_t lm_cond_stream(lm_cond_family f, double level)
@@ -151,7 +151,7 @@ static lm_status bad_family(const lm_infer_model *im, lm_cond_family f, double l
     if (!lm_cond_level_ok(f, level))
         return lm_err_set(err, LM_ERR_ARG, "conditions: %s level %g is out of range (%g..%g)",
                           lm_cond_name(f), level, lo, hi);
-    if (!lm_cond_applies(f, im->model->in_channels))
+    if (!lm_cond_applies(f, lm_model_has(im->model, LM_CAP_RGB_INPUT)))
         return lm_err_set(err, LM_ERR_ARG, "conditions: %s does not apply to %s (RGB input)",
                           lm_cond_name(f), im->model->preset);
     return LM_OK;

@@ -50,8 +50,9 @@ int lm_cond_range(lm_cond_family f, double *lo, double *hi);
 int lm_cond_level_ok(lm_cond_family f, double level);
 /* The default sweep (mild to severe) into levels (room for LM_COND_MAX_LEVELS); the count. */
 int lm_cond_default_levels(lm_cond_family f, double *levels);
-/* Does the family apply to a model with `in_channels` input channels (1 coded, 3 RGB)? */
-int lm_cond_applies(lm_cond_family f, int in_channels);
+/* Does the family apply to a model whose input is the coded frame (rgb_input 0) or the RGB
+ * camera image (rgb_input 1: lm_model_has(m, LM_CAP_RGB_INPUT))? */
+int lm_cond_applies(lm_cond_family f, int rgb_input);
 /* The generator stream of (family, level). */
 uint64_t lm_cond_stream(lm_cond_family f, double level);
 

@@ -12,8 +12,7 @@
 #include "infer/align.h"
 #include "infer/whole.h"
 
-static int is_rgb(const lm_infer_model *im) { return im->model->in_channels == 3; }
-static int is_mst(const lm_infer_model *im) { return !strcmp(im->model->family, "mst"); }
+static int is_rgb(const lm_infer_model *im) { return lm_model_has(im->model, LM_CAP_RGB_INPUT); }
 
 /* lm_eval_simulate with an explicit thread count and a mutable rng (advanced). */
 static lm_status simulate(const lm_infer_model *im, const lm_cube *truth,
@@ -72,7 +71,7 @@ lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *
     memset(out, 0, sizeof *out);
     lm_model *m = im ? im->model : NULL;
     if (!m) return lm_err_set(err, LM_ERR_ARG, "eval: reconstruct: no model");
-    if (is_mst(im)) { /* global attention: the whole frame at once */
+    if (lm_model_has(m, LM_CAP_WHOLE_FRAME)) { /* global attention: the whole frame at once */
         if (m->out_channels != 31)
             return lm_err_set(err, LM_ERR_ARG, "eval: model %s has %d output channels (need 31)",
                               m->preset, m->out_channels);

@@ -49,9 +49,9 @@ lm_status lm_eval_simulate(const lm_infer_model *im, const lm_cube *truth,
 
 /* A 31-band cube (400..700 nm, allocated here; lm_cube_free) from a frame of lm_eval_simulate's
  * layout: coded models through lm_tile_infer (to: window options) — or lm_whole_infer when
- * `whole` is non-zero and the model declares a receptive field (lm_whole_halo > 0); MST++
- * models (family "mst": the RGB "mst", "mst-tiny", and the coded "mst-coded", whose global
- * attention has no windows) through lm_mst_reconstruct on the whole frame with lm_nthreads(c)
+ * `whole` is non-zero and the model declares a receptive field (lm_whole_halo > 0); models
+ * with LM_CAP_WHOLE_FRAME (MST++: the RGB "mst", "mst-tiny", and the coded "mst-coded", whose
+ * global attention has no windows) through lm_mst_reconstruct on the whole frame with lm_nthreads(c)
  * threads (in its own ctx; `to` and `whole` unused). c must hold no tensors. Errors: those of
  * the inference paths; LM_ERR_ARG for a model that is neither coded nor MST++. */
 lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *frame,

@@ -9,12 +9,7 @@
 #include <sys/stat.h>
 #include "data/spectra.h"
 #include "data/mosaic.h"
-
-static int is_dir(const char *p)
-{
-    struct stat st;
-    return stat(p, &st) == 0 && S_ISDIR(st.st_mode);
-}
+#include "data/util.h"
 
 static int is_file(const char *p)
 {
@@ -26,7 +21,7 @@ static int is_file(const char *p)
 static lm_status read_meta(const char *path, lm_infer_model *im, char *preset, size_t np,
                            uint64_t *hash, lm_err *err)
 {
-    if (is_dir(path)) snprintf(im->weights, sizeof im->weights, "%s/model.safetensors", path);
+    if (lm_is_dir(path)) snprintf(im->weights, sizeof im->weights, "%s/model.safetensors", path);
     else snprintf(im->weights, sizeof im->weights, "%s", path);
     if (!is_file(im->weights))
         return lm_err_set(err, LM_ERR_IO, "%s: no such model (a run folder with "

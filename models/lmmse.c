@@ -358,12 +358,12 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
 
 int lm_lmmse_window(const lm_model *m)
 {
-    return m && !strcmp(m->family, "lmmse") ? ((const lmmse_net *)m->impl)->K : 0;
+    return m && m->forward == lmmse_forward ? ((const lmmse_net *)m->impl)->K : 0;
 }
 
 int lm_lmmse_features(const lm_model *m)
 {
-    return m && !strcmp(m->family, "lmmse") ? ((const lmmse_net *)m->impl)->D : 0;
+    return m && m->forward == lmmse_forward ? ((const lmmse_net *)m->impl)->D : 0;
 }
 
 lm_tensor *lm_lmmse_feature_maps(lm_ctx *c, const lm_model *m, lm_tensor *raw)

@@ -1,34 +1,76 @@
-/* model.c — presets by name and the common model life cycle. */
+/* model.c — the preset table (each row: builder and capability flags) and the common model
+ * life cycle. What it is not: the families' layers (models/<family>.c). */
 #include "models/model.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-typedef struct preset {
+typedef struct preset preset;
+struct preset {
     const char *name;
-    const char *family;
+    lm_status (*build)(lm_model *m, const preset *ps, lm_err *err); /* declares the family */
+    unsigned caps;   /* lm_model_cap flags, copied to lm_model.caps */
     lm_han_cfg han;  /* han */
-    int width;       /* mcan: feats; srnet: dim; rt: width */
-} preset;
-
-static const preset presets[] = {
-    {"linear", "linear", {0, 0, 0, 0}, 0},
-    {"lmmse", "lmmse", {0, 0, 0, 0}, 0},
-    {"lmmse-rf", "lmmse", {0, 0, 0, 0}, 256},
-    {"han-tiny", "han", {2, 2, 16, 4}, 0},
-    {"han-g3b2c32", "han", {3, 2, 32, 8}, 0},
-    {"han-small", "han", {4, 6, 64, 16}, 0},
-    {"han-paper", "han", {10, 18, 128, 16}, 0},
-    {"mcan-tiny", "mcan", {0, 0, 0, 0}, 16},
-    {"mcan", "mcan", {0, 0, 0, 0}, 64},
-    {"srnet-tiny", "srnet", {0, 0, 0, 0}, 8},
-    {"srnet", "srnet", {0, 0, 0, 0}, 32},
-    {"mst-tiny", "mst", {0, 0, 0, 0}, 1},
-    {"mst", "mst", {0, 0, 0, 0}, 3},
-    {"mst-coded", "mst-coded", {0, 0, 0, 0}, 3},
-    {"rt-8", "rt", {0, 0, 0, 0}, 8},
-    {"rt-16", "rt", {0, 0, 0, 0}, 16},
+    int width;       /* mcan: feats; srnet: dim; rt: width; mst: stages; lmmse: features */
 };
+
+/* The families' builders, called with their preset row. */
+static lm_status build_linear(lm_model *m, const preset *ps, lm_err *err)
+{
+    (void)ps;
+    return lm_linear_build(m, err);
+}
+static lm_status build_lmmse(lm_model *m, const preset *ps, lm_err *err)
+{
+    return lm_lmmse_build(m, 11, ps->width, err);
+}
+static lm_status build_han(lm_model *m, const preset *ps, lm_err *err)
+{
+    return lm_han_build(m, ps->han, err);
+}
+static lm_status build_mcan(lm_model *m, const preset *ps, lm_err *err)
+{
+    return lm_mcan_build(m, ps->width, err);
+}
+static lm_status build_srnet(lm_model *m, const preset *ps, lm_err *err)
+{
+    return lm_srnet_build(m, ps->width, err);
+}
+static lm_status build_mst(lm_model *m, const preset *ps, lm_err *err)
+{
+    return lm_mst_build(m, ps->width, !(ps->caps & LM_CAP_RGB_INPUT), err);
+}
+static lm_status build_rt(lm_model *m, const preset *ps, lm_err *err)
+{
+    return lm_rt_build(m, ps->width, err);
+}
+
+#define CL LM_CAP_OPENCL
+#define FIT LM_CAP_CLOSED_FORM
+#define RGB LM_CAP_RGB_INPUT
+#define WHOLE LM_CAP_WHOLE_FRAME
+static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rfD]" its flags */
+    {"linear", build_linear, CL, {0, 0, 0, 0}, 0},
+    {"lmmse", build_lmmse, CL | FIT, {0, 0, 0, 0}, 0},
+    {"lmmse-rf", build_lmmse, CL | FIT, {0, 0, 0, 0}, 256},
+    {"han-tiny", build_han, CL, {2, 2, 16, 4}, 0},
+    {"han-g3b2c32", build_han, CL, {3, 2, 32, 8}, 0},
+    {"han-small", build_han, CL, {4, 6, 64, 16}, 0},
+    {"han-paper", build_han, CL, {10, 18, 128, 16}, 0},
+    {"mcan-tiny", build_mcan, CL, {0, 0, 0, 0}, 16},
+    {"mcan", build_mcan, CL, {0, 0, 0, 0}, 64},
+    {"srnet-tiny", build_srnet, CL, {0, 0, 0, 0}, 8},
+    {"srnet", build_srnet, CL, {0, 0, 0, 0}, 32},
+    {"mst-tiny", build_mst, RGB | WHOLE, {0, 0, 0, 0}, 1},
+    {"mst", build_mst, RGB | WHOLE, {0, 0, 0, 0}, 3},
+    {"mst-coded", build_mst, WHOLE, {0, 0, 0, 0}, 3},
+    {"rt-8", build_rt, CL, {0, 0, 0, 0}, 8},
+    {"rt-16", build_rt, CL, {0, 0, 0, 0}, 16},
+};
+#undef CL
+#undef FIT
+#undef RGB
+#undef WHOLE
 #define NPRESETS (int)(sizeof presets / sizeof presets[0])
 
 const char *const *lm_model_presets(void)
@@ -92,15 +134,12 @@ static lm_status build(lm_model *m, const char *name, lm_err *err)
     m->conv_rows = -1;
     m->noise_sigma = -1.0f;
     m->noise_given = -1.0f;
-    if (K) return lm_lmmse_build(m, K, D, err);
-    if (!strcmp(ps->family, "han")) return lm_han_build(m, ps->han, err);
-    if (!strcmp(ps->family, "mcan")) return lm_mcan_build(m, ps->width, err);
-    if (!strcmp(ps->family, "srnet")) return lm_srnet_build(m, ps->width, err);
-    if (!strcmp(ps->family, "linear")) return lm_linear_build(m, err);
-    if (!strncmp(ps->family, "mst", 3)) return lm_mst_build(m, ps->width, ps->family[3] != 0, err);
-    if (!strcmp(ps->family, "rt")) return lm_rt_build(m, ps->width, err);
-    if (!strcmp(ps->family, "lmmse")) return lm_lmmse_build(m, 11, ps->width, err);
-    return lm_err_set(err, LM_ERR_ARG, "model %s: unknown family %s", name, ps->family);
+    if (K) {
+        m->caps = find_preset("lmmse")->caps;
+        return lm_lmmse_build(m, K, D, err);
+    }
+    m->caps = ps->caps;
+    return ps->build(m, ps, err);
 }
 
 static lm_model *model_new(const lm_mosaic *mosaic, lm_err *err)
@@ -150,7 +189,7 @@ lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
         m->params.frozen = 0;
         lm_params_init(&b->params);
     }
-    if (st == LM_OK && (m->in_channels != 1 || b->in_channels != 1 ||
+    if (st == LM_OK && ((m->caps | b->caps) & LM_CAP_RGB_INPUT ||
                         b->out_channels != m->out_channels))
         st = lm_err_set(err, LM_ERR_ARG, "residual %s on %s: both must map the raw mosaic to %d "
                         "channels", preset, base_preset, m->out_channels);
@@ -172,6 +211,8 @@ lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
     m->conv_rows = m->conv_rows < 0 || b->conv_rows < 0 ? -1
                    : m->conv_rows > b->conv_rows ? m->conv_rows : b->conv_rows;
     m->noise_input |= b->noise_input;
+    /* a residual is trained by gradient descent; on OpenCL only if both parts run there */
+    m->caps = ((m->caps | b->caps) & LM_CAP_WHOLE_FRAME) | (m->caps & b->caps & LM_CAP_OPENCL);
     m->res_scale = g;
     return m;
 }

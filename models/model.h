@@ -8,6 +8,17 @@
 
 #define LM_MODEL_OUT_CHANNELS 33
 
+/* Capability flags of a preset: one row of the preset table (models/model.c) sets them on
+ * lm_model.caps; callers ask lm_model_has, never the family name or the channel count. */
+typedef enum lm_model_cap {
+    LM_CAP_RGB_INPUT = 1u << 0,   /* input: the 3-channel RGB camera image (the passive MST++
+                                   * baseline), not the coded frame */
+    LM_CAP_WHOLE_FRAME = 1u << 1, /* global context: runs on the whole frame at once
+                                   * (lm_mst_reconstruct), never in windows or strips */
+    LM_CAP_OPENCL = 1u << 2,      /* may run on an OpenCL device (--device opencl) */
+    LM_CAP_CLOSED_FORM = 1u << 3, /* fitted in closed form (train/fit_lmmse.h) */
+} lm_model_cap;
+
 typedef struct lm_model lm_model;
 struct lm_model {
     char preset[64];
@@ -21,7 +32,9 @@ struct lm_model {
     void (*init)(lm_model *m, lm_rng *r);   /* default initialisation, declaration order */
     void (*free_impl)(lm_model *m);
     void *impl;
-    /* Capabilities (set by the builder; callers ask these, not the family name). */
+    /* Capabilities: caps from the preset row; the rest set by the builder. Callers ask these,
+     * not the family name. */
+    unsigned caps;                 /* lm_model_cap flags (lm_model_has) */
     int conv_rows;                 /* rows of context each output row needs beyond the
                                     * demosaic's (finite receptive field: whole frames run in
                                     * strips, infer/whole.h); -1 = global context (default) */
@@ -60,6 +73,8 @@ lm_tensor *lm_model_forward(lm_ctx *c, lm_model *m, lm_tensor *raw);
 lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
                                    const lm_mosaic *mosaic, uint64_t seed, int train_base,
                                    float res_init, lm_err *err);
+/* Does m have every flag of caps (lm_model_cap)? */
+static inline int lm_model_has(const lm_model *m, unsigned caps) { return (m->caps & caps) == caps; }
 /* Is name a preset (a listed name or lmmse-K)? */
 int lm_model_preset_known(const char *name);
 /* NULL-terminated list of preset names. */

@@ -262,7 +262,7 @@ lm_status lm_mst_build(lm_model *m, int stages, int raw_input, lm_err *err)
 lm_status lm_mst_reconstruct(lm_model *m, const float *in, int H, int W, float *out,
                              int nthreads, lm_err *err)
 {
-    if (!m || strcmp(m->family, "mst"))
+    if (!m || m->forward != mst_forward)
         return lm_err_set(err, LM_ERR_ARG, "mst reconstruct: model %s is not MST++",
                           m ? m->preset : "(null)");
     lm_ctx c;

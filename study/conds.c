@@ -27,7 +27,7 @@ lm_status lm_study_cond_add(lm_ctx *c, const lm_infer_model *im, const lm_study_
     lm_metrics_acc_add(&a->clean, &m);
     for (int i = 0; i < cfg->ncond; i++) {
         const lm_study_cond *sc = &cfg->cond[i];
-        if (!lm_cond_applies(sc->family, im->model->in_channels)) continue;
+        if (!lm_cond_applies(sc->family, lm_model_has(im->model, LM_CAP_RGB_INPUT))) continue;
         for (int k = 0; k < sc->nlevels; k++) {
             if (lm_cond_eval(c, im, truth, sc->family, sc->levels[k], &to, rs, &m, &u, err))
                 return err->status;
@@ -72,7 +72,7 @@ json_t *lm_study_cond_json(const lm_study_cfg *cfg, const lm_infer_model *im,
     json_t *fam = json_array();
     for (int i = 0; i < cfg->ncond; i++) {
         const lm_study_cond *sc = &cfg->cond[i];
-        if (lm_cond_applies(sc->family, im->model->in_channels))
+        if (lm_cond_applies(sc->family, lm_model_has(im->model, LM_CAP_RGB_INPUT)))
             json_array_append_new(fam, family_json(sc, a, i, cm.psnr));
         else
             json_array_append_new(fam, json_pack("{s:s, s:s, s:b}", "family",

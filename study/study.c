@@ -13,6 +13,7 @@
 #include <dirent.h>
 #include "data/cube_io.h"
 #include "data/dataset.h"
+#include "data/util.h"
 #include "data/synth.h"
 #include "models/profile.h"
 #include "study/study.h"
@@ -41,13 +42,6 @@ static void held_free(held *h)
     memset(h, 0, sizeof *h);
 }
 
-static uint64_t fnv1a(const char *s)
-{
-    uint64_t h = 1469598103934665603ull;
-    for (; *s; s++) h = (h ^ (unsigned char)*s) * 1099511628211ull;
-    return h;
-}
-
 static lm_status load_system(const lm_study_cfg *cfg, lm_system *sys, lm_err *err)
 {
     lm_status st = cfg->train.system[0] ? lm_system_load(cfg->train.system, sys, err)
@@ -64,30 +58,19 @@ static lm_status list_test_scenes(const lm_study_cfg *cfg, held *h, lm_err *err)
     if (load_system(cfg, &sys, err)) return err->status;
     const char *paths[LM_TRAIN_MAX_PATHS];
     for (int i = 0; i < cfg->train.ndata; i++) paths[i] = cfg->train.data[i];
-    lm_dataset_cfg dc;
-    lm_dataset_default_cfg(&dc);
-    dc.paths = paths;
-    dc.npaths = cfg->train.ndata;
-    dc.sys = &sys;
-    dc.workers = 0;
-    dc.synth_fraction = 0.0f;
-    lm_dataset *d = lm_dataset_open(&dc, err);
-    lm_status st = d ? LM_OK : err->status;
-    int total = d && !lm_dataset_split_borrowed(d, LM_SPLIT_TEST)
-                ? lm_dataset_num_scenes(d, LM_SPLIT_TEST) : 0;
+    lm_dataset_scene *ls = NULL;
+    int total = 0;
+    lm_status st = lm_dataset_list_scenes(paths, cfg->train.ndata, &sys, LM_SPLIT_TEST, &ls,
+                                          &total, err);
+    if (st == LM_ERR_NOMEM) lm_err_set(err, st, "study: out of memory");
     h->name = calloc((size_t)total + 1, sizeof *h->name);
     h->path = calloc((size_t)total + 1, sizeof *h->path);
     if (!st && (!h->name || !h->path)) st = lm_err_set(err, LM_ERR_NOMEM, "study: out of memory");
     for (int i = 0; !st && i < total; i++) {
-        const char *nm = lm_dataset_scene_name(d, LM_SPLIT_TEST, i);
-        const char *p = lm_dataset_scene_path(d, LM_SPLIT_TEST, i);
-        int dup = 0;
-        for (int j = 0; j < h->n; j++) dup |= !strcmp(h->path[j], p);
-        if (dup) continue;
-        snprintf(h->name[h->n], sizeof h->name[0], "%s", nm);
-        snprintf(h->path[h->n++], sizeof h->path[0], "%s", p);
+        snprintf(h->name[h->n], sizeof h->name[0], "%s", ls[i].name);
+        snprintf(h->path[h->n++], sizeof h->path[0], "%s", ls[i].path);
     }
-    lm_dataset_close(d);
+    free(ls);
     lm_system_free(&sys);
     return st;
 }
@@ -159,7 +142,7 @@ static lm_status eval_held(lm_ctx *c, const lm_infer_model *im, const lm_study_c
             : lm_cube_read(h->path[i], &cube, err);
         if (st) return st;
         st = lm_eval_prepare(&cube, im->model->mosaic.ty, im->model->mosaic.tx, err);
-        lm_rng rs = lm_rng_split(&base, h->procedural ? h->seed[i] : fnv1a(h->name[i]));
+        lm_rng rs = lm_rng_split(&base, h->procedural ? h->seed[i] : lm_fnv1a_str(LM_FNV1A_BASIS_SHORT, h->name[i]));
         if (!st) st = lm_eval_scene(c, im, &cube, cfg->noise, cfg->nnoise, &to, &rs, m, err);
         if (!st && ca && cfg->ncond > 0 && i < ncs)
             st = lm_study_cond_add(c, im, cfg, &cube, &rs, ca, err);
@@ -232,7 +215,7 @@ static lm_status count_costs(lm_model *m, const lm_study_cfg *cfg, json_t *rec, 
         return LM_OK;
     }
     lm_profile p;
-    int whole = !strcmp(m->family, "mst"); /* MST++ runs on the whole frame (lm_eval_reconstruct) */
+    int whole = lm_model_has(m, LM_CAP_WHOLE_FRAME); /* as lm_eval_reconstruct runs it */
     lm_status st = whole ? lm_model_profile(m, 1, cfg->frame_h, cfg->frame_w, &p, err)
                          : lm_model_profile(m, 1, to.win_h, to.win_w, &p, err);
     if (!st) {
@@ -483,20 +466,6 @@ static lm_status train_preset(const lm_study_cfg *cfg, const char *dir, const ru
     return LM_OK;
 }
 
-/* mkdir -p. */
-static int make_dirs(const char *path)
-{
-    char buf[PATH_MAX_LEN];
-    snprintf(buf, sizeof buf, "%s", path);
-    for (char *q = buf + 1; *q; q++)
-        if (*q == '/') {
-            *q = 0;
-            if (mkdir(buf, 0777) && errno != EEXIST) return -1;
-            *q = '/';
-        }
-    return mkdir(buf, 0777) && errno != EEXIST ? -1 : 0;
-}
-
 static lm_status write_json_atomic(json_t *j, const char *path, lm_err *err)
 {
     char tmp[PATH_MAX_LEN + 32];
@@ -679,7 +648,7 @@ lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_
     snprintf(runs, sizeof runs, "%s/runs", dir);
     held h;
     lm_status st = held_open(cfg, &h, &out->held_out, err); /* checks the data first */
-    if (!st && make_dirs(runs))
+    if (!st && lm_make_dirs(runs, NULL, 0, NULL, 0))
         st = lm_err_set(err, LM_ERR_WRITE, "%s: cannot create (%s)", runs, strerror(errno));
     if (!st && h.procedural)
         fprintf(o.log, "study: the test split of the data is empty; evaluating on %d procedural "

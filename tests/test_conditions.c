@@ -247,14 +247,14 @@ static void test_eval_and_errors(void)
     lm_err_clear(&e);
     CHECK(lm_cond_eval(&c, &g_im, &g_truth, LM_COND_PHOTONS, -1, &to, &rng, m, NULL, &e) ==
           LM_ERR_ARG);
-    g_im.model->in_channels = 3; /* as an RGB model: LED gains and motion do not apply */
+    g_im.model->caps |= LM_CAP_RGB_INPUT; /* as an RGB model: LED gains and motion do not apply */
     lm_err_clear(&e);
     CHECK(lm_cond_eval(&c, &g_im, &g_truth, LM_COND_LED_GAIN, 5, &to, &rng, m, NULL, &e) ==
           LM_ERR_ARG && strstr(e.msg, "RGB"));
     lm_err_clear(&e);
     CHECK(lm_cond_eval(&c, &g_im, &g_truth, LM_COND_MOTION, 5, &to, &rng, m, NULL, &e) ==
           LM_ERR_ARG && strstr(e.msg, "motion"));
-    g_im.model->in_channels = 1;
+    g_im.model->caps &= ~(unsigned)LM_CAP_RGB_INPUT;
     lm_ctx_free(&c);
 }
 
@@ -307,8 +307,8 @@ static void test_names(void)
         for (int i = 0; i < n; i++) CHECK(lm_cond_level_ok((lm_cond_family)f, lv[i]));
     }
     CHECK(lm_cond_parse("bogus") == -1 && lm_cond_name(LM_COND_NFAMILIES) == NULL);
-    CHECK(lm_cond_applies(LM_COND_LED_GAIN, 1) && !lm_cond_applies(LM_COND_LED_GAIN, 3));
-    CHECK(lm_cond_applies(LM_COND_PHOTONS, 3) && !lm_cond_applies(LM_COND_MOTION, 3));
+    CHECK(lm_cond_applies(LM_COND_LED_GAIN, 0) && !lm_cond_applies(LM_COND_LED_GAIN, 1));
+    CHECK(lm_cond_applies(LM_COND_PHOTONS, 1) && !lm_cond_applies(LM_COND_MOTION, 1));
     CHECK(lm_cond_stream(LM_COND_PHOTONS, 100) != lm_cond_stream(LM_COND_PHOTONS, 30));
     CHECK(lm_cond_stream(LM_COND_PHOTONS, 5) != lm_cond_stream(LM_COND_DEAD_PIXELS, 5));
 }

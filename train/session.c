@@ -219,7 +219,7 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
     lm_dataset *d = NULL;
     lm_status st = lm_mosaic_from_system(&sys, &mo, err);
     if (!st && !(m = create_model(cfg, &mo, opts.system_hash, err))) st = err->status;
-    int closed = !st && lm_lmmse_window(m) && !m->base && strcmp(cfg->fit, "sgd");
+    int closed = !st && lm_model_has(m, LM_CAP_CLOSED_FORM) && strcmp(cfg->fit, "sgd");
     if (!st && !closed && !strcmp(cfg->fit, "closed"))
         st = lm_err_set(err, LM_ERR_ARG, "config: field 'fit': model %s has no closed form (only "
                         "lmmse presets)", cfg->model);
@@ -234,7 +234,7 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         lm_dataset_describe(d, opts.progress_out ? opts.progress_out : stderr);
     if (!st && closed) {
         st = fit_closed(cfg, m, d, &opts, res, err);
-    } else if (!st && m->in_channels == 3) {
+    } else if (!st && lm_model_has(m, LM_CAP_RGB_INPUT)) {
         /* the passive RGB baseline (MST++): same samples, seen through an RGB camera */
         lm_train_source src;
         st = lm_train_source_rgb_open(&src, d, NULL, LM_RGBCAM_D65, NULL, cfg->patch_h,

@@ -8,6 +8,7 @@
 #include "train/train.h"
 #include "autograd/autograd.h"
 #include "data/noise_est.h"
+#include "data/util.h"
 #include "tensor/device.h"
 #include <errno.h>
 #include <math.h>
@@ -68,22 +69,10 @@ static double train_s(const loop *L)
 
 lm_status lm_train_make_dir_top(const char *path, char *top, size_t n, lm_err *err)
 {
-    char buf[LM_TRAIN_PATH_LEN];
-    snprintf(buf, sizeof buf, "%s", path);
-    if (top && n) top[0] = 0;
-    for (char *p = buf + 1; ; p++) {
-        if (*p == '/' || *p == 0) {
-            char ch = *p;
-            *p = 0;
-            int made = mkdir(buf, 0777) == 0;
-            if (!made && errno != EEXIST)
-                return lm_err_set(err, LM_ERR_WRITE, "output %s: cannot create folder %s: %s",
-                                  path, buf, strerror(errno));
-            if (made && top && n && !top[0]) snprintf(top, n, "%s", buf);
-            *p = ch;
-            if (!ch) break;
-        }
-    }
+    char failed[LM_TRAIN_PATH_LEN];
+    if (lm_make_dirs(path, top, n, failed, sizeof failed))
+        return lm_err_set(err, LM_ERR_WRITE, "output %s: cannot create folder %s: %s", path,
+                          failed, strerror(errno));
     return LM_OK;
 }
 
@@ -616,7 +605,7 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
     if (!res) res = &dummy;
     memset(res, 0, sizeof *res);
     if (lm_train_cfg_validate(cfg, err)) return err->status;
-    if (model->in_channels == 1 &&
+    if (!lm_model_has(model, LM_CAP_RGB_INPUT) && /* the coded frame: whole tiles */
         (cfg->patch_h % model->mosaic.ty || cfg->patch_w % model->mosaic.tx))
         return lm_err_set(err, LM_ERR_ARG, "config: field 'patch': %dx%d is not a multiple of the "
                           "%d x %d tile", cfg->patch_h, cfg->patch_w, model->mosaic.ty,

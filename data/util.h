@@ -1,0 +1,28 @@
+/* util.h — small utilities shared by data/ and the layers above it, written once: the FNV-1a
+ * hash (of strings, bytes and whole files), "is this a folder" and mkdir -p.
+ * What it is not: file formats (cube_io.h) or dataset logic (dataset.h). */
+#ifndef LM_DATA_UTIL_H
+#define LM_DATA_UTIL_H
+#include <stddef.h>
+#include <stdint.h>
+
+/* FNV-1a, 64-bit: start from a basis, feed bytes with lm_fnv1a (chainable). Two bases are in
+ * use and must stay as they are (the values are stored or seed the numbers):
+ * LM_FNV1A_BASIS, the standard offset basis (the dataset split's group hash), and
+ * LM_FNV1A_BASIS_SHORT, the standard one without its last digit, as the first copies wrote it
+ * (lm_file_hash, whose value checkpoints record, and the per-scene seeds of eval and study). */
+#define LM_FNV1A_BASIS 0xcbf29ce484222325ull
+#define LM_FNV1A_BASIS_SHORT 1469598103934665603ull
+uint64_t lm_fnv1a(uint64_t h, const void *bytes, size_t n);
+/* lm_fnv1a of the bytes of a NUL-terminated string (not the NUL), from basis h. */
+uint64_t lm_fnv1a_str(uint64_t h, const char *s);
+
+/* 1 when path names an existing folder (following links), else 0. */
+int lm_is_dir(const char *path);
+/* mkdir -p path (mode 0777 less the umask): every missing folder of path, parents first.
+ * Returns 0, or -1 with errno set and, when failed is non-NULL, the folder that could not be
+ * made in failed[fn]. When top is non-NULL, top[tn] receives the first (outermost) folder this
+ * call created ("" when all existed), for undoing it. */
+int lm_make_dirs(const char *path, char *top, size_t tn, char *failed, size_t fn);
+
+#endif
