@@ -110,7 +110,7 @@ static int print_plan(const lm_study_cfg *cfg, const char *dir)
     printf("\ntraining: %ld iterations, patch %dx%d, batch %d x %d, lr %g, narrowband synthetic "
            "share %g, procedural share %g, seed %llu\ndata:", t->iterations, t->patch_h,
            t->patch_w, t->batch, t->accum_steps, (double)t->lr, (double)t->synth_fraction,
-           (double)t->procedural_fraction, (unsigned long long)t->seed);
+           (double)lm_train_procedural_share(t), (unsigned long long)t->seed);
     for (int i = 0; i < t->ndata; i++) printf(" %s", t->data[i]);
     printf("\nnoise %%:");
     for (int k = 0; k < cfg->nnoise; k++) printf(" %g", 100.0 * cfg->noise[k]);

@@ -298,7 +298,7 @@ static void write_md(FILE *f, const lm_study_cfg *cfg, const lm_study *s, const 
                "accumulated, lr %g (%s), narrowband synthetic share %g, procedural share %g, "
                "training noise k ~ U[%g, %g], seed %llu.\n\n", cfg->path, t->iterations,
             t->patch_h, t->patch_w, t->batch, t->accum_steps, (double)t->lr, t->schedule,
-            (double)t->synth_fraction, (double)t->procedural_fraction,
+            (double)t->synth_fraction, (double)lm_train_procedural_share(t),
             (double)t->noise_min, (double)t->noise_max, (unsigned long long)t->seed);
     if (cfg->preset_train && json_object_size(cfg->preset_train)) {
         fprintf(f, "Per-preset training fields over these (`preset_train`):");

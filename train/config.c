@@ -44,7 +44,8 @@ static const field fields[] = {
     FLD("synth_fraction", F_FLOAT, synth_fraction, "F", "share of the paper's synthetic samples "
         "(textureless narrowband spectra)", 0, 1),
     FLD("procedural_fraction", F_FLOAT, procedural_fraction, "F", "share of procedural scenes "
-        "(textured, varied spectra; not in the paper)", 0, 1),
+        "(textured, varied spectra; not in the paper; -1: 0.2, at most 1 - synth_fraction)", -1,
+        1),
     FLD("patch", F_PATCH, patch_h, "HxW", "patch size, multiples of the tile (66x64)", 1,
         MAX_PATCH),
     FLD("batch", F_INT, batch, "N", "samples per forward pass (14)", 1, MAX_BATCH),
@@ -95,12 +96,21 @@ static const field fields[] = {
 };
 #define NFIELDS (int)(sizeof fields / sizeof fields[0])
 
+float lm_train_procedural_share(const lm_train_cfg *c)
+{
+    if (c->procedural_fraction >= 0.0f) return c->procedural_fraction;
+    float rest = 1.0f - c->synth_fraction;
+    return rest < LM_TRAIN_PROCEDURAL_DEFAULT ? (rest > 0.0f ? rest : 0.0f)
+                                              : LM_TRAIN_PROCEDURAL_DEFAULT;
+}
+
 void lm_train_cfg_default(lm_train_cfg *c)
 {
     memset(c, 0, sizeof *c);
     c->version = LM_TRAIN_CFG_VERSION;
     snprintf(c->model, sizeof c->model, "han-paper");
     c->synth_fraction = 0.33f;
+    c->procedural_fraction = -1.0f; /* lm_train_procedural_share: 0.2 (measured, README) */
     c->patch_h = 66, c->patch_w = 64;
     c->batch = 14, c->accum_steps = 2;
     c->iterations = 50000;
@@ -451,10 +461,13 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     for (const char *p = c->snapshots; *p; p++)
         if (!strchr("0123456789.,", *p))
             BAD("'snapshots': must be minutes separated by commas (got '%s')", c->snapshots);
-    if (c->synth_fraction + c->procedural_fraction > 1.0f)
+    if (!(c->procedural_fraction == -1.0f || c->procedural_fraction >= 0.0f))
+        BAD("'procedural_fraction': must be -1 (default share) or in [0, 1] (got %g)",
+            (double)c->procedural_fraction);
+    if (c->procedural_fraction >= 0.0f && c->synth_fraction + c->procedural_fraction > 1.0f)
         BAD("'procedural_fraction': synth_fraction + procedural_fraction must be <= 1 (got %g)",
             (double)(c->synth_fraction + c->procedural_fraction));
-    if (c->ndata == 0 && c->synth_fraction + c->procedural_fraction < 1)
+    if (c->ndata == 0 && c->synth_fraction + lm_train_procedural_share(c) < 1)
         BAD("'data': no scenes given (add --data PATH, or make synth_fraction + "
             "procedural_fraction 1)%s", "");
     return LM_OK;

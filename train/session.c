@@ -43,7 +43,7 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.patch_h = cfg->patch_h;
     dc.patch_w = cfg->patch_w;
     dc.synth_fraction = cfg->synth_fraction;
-    dc.procedural_fraction = cfg->procedural_fraction;
+    dc.procedural_fraction = lm_train_procedural_share(cfg);
     dc.noise_min = cfg->noise_min;
     dc.noise_max = cfg->noise_max;
     dc.seed = cfg->seed;

@@ -40,7 +40,8 @@ typedef struct lm_train_cfg {
     int ndata;
     float synth_fraction;           /* share of the paper's synthetic samples: textureless
                                      * narrowband patches (paper 0.33) */
-    float procedural_fraction;      /* share of procedural scenes (not in the paper; 0) */
+    float procedural_fraction;      /* share of procedural scenes (not in the paper); -1 (the
+                                     * default): lm_train_procedural_share */
     int patch_h, patch_w;           /* 66 x 64 */
     int batch, accum_steps;         /* 14, 2 */
     long iterations;                /* optimizer updates (paper 50,000) */
@@ -85,6 +86,11 @@ typedef struct lm_train_cfg {
     char clock[8];
 } lm_train_cfg;
 
+/* The default share of procedural scenes, chosen on the real validation split (README). */
+#define LM_TRAIN_PROCEDURAL_DEFAULT 0.2f
+/* The share of procedural scenes a run draws: procedural_fraction, or when it is -1 the
+ * default share, at most 1 - synth_fraction. */
+float lm_train_procedural_share(const lm_train_cfg *cfg);
 /* Paper defaults (system.md §7) with output "runs/train". */
 void lm_train_cfg_default(lm_train_cfg *cfg);
 /* Merge a JSON config file over cfg. Unknown fields and wrong types are errors naming the
