@@ -17,8 +17,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 #include "cli/cli_util.h"
 #include "cli/commands.h"
+#include "train/dist.h"
 #include "data/cube_io.h"
 #include "data/frames.h"
 #include "data/image.h"
@@ -150,6 +152,7 @@ typedef struct infer_run {
     float *rgb;
     infer_align al;
     char tmp[1100];
+    int first, end;  /* the frames this process reconstructs: [first, end) */
 } infer_run;
 
 /* Write one reconstructed cube (clamped to >= 0) and its sRGB preview into the staging dir. */
@@ -226,9 +229,11 @@ static lm_status load_planes(infer_run *r, int i, float *dst, lm_err *e)
 static lm_status align_step(infer_run *r, int i, lm_err *e)
 {
     infer_align *a = &r->al;
-    if (i == 0) {
-        a->cur = a->buf[0];
-        if (load_planes(r, 0, a->cur, e)) return e->status;
+    if (i == r->first) { /* this process's first frame (MPI ranks take blocks of frames) */
+        a->cur = a->buf[i % 3];
+        if (load_planes(r, i, a->cur, e)) return e->status;
+        a->prev = i > 0 ? a->buf[(i - 1) % 3] : NULL;
+        if (i > 0 && load_planes(r, i - 1, a->prev, e)) return e->status;
     }
     if (i + 1 < r->seq.count) {
         a->next = a->buf[(i + 1) % 3];
@@ -323,7 +328,7 @@ static int run_frames(infer_run *r)
 {
     lm_err e;
     lm_err_clear(&e);
-    for (int i = 0; i < r->seq.count; i++) {
+    for (int i = r->first; i < r->end; i++) {
         double t0 = omp_get_wtime();
         lm_frame f;
         lm_cube cube;
@@ -410,6 +415,34 @@ static int open_inputs(infer_run *r, lm_err *e)
     return align_init(r, e);
 }
 
+/* Under mpirun: rank r of N reconstructs the block of frames [r n / N, (r + 1) n / N) (it
+ * reads the neighbours that alignment needs itself) into rank 0's staging folder; rank 0
+ * renames it into place once every rank has finished, or removes it when any failed.
+ * rc: this rank's status so far. Returns the job's status (the worst rank's). */
+static int run_ranks(infer_run *r, int rc)
+{
+    int rank = lm_dist_rank(), n = lm_dist_size();
+    long v[2] = {rc, (long)getpid()};
+    if (rank == 0 && !rc) v[0] = rc = lm_cli_stage_dir(r->c, r->o->output, r->tmp, sizeof r->tmp);
+    long any = rc; /* every rank opened its inputs, and rank 0 staged the output */
+    lm_dist_max_long(&any, 1);
+    lm_dist_bcast_long(v, 2);
+    if (rank > 0) snprintf(r->tmp, sizeof r->tmp, "%s.tmp.%ld", r->o->output, v[1]);
+    if (any) {
+        if (rank == 0 && !rc) lm_cli_remove_tree(r->tmp);
+        return rc ? rc : (int)any;
+    }
+    r->first = (int)((long)r->seq.count * rank / n);
+    r->end = (int)((long)r->seq.count * (rank + 1) / n);
+    rc = run_frames(r);
+    any = rc;
+    lm_dist_max_long(&any, 1);
+    if (rank > 0) return rc ? rc : (int)any;
+    if (any) lm_cli_remove_tree(r->tmp);
+    else if (lm_cli_commit_dir(r->c, r->tmp, r->o->output)) rc = 1;
+    return rc ? rc : (int)any;
+}
+
 int lm_cmd_infer(int argc, char **argv)
 {
     lm_cli c;
@@ -417,6 +450,7 @@ int lm_cmd_infer(int argc, char **argv)
     lm_cli_init(&c, "lumosaic infer", argc, argv);
     int rc = parse(&c, &o);
     if (rc != 1) return rc;
+    lm_dist_init(NULL, NULL); /* under mpirun: the frames are spread over the ranks */
     lm_cli_common_apply(&o.com);
     if (lm_cli_signals_init(&c, 0)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
     infer_run r;
@@ -437,11 +471,15 @@ int lm_cmd_infer(int argc, char **argv)
         else if (r.dev.backend->device != LM_DEVICE_CPU)
             fprintf(stderr, "device: %s\n", lm_tile_device_name(&r.dev));
     }
-    if (!rc) rc = lm_cli_stage_dir(&c, o.output, r.tmp, sizeof r.tmp);
-    if (!rc) {
-        rc = run_frames(&r);
-        if (rc) lm_cli_remove_tree(r.tmp);
-        else if (lm_cli_commit_dir(&c, r.tmp, o.output)) rc = 1;
+    if (lm_dist_size() > 1) rc = run_ranks(&r, rc);
+    else {
+        r.end = r.seq.count;
+        if (!rc) rc = lm_cli_stage_dir(&c, o.output, r.tmp, sizeof r.tmp);
+        if (!rc) {
+            rc = run_frames(&r);
+            if (rc) lm_cli_remove_tree(r.tmp);
+            else if (lm_cli_commit_dir(&c, r.tmp, o.output)) rc = 1;
+        }
     }
     lm_tile_device_close(&r.dev);
     if (have_ctx) lm_ctx_free(&r.ctx);

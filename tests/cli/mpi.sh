@@ -89,6 +89,28 @@ for ra, rb in zip(a, b):
     assert [l["psnr"] for l in ra["eval"]["levels"]] == [l["psnr"] for l in rb["eval"]["levels"]], ra["preset"]
 PY
 
+# infer under mpirun: each rank a block of frames (aligned with the neighbours it reads
+# itself), one output folder: the same cubes as one process, bit for bit
+DEMO=$(dirname "$0")/../../models/demo/rt16-lmmse.safetensors
+"$LM" simulate --input "$CAVE" --video --frames 5 --motion translate:60,0 --crop \
+  --output "$T/vid" > /dev/null 2> "$T/err"
+check "simulate a video: $(tail -1 "$T/err")" [ $? -eq 0 ]
+"$LM" infer --model "$DEMO" --input "$T/vid/frames" --output "$T/inf1" --threads 1 \
+  > /dev/null 2> "$T/err"
+check "infer, one process: $(tail -1 "$T/err")" [ $? -eq 0 ]
+$MPI "$LM" infer --model "$DEMO" --input "$T/vid/frames" --output "$T/inf2" --threads 1 \
+  > /dev/null 2> "$T/err"
+check "infer, 2 ranks: $(tail -1 "$T/err")" [ $? -eq 0 ]
+check "infer, 2 ranks: every frame once" [ "$(ls "$T/inf2" | grep -c '^cube_.*exr$')" -eq 5 ]
+check "infer, 2 ranks: no staging folder left" [ -z "$(ls -d "$T"/inf2.tmp.* 2> /dev/null)" ]
+for f in "$T"/inf1/cube_*.exr; do
+  check "infer, 2 ranks: $(basename "$f") identical" cmp -s "$f" "$T/inf2/$(basename "$f")"
+done
+$MPI "$LM" infer --model "$DEMO" --input "$T/vid/frames" --output "$T/inf2" --threads 1 \
+  > /dev/null 2> "$T/err"
+check "infer, 2 ranks: an existing output is refused" [ $? -ne 0 ]
+check "infer, 2 ranks: the output is untouched" [ "$(ls "$T/inf2" | grep -c '^cube_')" -eq 5 ]
+
 # a killed rank ends the job (non-zero), it does not hang
 $MPI "$LM" train $C --batch 2 --workers 0 --iterations 100000 --output "$T/kill" \
   > /dev/null 2> "$T/kerr" &
