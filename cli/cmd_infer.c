@@ -370,8 +370,6 @@ static int open_auto(infer_run *r, lm_err *e)
 {
     lm_auto_calib *a = &r->cal;
     if (lm_auto_load(r->o->auto_file, a, e)) return fail(r->c, e, 0);
-    if (r->o->com.device && strcmp(r->o->com.device, "cpu"))
-        return lm_cli_error(r->c, "--model auto runs on the cpu only");
     for (int m = 0; m < a->nmodels; m++) {
         lm_infer_model *im = m ? &r->more[m] : &r->im;
         if (lm_infer_model_load(a->models[m].path, r->o->system, im, e))
@@ -466,7 +464,9 @@ int lm_cmd_infer(int argc, char **argv)
         rc = 1;
     } else if (!rc) {
         have_ctx = 1;
-        if (lm_tile_device_open(&r.dev, o.com.device, r.im.model, &r.ctx, &e))
+        if (o.is_auto ? lm_tile_device_open_models(&r.dev, o.com.device, r.models,
+                                                   r.cal.nmodels, &r.ctx, &e)
+                      : lm_tile_device_open(&r.dev, o.com.device, r.im.model, &r.ctx, &e))
             rc = fail(&c, &e, 0);
         else if (r.dev.backend->device != LM_DEVICE_CPU)
             fprintf(stderr, "device: %s\n", lm_tile_device_name(&r.dev));

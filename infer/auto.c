@@ -342,19 +342,20 @@ typedef struct mix {
     const int *win_model;
     long *windows;
     int *idx;                  /* fold batch scratch */
+    float *host;               /* host scratch: raw, a group's input, outputs, a group's output */
+    size_t cap;                /* windows' pixels the scratch holds per plane */
 } mix;
 
-/* Model m on windows idx[0..k) of raw (B x 1 x h x w, host), outputs into y (host). */
-static int run_group(lm_ctx *c, lm_model *m, const lm_tensor *raw, const int *idx, int k,
-                     lm_tensor *y)
+/* Model m on windows idx[0..k) of raw (nb x 1 x h x w floats, host), its outputs into y
+ * (nb x oc x h x w floats, host). The group goes in and out through lm_tensor_from /
+ * lm_tensor_read, so the ctx may run on a device. */
+static int run_group(lm_ctx *c, lm_model *m, const float *raw, int h, int w, const int *idx,
+                     int k, int oc, float *y, float *gin, float *gout)
 {
-    const int h = raw->shape[2], w = raw->shape[3], oc = y->shape[1];
     const size_t win = (size_t)h * w;
-    int shape[4] = {k, 1, h, w};
-    lm_tensor *in = lm_tensor_new(c, 4, shape);
-    if (!in) return -1;
-    for (int i = 0; i < k; i++) memcpy(in->data + i * win, raw->data + idx[i] * win, sizeof(float) * win);
-    lm_tensor *o = lm_model_forward(c, m, in);
+    for (int i = 0; i < k; i++) memcpy(gin + i * win, raw + idx[i] * win, sizeof(float) * win);
+    lm_tensor *in = lm_tensor_from(c, 4, (int[]){k, 1, h, w}, gin);
+    lm_tensor *o = in ? lm_model_forward(c, m, in) : NULL;
     if (!o || lm_ctx_status(c)) return -1;
     if (o->ndim != 4 || o->shape[0] != k || o->shape[1] != oc || o->shape[2] != h ||
         o->shape[3] != w) {
@@ -362,33 +363,46 @@ static int run_group(lm_ctx *c, lm_model *m, const lm_tensor *raw, const int *id
         return -1;
     }
     lm_tensor *oc_ = lm_contiguous(c, o);
-    if (!oc_) return -1;
+    if (!oc_ || lm_tensor_read(c, oc_, gout)) return -1;
     for (int i = 0; i < k; i++)
-        memcpy(y->data + (size_t)idx[i] * oc * win, oc_->data + (size_t)i * oc * win,
+        memcpy(y + (size_t)idx[i] * oc * win, gout + (size_t)i * oc * win,
                sizeof(float) * oc * win);
     return 0;
 }
 
+/* One fold batch: the windows of each model in groups of at most x->batch. raw may live on a
+ * device (fold_batch made it with lm_tensor_from): it is read to the host first, and the
+ * result goes back as a tensor of the ctx. */
 static lm_tensor *mix_fn(lm_ctx *c, lm_tensor *raw, void *user)
 {
     mix *x = user;
-    const int nb = raw->shape[0];
+    const int nb = raw->shape[0], h = raw->shape[2], w = raw->shape[3];
     int oc = x->models[0]->out_channels;
-    int shape[4] = {nb, oc, raw->shape[2], raw->shape[3]};
-    lm_tensor *y = lm_tensor_new(c, 4, shape);
-    if (!y) return NULL;
+    const size_t win = (size_t)h * w;
+    if (!x->host || x->cap < (size_t)nb * win) {
+        free(x->host);
+        x->cap = (size_t)nb * win;
+        x->host = malloc(x->cap * sizeof(float) * (2 + 2 * (size_t)oc));
+        if (!x->host) {
+            lm_ctx_fail(c, LM_ERR_NOMEM, "auto: out of memory");
+            return NULL;
+        }
+    }
+    float *hraw = x->host, *gin = hraw + x->cap, *hy = gin + x->cap, *gout = hy + x->cap * oc;
+    if (lm_tensor_read(c, lm_contiguous(c, raw), hraw)) return NULL;
     for (int m = 0; m < x->nmodels; m++) {
         int k = 0;
         for (int b = 0; b < nb; b++)
             if (x->win_model[x->next + b] == m) x->idx[k++] = b;
         for (int s = 0; s < k; s += x->batch) {
             int n = k - s < x->batch ? k - s : x->batch;
-            if (run_group(c, x->models[m], raw, x->idx + s, n, y)) return NULL;
+            if (run_group(c, x->models[m], hraw, h, w, x->idx + s, n, oc, hy, gin, gout))
+                return NULL;
         }
         if (x->windows) x->windows[m] += k;
     }
     x->next += nb;
-    return y;
+    return lm_tensor_from(c, 4, (int[]){nb, oc, h, w}, hy);
 }
 
 lm_status lm_auto_fold(lm_ctx *c, lm_model *const *models, int nmodels, const int *win_model,
@@ -412,12 +426,14 @@ lm_status lm_auto_fold(lm_ctx *c, lm_model *const *models, int nmodels, const in
                               i, win_model[i], nmodels - 1);
     lm_tile_opts fo = *o;
     fo.batch = o->batch * nmodels;
-    mix x = {models, nmodels, o->batch, 0, win_model, windows, malloc(sizeof(int) * fo.batch)};
+    mix x = {models, nmodels, o->batch, 0, win_model, windows, malloc(sizeof(int) * fo.batch),
+             NULL, 0};
     if (!x.idx) return lm_err_set(err, LM_ERR_NOMEM, "auto: out of memory");
     for (int k = 0; k < nmodels; k++) lm_infer_set_noise(models[k], frame, height, width);
     lm_status st = lm_tile_fold(c, frame, height, width, models[0]->mosaic.ty,
                                 models[0]->mosaic.tx, &fo, mix_fn, &x, out_ch, out, err);
     free(x.idx);
+    free(x.host);
     return st;
 }
 

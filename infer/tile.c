@@ -257,6 +257,12 @@ lm_status lm_tile_infer(lm_ctx *c, lm_model *m, const float *frame, int height, 
 lm_status lm_tile_device_open(lm_tile_device *d, const char *name, lm_model *m, lm_ctx *c,
                               lm_err *err)
 {
+    return lm_tile_device_open_models(d, name, &m, 1, c, err);
+}
+
+lm_status lm_tile_device_open_models(lm_tile_device *d, const char *name, lm_model *const *ms,
+                                     int nm, lm_ctx *c, lm_err *err)
+{
     memset(d, 0, sizeof *d);
     lm_err be;
     lm_err_clear(&be);
@@ -266,17 +272,19 @@ lm_status lm_tile_device_open(lm_tile_device *d, const char *name, lm_model *m, 
     d->ctx = c;
     if (b->device == LM_DEVICE_CPU) return LM_OK;
     lm_ctx_set_backend(c, b);
-    lm_params *p = &m->params;
-    d->ps = malloc(sizeof *d->ps * (size_t)(p->n > 0 ? p->n : 1));
-    d->held = malloc(sizeof *d->held * (size_t)(p->n > 0 ? p->n : 1));
+    int total = 0;
+    for (int k = 0; k < nm; k++) total += ms[k]->params.n;
+    d->ps = malloc(sizeof *d->ps * (size_t)(total > 0 ? total : 1));
+    d->held = malloc(sizeof *d->held * (size_t)(total > 0 ? total : 1));
     if (!d->ps || !d->held || lm_ctx_init(&d->pctx, lm_nthreads(c)) != 0) {
         lm_tile_device_close(d);
         return lm_err_set(err, LM_ERR_NOMEM, "device: out of memory");
     }
     d->have_pctx = 1;
     lm_ctx_set_backend(&d->pctx, b);
-    for (int i = 0; i < p->n; i++) d->ps[i] = &p->items[i]->t;
-    d->np = p->n;
+    d->np = 0; /* every model's parameters, in model order */
+    for (int k = 0; k < nm; k++)
+        for (int i = 0; i < ms[k]->params.n; i++) d->ps[d->np++] = &ms[k]->params.items[i]->t;
     if (lm_tensors_swap_to_device(&d->pctx, d->ps, d->np, d->held)) {
         lm_status s = lm_err_set(err, lm_ctx_status(&d->pctx), "device: %s",
                                  lm_ctx_message(&d->pctx));

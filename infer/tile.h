@@ -96,6 +96,10 @@ typedef struct lm_tile_device {
 lm_status lm_tile_device_open(lm_tile_device *d, const char *name, lm_model *m, lm_ctx *c,
                               lm_err *err);
 /* "cpu", or the OpenCL device's name. */
+/* The same for several models run by one ctx (`infer --model auto`): every model's parameters
+ * are on the device for the run. */
+lm_status lm_tile_device_open_models(lm_tile_device *d, const char *name, lm_model *const *ms,
+                                     int nm, lm_ctx *c, lm_err *err);
 const char *lm_tile_device_name(const lm_tile_device *d);
 /* Parameters back on the host, c back on the CPU backend, the backend closed. Idempotent. */
 void lm_tile_device_close(lm_tile_device *d);

@@ -2,7 +2,8 @@
 # infer_opencl.sh — `lumosaic infer` and `lumosaic eval` with --device opencl against the CPU:
 # a briefly trained linear model, a few-iteration rt-8 (whole frame in strips, and windows with
 # --tiles) and mcan-tiny (convolutions, attention; windows) each reconstruct the same simulated
-# frame on both devices — the cubes agree (max abs difference <= 1e-4); LM_DEVICE=opencl selects the device without the option (a "device:" line names
+# frame on both devices — the cubes agree (max abs difference <= 1e-4), and so does
+# `--model auto` over the three; LM_DEVICE=opencl selects the device without the option (a "device:" line names
 # it); eval's metrics agree (PSNR within 1e-3 dB, incl. a --motion row); an unknown device is
 # refused (one line, exit 2, no output left). Exits 77 (skipped) only when no OpenCL platform
 # exists (`clinfo -l` lists none).
@@ -45,6 +46,20 @@ done
 d=$("$DIFF" "$T/cpu_rt-8/cube_0000.exr" "$T/cpu_rt-8--tiles/cube_0000.exr")
 check "rt-8: strips and windows differ ($d), so opencl ran strips" \
   awk -v d="$d" 'BEGIN { exit !(d != "" && d > 1e-3) }'
+
+# --model auto on both devices: every model's parameters on the device, windows per model
+"$LM" fit-auto --models "$T/run_linear,$T/run_mcan-tiny,$T/run_rt-8" --synth 2 \
+  --synth-size 132x128 --bins 2 --threads 1 --output "$T/auto.json" > /dev/null 2> "$T/err"
+check "fit-auto: $(cat "$T/err")" [ $? -eq 0 ]
+for dev in cpu opencl; do
+  "$LM" infer --model auto --auto "$T/auto.json" --auto-tol 0 --input "$F" \
+    --output "$T/auto_$dev" --device $dev > /dev/null 2> "$T/err"
+  check "infer --model auto --device $dev: $(cat "$T/err")" [ $? -eq 0 ]
+done
+d=$("$DIFF" "$T/auto_cpu/cube_0000.exr" "$T/auto_opencl/cube_0000.exr")
+echo "auto: max |cpu - opencl| = $d"
+check "auto: cpu and opencl cubes agree (max abs diff $d <= 1e-4)" \
+  awk -v d="$d" 'BEGIN { exit !(d != "" && d <= 1e-4) }'
 
 # LM_DEVICE picks the device when --device is not given
 LM_DEVICE=opencl "$LM" infer --model "$T/run_linear" --input "$F" --output "$T/env" 2> "$T/err"
