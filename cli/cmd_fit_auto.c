@@ -202,43 +202,39 @@ static int load_models(cal_run *r, lm_err *e)
     return 0;
 }
 
-/* The DATA scenes of the chosen split. 0 ok, else an exit status (printed). */
+/* The DATA scenes of the chosen split (lm_dataset_list_scenes; valtest: val, then test).
+ * 0 ok, else an exit status (printed). */
 static int list_scenes(cal_run *r, lm_err *e)
 {
     if (!r->o->ndata) return 0;
-    lm_dataset_cfg cfg;
-    lm_dataset_default_cfg(&cfg);
-    cfg.paths = r->o->data;
-    cfg.npaths = r->o->ndata;
-    cfg.sys = &r->im[0].sys;
-    cfg.workers = 0;
-    cfg.synth_fraction = 0.0f;
-    lm_dataset *d = lm_dataset_open(&cfg, e);
-    if (!d) return lm_cli_error(r->c, "%s", e->msg);
-    int total = 0;
-    for (int k = 0; k < 3; k++) total += lm_dataset_num_scenes(d, (lm_data_split)k);
-    r->scenes = calloc((size_t)total + 1, sizeof *r->scenes);
-    for (int k = 0; k < 3 && r->scenes; k++) {
-        lm_data_split s = (lm_data_split)k; /* a borrowed list holds no scene of its split */
-        int keep = r->o->split == 3 ||
-                   (!lm_dataset_split_borrowed(d, s) &&
-                    ((r->o->split == 2 && s != LM_SPLIT_TRAIN) ||
-                     (r->o->split == 0 && s == LM_SPLIT_VAL) ||
-                     (r->o->split == 1 && s == LM_SPLIT_TEST)));
-        for (int i = 0; i < lm_dataset_num_scenes(d, s) && keep; i++) {
-            const char *p = lm_dataset_scene_path(d, s, i);
-            int add = 1;
-            for (int j = 0; j < r->nscenes && add; j++)
-                if (!strcmp(r->scenes[j], p)) add = 0;
-            if (add) snprintf(r->scenes[r->nscenes++], 1024, "%s", p);
+    const int all[] = {-1}, valtest[] = {LM_SPLIT_VAL, LM_SPLIT_TEST}, val[] = {LM_SPLIT_VAL},
+              test[] = {LM_SPLIT_TEST};
+    const int *splits = r->o->split == 3 ? all : r->o->split == 2 ? valtest
+                        : r->o->split == 0 ? val : test;
+    int nsplits = r->o->split == 2 ? 2 : 1, total = 0;
+    for (int k = 0; k < nsplits; k++) {
+        lm_dataset_scene *sc = NULL;
+        int n = 0;
+        if (lm_dataset_list_scenes(r->o->data, r->o->ndata, &r->im[0].sys, splits[k], &sc, &n,
+                                   e))
+            return lm_cli_error(r->c, "%s", e->msg);
+        char (*grown)[1024] = realloc(r->scenes, ((size_t)total + n + 1) * sizeof *r->scenes);
+        if (!grown) {
+            free(sc);
+            return lm_cli_error(r->c, "out of memory"), 1;
         }
+        r->scenes = grown;
+        for (int i = 0; i < n; i++) snprintf(r->scenes[total + i], 1024, "%s", sc[i].path);
+        total += n;
+        free(sc);
     }
-    lm_dataset_close(d);
+    r->nscenes = total;
+    if (!r->scenes) r->scenes = calloc(1, sizeof *r->scenes);
     if (!r->scenes) return lm_cli_error(r->c, "out of memory"), 1;
     if (!r->nscenes && !r->o->synth)
-        return lm_cli_error(r->c, "no DATA scene of split '%s' among the %d given (use --synth "
-                            "N for procedural held-out scenes, or --split all)",
-                            r->o->split_s ? r->o->split_s : "valtest", total);
+        return lm_cli_error(r->c, "no DATA scene of split '%s' among the %d DATA path(s) (use "
+                            "--synth N for procedural held-out scenes, or --split all)",
+                            r->o->split_s ? r->o->split_s : "valtest", r->o->ndata);
     return 0;
 }
 
