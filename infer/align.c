@@ -1,28 +1,27 @@
 /* align.c — temporal alignment of LED sub-images (see align.h for the scheme).
- * What it is: timestamps from the system description, the per-plane choice of frames and
+ * What it is: timestamps from the system description (window centres over the frame period), the per-plane choice of frames and
  * interpolation time, the edge-frame fallbacks, and tile-phase (un)shuffling of raw frames.
  * What it is not: the flow itself (flow.c). */
 #include "infer/align.h"
 #include <stdlib.h>
 #include <string.h>
-#include <strings.h>
 
 lm_status lm_align_phase_times(const lm_system *s, float *t, int *ref, lm_err *e)
 {
     if (!s || !t || !ref) return lm_err_set(e, LM_ERR_ARG, "align: NULL argument");
-    double period = lm_system_exposure_us(s) + s->readout_us;
-    int nph = s->tile_rows * s->tile_cols;
+    /* frames start frame_period_us apart: the same LED of frames i and i + 1 is one period
+     * apart, so one period is the unit of the flow's time axis */
+    double period = lm_system_frame_period_us(s);
+    int nph = s->tile_rows * s->tile_cols, rl = lm_system_reference_led(s);
     *ref = -1;
     for (int p = 0; p < nph; p++) {
         int led = lm_system_tile_led(s, p);
-        double a, b;
-        lm_system_led_window(s, led, &a, &b);
-        t[p] = (float)(0.5 * (a + b) / period);
-        if (!strcasecmp(s->leds[led].name, "Lime")) *ref = p;
+        t[p] = (float)(lm_system_led_centre_us(s, led) / period);
+        if (led == rl && *ref < 0) *ref = p;
     }
     if (*ref < 0)
-        return lm_err_set(e, LM_ERR_ARG, "align: system '%s' has no LED named Lime in its tile",
-                          s->name);
+        return lm_err_set(e, LM_ERR_ARG, "align: system '%s': its reference LED %s is not in "
+                          "the tile", s->name, s->leds[rl].name);
     return LM_OK;
 }
 

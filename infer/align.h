@@ -1,6 +1,7 @@
 /* align.h — temporal alignment of a coded video frame's LED sub-images (system.md §9).
- * What it is: every LED sub-image of frame i has a timestamp (its window's midpoint over
- * exposure + readout); each is moved to the reference (lime) timestamp of frame i with dense
+ * What it is: every LED sub-image of frame i has a timestamp (its window's midpoint over the
+ * frame period: frames start frame_period_us apart, 33.3 ms at 30 fps, not exposure + readout =
+ * 29.7 ms); each is moved to the reference (lime) timestamp of frame i with dense
  * optical flow (infer/flow.h) between the same LED's sub-images of two consecutive frames
  * (same LED, so brightness constancy holds):
  *   LED before the reference (tau = t_ref - t_l > 0): frames i and i+1, frame time t = tau;
@@ -18,9 +19,11 @@
 #include "infer/flow.h"
 
 /* Normalised timestamp of each tile phase: t[p] = midpoint of the window of the LED at phase p,
- * in us from the exposure start, divided by (exposure + readout); writes tile_rows * tile_cols
- * values. *ref = the phase whose LED is named "Lime" (case-insensitive). Errors: LM_ERR_ARG
- * (no lime LED in the tile, or NULL arguments), message starting "align:". */
+ * in us from the exposure start, divided by the system's frame_period_us (the time between the
+ * starts of consecutive frames, the time base of the video simulator too); writes tile_rows *
+ * tile_cols values. *ref = the first phase of the reference LED (lm_system_reference_led:
+ * Lime, the LED whose window centre is the ground-truth instant of data/video.h). Errors:
+ * LM_ERR_ARG (NULL arguments), message starting "align:". */
 lm_status lm_align_phase_times(const lm_system *s, float *t, int *ref, lm_err *e);
 
 /* Align the np sub-images of frame i (cur, np x h x w) to the timestamp t[ref]; prev / next are
