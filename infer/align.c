@@ -3,6 +3,7 @@
  * interpolation time, the edge-frame fallbacks, and tile-phase (un)shuffling of raw frames.
  * What it is not: the flow itself (flow.c). */
 #include "infer/align.h"
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -25,53 +26,108 @@ lm_status lm_align_phase_times(const lm_system *s, float *t, int *ref, lm_err *e
     return LM_OK;
 }
 
-/* Frame i's plane alone, warped under linear motion with the flow to neighbour n at relative
- * time dt (+1 or -1): out(p) = cur(p - (tau / dt) F_{i->n}(p)). */
-static lm_status warp_one_sided(const float *cur, const float *nb, int h, int w, float tau,
-                                float dt, const lm_flow_opts *o, float *out, lm_err *e)
+void lm_align_default_opts(lm_align_opts *o)
 {
-    float *f = malloc(sizeof(float) * 2 * (size_t)h * (size_t)w);
-    if (!f) return lm_err_set(e, LM_ERR_NOMEM, "align: out of memory");
-    lm_status s = lm_flow_compute(cur, nb, h, w, o, f, e);
-    if (!s) lm_flow_warp(cur, h, w, f, -tau / dt, out, o && o->nthreads > 0 ? o->nthreads : 1);
-    free(f);
+    o->confidence = 1;
+    o->fb_tol = 2.0f;
+}
+
+/* out <- cur + c (out - cur), c from the flows fc = F_{cur->n}, fn = F_{n->cur} (align.h). */
+static void blend_confidence(const float *cur, const float *fc, const float *fn, int h, int w,
+                             float tau, const lm_align_opts *ao, float *out)
+{
+    long n = (long)h * w;
+    float at = fabsf(tau), lo = 0.5f * ao->fb_tol, hi = ao->fb_tol;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            long i = (long)y * w + x;
+            float u = fc[i], v = fc[n + i];
+            float bx = (float)x + u, by = (float)y + v;
+            float eu = u + lm_flow_sample(fn, h, w, bx, by);
+            float ev = v + lm_flow_sample(fn + n, h, w, bx, by);
+            float d = at * sqrtf(eu * eu + ev * ev); /* position error the warp would make */
+            float c = d <= lo ? 1.0f : d >= hi ? 0.0f : (hi - d) / (hi - lo);
+            out[i] = cur[i] + c * (out[i] - cur[i]);
+        }
+}
+
+/* The neighbour plane p uses: +1 frame i+1, -1 frame i-1, 0 none (copy). */
+static int plane_side(const float *prev, const float *next, float tau)
+{
+    if (tau == 0.0f || (!prev && !next)) return 0;
+    if (tau > 0.0f) return next ? 1 : -1;
+    return prev ? -1 : 1;
+}
+
+/* One plane from its flows fc = F_{cur->nb}, fn = F_{nb->cur} (dt = +1: nb is frame i+1,
+ * -1: frame i-1) at relative time tau: interpolation between the two frames when tau points
+ * towards nb, else frame i's plane warped alone under linear motion, out(p) = cur(p - (tau /
+ * dt) F_{i->n}(p)); then the confidence blend. */
+static lm_status align_pair(const float *cur, const float *nb, float dt, int h, int w,
+                            float tau, const float *fc, const float *fn, int nt,
+                            const lm_align_opts *ao, float *out, lm_err *e)
+{
+    lm_status s = LM_OK;
+    if (tau * dt > 0.0f && dt > 0.0f)
+        s = lm_flow_interpolate_flows(cur, nb, h, w, tau, fc, fn, nt, out, e);
+    else if (tau * dt > 0.0f)
+        s = lm_flow_interpolate_flows(nb, cur, h, w, 1.0f + tau, fn, fc, nt, out, e);
+    else
+        lm_flow_warp_cubic(cur, h, w, fc, -tau / dt, out, nt);
+    if (!s && ao->confidence) blend_confidence(cur, fc, fn, h, w, tau, ao, out);
     return s;
 }
 
-/* One plane: the pair of frames and the time, or a fallback (see align.h). */
-static lm_status align_plane(const float *prev, const float *cur, const float *next, int h,
-                             int w, float tau, const lm_flow_opts *o, float *out, lm_err *e)
+/* Flows both ways of every plane that has a neighbour (fl: np x 4n floats, F_{cur->nb} then
+ * F_{nb->cur}). */
+static lm_status plane_flows(const float *prev, const float *cur, const float *next, int np,
+                             int h, int w, const int *side, const lm_flow_opts *o, float *fl,
+                             lm_err *e)
 {
-    size_t n = (size_t)h * (size_t)w;
-    if (tau == 0.0f || (!prev && !next)) {
-        memcpy(out, cur, n * sizeof *out);
-        return LM_OK;
-    }
-    if (tau > 0.0f) {
-        if (next) return lm_flow_interpolate(cur, next, h, w, tau, o, out, e);
-        return warp_one_sided(cur, prev, h, w, tau, -1.0f, o, out, e);
-    }
-    if (prev) return lm_flow_interpolate(prev, cur, h, w, 1.0f + tau, o, out, e);
-    return warp_one_sided(cur, next, h, w, tau, 1.0f, o, out, e);
-}
-
-lm_status lm_align_frame(const float *prev, const float *cur, const float *next, int np, int h,
-                         int w, const float *t, int ref, const lm_flow_opts *o, float *out,
-                         lm_err *e)
-{
-    if (!cur || !t || !out) return lm_err_set(e, LM_ERR_ARG, "align: NULL frame, times or output");
-    if (np < 1 || ref < 0 || ref >= np)
-        return lm_err_set(e, LM_ERR_ARG, "align: reference plane %d outside 0..%d", ref, np - 1);
-    if (h <= 0 || w <= 0)
-        return lm_err_set(e, LM_ERR_SHAPE, "align: empty sub-images %dx%d", h, w);
-    size_t n = (size_t)h * (size_t)w;
+    long n = (long)h * w;
     for (int p = 0; p < np; p++) {
-        const float *pp = prev ? prev + p * n : NULL, *nx = next ? next + p * n : NULL;
+        if (!side[p]) continue;
+        const float *c = cur + p * n, *nb = (side[p] > 0 ? next : prev) + p * n;
+        float *fc = fl + (size_t)p * 4 * n;
         lm_err pe = {0};
-        lm_status s = align_plane(pp, cur + p * n, nx, h, w, t[ref] - t[p], o, out + p * n, &pe);
+        lm_status s = lm_flow_compute(c, nb, h, w, o, fc, &pe);
+        if (!s) s = lm_flow_compute(nb, c, h, w, o, fc + 2 * n, &pe);
         if (s) return lm_err_set(e, s, "align: plane %d: %s", p, pe.msg);
     }
     return LM_OK;
+}
+
+lm_status lm_align_frame(const float *prev, const float *cur, const float *next, int np, int h,
+                         int w, const float *t, int ref, const lm_flow_opts *o,
+                         const lm_align_opts *ao, float *out, lm_err *e)
+{
+    if (!cur || !t || !out) return lm_err_set(e, LM_ERR_ARG, "align: NULL frame, times or output");
+    if (np < 1 || np > LM_SYSTEM_MAX_TILE || ref < 0 || ref >= np)
+        return lm_err_set(e, LM_ERR_ARG, "align: reference plane %d outside 0..%d", ref, np - 1);
+    if (h <= 0 || w <= 0)
+        return lm_err_set(e, LM_ERR_SHAPE, "align: empty sub-images %dx%d", h, w);
+    lm_align_opts dao;
+    if (!ao) lm_align_default_opts(&dao);
+    if (!ao) ao = &dao;
+    long n = (long)h * w;
+    int side[LM_SYSTEM_MAX_TILE], nt = o && o->nthreads > 0 ? o->nthreads : 1;
+    for (int p = 0; p < np; p++) side[p] = plane_side(prev, next, t[ref] - t[p]);
+    float *fl = malloc(sizeof(float) * 4 * (size_t)n * (size_t)np);
+    if (!fl) return lm_err_set(e, LM_ERR_NOMEM, "align: out of memory");
+    lm_status s = plane_flows(prev, cur, next, np, h, w, side, o, fl, e);
+    for (int p = 0; p < np && !s; p++) {
+        if (!side[p]) {
+            memcpy(out + p * n, cur + p * n, sizeof(float) * (size_t)n);
+            continue;
+        }
+        const float *fc = fl + (size_t)p * 4 * n, *nb = (side[p] > 0 ? next : prev) + p * n;
+        lm_err pe = {0};
+        s = align_pair(cur + p * n, nb, (float)side[p], h, w, t[ref] - t[p], fc, fc + 2 * n,
+                       nt, ao, out + p * n, &pe);
+        if (s) lm_err_set(e, s, "align: plane %d: %s", p, pe.msg);
+    }
+    free(fl);
+    return s;
 }
 
 lm_status lm_align_unshuffle(const float *raw, int height, int width, int ty, int tx,

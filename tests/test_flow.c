@@ -537,7 +537,7 @@ static void test_align_video(void)
     lm_flow_default_opts(&o, LM_FLOW_MEDIUM);
     for (int c = 0; c < 3; c++) {
         lm_err e = {0};
-        CHECK(lm_align_frame(cases[c][0], fr + n, cases[c][1], NP, AH, AH, t, ref, &o, out,
+        CHECK(lm_align_frame(cases[c][0], fr + n, cases[c][1], NP, AH, AH, t, ref, &o, NULL, out,
                              &e) == LM_OK);
         double worst = 0.0, before = 0.0;
         for (int p = 0; p < NP; p++) {
@@ -557,12 +557,12 @@ static void test_align_video(void)
         printf("  align (%s): worst plane RMS %.4f (unaligned %.4f)\n", names[c], worst, before);
     }
     lm_err e = {0};
-    CHECK(lm_align_frame(NULL, fr + n, NULL, NP, AH, AH, t, ref, &o, out, &e) == LM_OK);
+    CHECK(lm_align_frame(NULL, fr + n, NULL, NP, AH, AH, t, ref, &o, NULL, out, &e) == LM_OK);
     CHECK_ARRAY_CLOSE(out, fr + n, (long)n, 0, 0);
-    CHECK(lm_align_frame(fr, fr + n, NULL, NP, AH, AH, t, NP, &o, out, &e) == LM_ERR_ARG);
+    CHECK(lm_align_frame(fr, fr + n, NULL, NP, AH, AH, t, NP, &o, NULL, out, &e) == LM_ERR_ARG);
     CHECK(strstr(e.msg, "align:") != NULL);
     lm_err_clear(&e);
-    CHECK(lm_align_frame(fr, fr + n, NULL, NP, 16, 16 * 16, t, ref, &o, out, &e) == LM_ERR_SHAPE);
+    CHECK(lm_align_frame(fr, fr + n, NULL, NP, 16, 16 * 16, t, ref, &o, NULL, out, &e) == LM_ERR_SHAPE);
     CHECK(strstr(e.msg, "plane 0") != NULL && strstr(e.msg, "flow:") != NULL);
     free(fr);
 }
