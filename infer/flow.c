@@ -61,16 +61,25 @@ float lm_flow_sample(const float *img, int h, int w, float x, float y)
     return top + ay * (bot - top);
 }
 
-void lm_flow_warp(const float *src, int h, int w, const float *flow, float s, float *out,
-                  int nthreads)
+typedef float (*sampler)(const float *img, int h, int w, float x, float y);
+
+/* out(p) = sample(src, p + s F(p)), rows split statically over the threads. */
+static void warp_with(sampler sample, const float *src, int h, int w, const float *flow,
+                      float s, float *out, int nthreads)
 {
     long n = (long)h * w;
 #pragma omp parallel for schedule(static) num_threads(nthreads > 0 ? nthreads : 1)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             long i = (long)y * w + x;
-            out[i] = lm_flow_sample(src, h, w, (float)x + s * flow[i], (float)y + s * flow[n + i]);
+            out[i] = sample(src, h, w, (float)x + s * flow[i], (float)y + s * flow[n + i]);
         }
+}
+
+void lm_flow_warp(const float *src, int h, int w, const float *flow, float s, float *out,
+                  int nthreads)
+{
+    warp_with(lm_flow_sample, src, h, w, flow, s, out, nthreads);
 }
 
 /* Catmull-Rom weights of the 4 taps around a sample at fraction f of the way from tap 1 to 2. */
@@ -103,14 +112,7 @@ float lm_flow_sample_cubic(const float *img, int h, int w, float x, float y)
 void lm_flow_warp_cubic(const float *src, int h, int w, const float *flow, float s, float *out,
                         int nthreads)
 {
-    long n = (long)h * w;
-#pragma omp parallel for schedule(static) num_threads(nthreads > 0 ? nthreads : 1)
-    for (int y = 0; y < h; y++)
-        for (int x = 0; x < w; x++) {
-            long i = (long)y * w + x;
-            out[i] = lm_flow_sample_cubic(src, h, w, (float)x + s * flow[i],
-                                          (float)y + s * flow[n + i]);
-        }
+    warp_with(lm_flow_sample_cubic, src, h, w, flow, s, out, nthreads);
 }
 
 /* Central differences with border clamping: gx = (I(x+1) - I(x-1)) / 2. */
