@@ -1,6 +1,7 @@
 /* align.c — temporal alignment of LED sub-images (see align.h for the scheme).
- * What it is: timestamps from the system description (window centres over the frame period), the per-plane choice of frames and
- * interpolation time, the edge-frame fallbacks, and tile-phase (un)shuffling of raw frames.
+ * What it is: timestamps from the system description (window centres over the frame period),
+ * the per-plane choice of frames and interpolation time, the edge-frame fallbacks, the
+ * confidence blend, and tile-phase (un)shuffling of raw frames.
  * What it is not: the flow itself (flow.c). */
 #include "infer/align.h"
 #include <math.h>
@@ -59,42 +60,28 @@ static int plane_side(const float *prev, const float *next, float tau)
     return prev ? -1 : 1;
 }
 
-/* One plane from its flows fc = F_{cur->nb}, fn = F_{nb->cur} (dt = +1: nb is frame i+1,
- * -1: frame i-1) at relative time tau: interpolation between the two frames when tau points
- * towards nb, else frame i's plane warped alone under linear motion, out(p) = cur(p - (tau /
- * dt) F_{i->n}(p)); then the confidence blend. */
+/* One plane with neighbour nb (dt = +1: frame i+1, -1: frame i-1) at relative time tau: the
+ * flows fc = F_{cur->nb} and (when the interpolation or the confidence needs it) fn =
+ * F_{nb->cur} into f (4n floats); interpolation between the two frames when tau points towards
+ * nb, else frame i's plane warped alone under linear motion, out(p) = cur(p - (tau / dt)
+ * F_{i->n}(p)); then the confidence blend. */
 static lm_status align_pair(const float *cur, const float *nb, float dt, int h, int w,
-                            float tau, const float *fc, const float *fn, int nt,
-                            const lm_align_opts *ao, float *out, lm_err *e)
+                            float tau, const lm_flow_opts *o, const lm_align_opts *ao, float *f,
+                            float *out, lm_err *e)
 {
-    lm_status s = LM_OK;
-    if (tau * dt > 0.0f && dt > 0.0f)
+    long n = (long)h * w;
+    int nt = o && o->nthreads > 0 ? o->nthreads : 1, towards = tau * dt > 0.0f;
+    float *fc = f, *fn = f + 2 * n;
+    lm_status s = lm_flow_compute(cur, nb, h, w, o, fc, e);
+    if (!s && (towards || ao->confidence)) s = lm_flow_compute(nb, cur, h, w, o, fn, e);
+    if (!s && towards && dt > 0.0f)
         s = lm_flow_interpolate_flows(cur, nb, h, w, tau, fc, fn, nt, out, e);
-    else if (tau * dt > 0.0f)
+    else if (!s && towards)
         s = lm_flow_interpolate_flows(nb, cur, h, w, 1.0f + tau, fn, fc, nt, out, e);
-    else
+    else if (!s)
         lm_flow_warp_cubic(cur, h, w, fc, -tau / dt, out, nt);
     if (!s && ao->confidence) blend_confidence(cur, fc, fn, h, w, tau, ao, out);
     return s;
-}
-
-/* Flows both ways of every plane that has a neighbour (fl: np x 4n floats, F_{cur->nb} then
- * F_{nb->cur}). */
-static lm_status plane_flows(const float *prev, const float *cur, const float *next, int np,
-                             int h, int w, const int *side, const lm_flow_opts *o, float *fl,
-                             lm_err *e)
-{
-    long n = (long)h * w;
-    for (int p = 0; p < np; p++) {
-        if (!side[p]) continue;
-        const float *c = cur + p * n, *nb = (side[p] > 0 ? next : prev) + p * n;
-        float *fc = fl + (size_t)p * 4 * n;
-        lm_err pe = {0};
-        lm_status s = lm_flow_compute(c, nb, h, w, o, fc, &pe);
-        if (!s) s = lm_flow_compute(nb, c, h, w, o, fc + 2 * n, &pe);
-        if (s) return lm_err_set(e, s, "align: plane %d: %s", p, pe.msg);
-    }
-    return LM_OK;
 }
 
 lm_status lm_align_frame(const float *prev, const float *cur, const float *next, int np, int h,
@@ -102,31 +89,29 @@ lm_status lm_align_frame(const float *prev, const float *cur, const float *next,
                          const lm_align_opts *ao, float *out, lm_err *e)
 {
     if (!cur || !t || !out) return lm_err_set(e, LM_ERR_ARG, "align: NULL frame, times or output");
-    if (np < 1 || np > LM_SYSTEM_MAX_TILE || ref < 0 || ref >= np)
+    if (np < 1 || ref < 0 || ref >= np)
         return lm_err_set(e, LM_ERR_ARG, "align: reference plane %d outside 0..%d", ref, np - 1);
     if (h <= 0 || w <= 0)
         return lm_err_set(e, LM_ERR_SHAPE, "align: empty sub-images %dx%d", h, w);
     lm_align_opts dao;
     if (!ao) lm_align_default_opts(&dao);
     if (!ao) ao = &dao;
-    long n = (long)h * w;
-    int side[LM_SYSTEM_MAX_TILE], nt = o && o->nthreads > 0 ? o->nthreads : 1;
-    for (int p = 0; p < np; p++) side[p] = plane_side(prev, next, t[ref] - t[p]);
-    float *fl = malloc(sizeof(float) * 4 * (size_t)n * (size_t)np);
-    if (!fl) return lm_err_set(e, LM_ERR_NOMEM, "align: out of memory");
-    lm_status s = plane_flows(prev, cur, next, np, h, w, side, o, fl, e);
+    size_t n = (size_t)h * (size_t)w;
+    float *f = malloc(sizeof(float) * 4 * n);
+    if (!f) return lm_err_set(e, LM_ERR_NOMEM, "align: out of memory");
+    lm_status s = LM_OK;
     for (int p = 0; p < np && !s; p++) {
-        if (!side[p]) {
-            memcpy(out + p * n, cur + p * n, sizeof(float) * (size_t)n);
+        int side = plane_side(prev, next, t[ref] - t[p]);
+        if (!side) {
+            memcpy(out + p * n, cur + p * n, sizeof(float) * n);
             continue;
         }
-        const float *fc = fl + (size_t)p * 4 * n, *nb = (side[p] > 0 ? next : prev) + p * n;
         lm_err pe = {0};
-        s = align_pair(cur + p * n, nb, (float)side[p], h, w, t[ref] - t[p], fc, fc + 2 * n,
-                       nt, ao, out + p * n, &pe);
+        s = align_pair(cur + p * n, (side > 0 ? next : prev) + p * n, (float)side, h, w,
+                       t[ref] - t[p], o, ao, f, out + p * n, &pe);
         if (s) lm_err_set(e, s, "align: plane %d: %s", p, pe.msg);
     }
-    free(fl);
+    free(f);
     return s;
 }
 
