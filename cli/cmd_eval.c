@@ -9,7 +9,8 @@
  * or whole-frame for MST++) and score PSNR / SSIM / MAE / SAM on the 31 bands (infer/eval.h);
  * with --motion, per scene and speed a 3-frame coded video of the scene translating at that
  * speed, its middle frame reconstructed with and without temporal alignment (for RGB models:
- * one motion-blurred camera frame, aligned = unaligned; lm_eval_motion_run); then the rainbow
+ * one motion-blurred camera frame, aligned = unaligned; lm_eval_motion_run), scored on the
+ * region that stays in view beside a static reference; then the rainbow
  * peak-wavelength test. Prints tables
  * (rows: noise levels / speeds, means over scenes) and writes eval.json + eval.csv (+
  * eval_motion.csv with --motion) into --output atomically (a staging folder renamed into place).
@@ -65,9 +66,8 @@ static void help(void)
            "                   camera frame blurred over the exposure, nothing to align\n"
            "                   (aligned = unaligned). Default: off\n"
            "  --align A        confident (default): a pixel keeps its unaligned value where\n"
-           "                   the warp would move it less than a fraction of a pixel or the\n"
-           "                   flow is inconsistent forward-backward (infer/align.h); plain:\n"
-           "                   warp every pixel\n"
+           "                   the flow is inconsistent forward-backward (infer/align.h);\n"
+           "                   plain: warp every pixel\n"
            "  --device D       where the network runs: cpu or opencl (default: env LM_DEVICE,\n"
            "                   else cpu); the weights are copied to the device once;\n"
            "                   MST++ models run on the CPU only\n"
