@@ -135,7 +135,7 @@ static double time_align(bench_env *b, lm_err *e)
     for (int i = 0; i < NF && !bad; i++)
         bad = lm_align_unshuffle(b->raw[i], H, W, ty, tx, b->planes[i], e) != LM_OK;
     bad = bad || lm_align_frame(b->planes[0], b->planes[1], b->planes[2], ty * tx, H / ty,
-                                W / tx, t, ref, &fo, b->al_planes, e) != LM_OK;
+                                W / tx, t, ref, &fo, NULL, b->al_planes, e) != LM_OK;
     bad = bad || lm_align_remosaic(b->al_planes, H / ty, W / tx, ty, tx, b->aligned, e) != LM_OK;
     return bad ? -1.0 : bench_now() - t0;
 }

@@ -9,7 +9,8 @@
  * or whole-frame for MST++) and score PSNR / SSIM / MAE / SAM on the 31 bands (infer/eval.h);
  * with --motion, per scene and speed a 3-frame coded video of the scene translating at that
  * speed, its middle frame reconstructed with and without temporal alignment (for RGB models:
- * one motion-blurred camera frame, aligned = unaligned; lm_eval_motion_run); then the rainbow
+ * one motion-blurred camera frame, aligned = unaligned; lm_eval_motion_run), scored on the
+ * region that stays in view beside a static reference; then the rainbow
  * peak-wavelength test. Prints tables
  * (rows: noise levels / speeds, means over scenes) and writes eval.json + eval.csv (+
  * eval_motion.csv with --motion) into --output atomically (a staging folder renamed into place).
@@ -33,7 +34,8 @@ static void help(void)
     printf("usage: lumosaic eval --model RUN DATA... [--split test|val|train|all]\n"
            "                     [--noise 0,5,10,15,20] [--output DIR] [--seed S]\n"
            "                     [--threads T] [--rainbow SIZE] [--batch N] [--system FILE]\n"
-           "                     [--motion 0,60,120,240] [--device cpu|opencl]\n\n"
+           "                     [--motion 0,60,120,240] [--align confident|plain]\n"
+           "                     [--device cpu|opencl]\n\n"
            "Score a trained model (system.md §10): each scene is cropped to the mosaic tile,\n"
            "divided by its own maximum, simulated at each noise level and reconstructed\n"
            "patch-wise; PSNR (peak 1), SSIM, MAE and SAM (degrees) on the 31 bands 400-700 nm.\n"
@@ -58,9 +60,15 @@ static void help(void)
            "                   each a 3-frame noise-free coded video of the scene translating\n"
            "                   along (0.8, 0.6); the middle frame is reconstructed with and\n"
            "                   without temporal alignment and scored against the scene at its\n"
-           "                   lime instant (sub-images must be >= 24 x 24). RGB models: one\n"
+           "                   lime instant (sub-images must be >= 24 x 24), over the region\n"
+           "                   that stays in view in all three frames (a margin of the motion\n"
+           "                   over two frame periods plus two tiles), beside the static\n"
+           "                   reference (that scene as a still frame). RGB models: one\n"
            "                   camera frame blurred over the exposure, nothing to align\n"
            "                   (aligned = unaligned). Default: off\n"
+           "  --align A        confident (default): a pixel keeps its unaligned value where\n"
+           "                   the flow is inconsistent forward-backward (infer/align.h);\n"
+           "                   plain: warp every pixel\n"
            "  --device D       where the network runs: cpu or opencl (default: env LM_DEVICE,\n"
            "                   else cpu); the weights are copied to the device once;\n"
            "                   MST++ models run on the CPU only\n"
@@ -82,11 +90,12 @@ typedef struct eval_opts {
     double speed[LM_EVAL_MAX_MOTION];
     int nmotion;
     long long rainbow, batch;
-    int noise_oracle, clip;
+    int noise_oracle, clip, align_plain;
     long long bits;
 } eval_opts;
 
 static const char *const split_names[] = {"test", "val", "train", "all", NULL};
+static const char *const align_names[] = {"confident", "plain", NULL};
 
 static int parse_noise(lm_cli *c, const char *s, eval_opts *o)
 {
@@ -134,6 +143,7 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE | LM_CLI_SEED,
                                (long long)1 << 62, &o->com)) ||
         (r = lm_cli_choice(c, "--split", split_names, &o->split)) ||
+        (r = lm_cli_choice(c, "--align", align_names, &o->align_plain)) ||
         (r = lm_cli_int(c, "--rainbow", 0, 4096, &o->rainbow)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
         (r = lm_cli_value(c, "--noise", &noise)) ||
@@ -247,9 +257,13 @@ static lm_status scene_motion(eval_run *r, scene_res *s, const lm_cube *cube,
     lm_status st = LM_OK;
     lm_err me;
     lm_err_clear(&me);
+    lm_align_opts ao;
+    lm_align_default_opts(&ao);
+    ao.confidence = !r->o->align_plain;
     int k = 0;
     for (; k < r->o->nmotion && !st; k++)
-        st = lm_eval_motion_run(&r->ctx, &r->im, cube, r->o->speed[k], to, NULL, &s->mo[k], &me);
+        st = lm_eval_motion_run(&r->ctx, &r->im, cube, r->o->speed[k], to, NULL, &ao, &s->mo[k],
+                                &me);
     if (st) lm_err_set(e, st, "--motion %g px/s: %s", r->o->speed[k - 1], me.msg);
     return st;
 }
@@ -258,16 +272,20 @@ static lm_status scene_motion(eval_run *r, scene_res *s, const lm_cube *cube,
 static void motion_means(eval_run *r)
 {
     for (int k = 0; k < r->o->nmotion; k++) {
-        lm_metrics_acc a, u;
+        lm_metrics_acc a, u, st;
         memset(&a, 0, sizeof a);
         memset(&u, 0, sizeof u);
+        memset(&st, 0, sizeof st);
         for (int i = 0; i < r->nsc; i++) {
             lm_metrics_acc_add(&a, &r->sc[i].mo[k].aligned);
             lm_metrics_acc_add(&u, &r->sc[i].mo[k].unaligned);
+            lm_metrics_acc_add(&st, &r->sc[i].mo[k].still);
         }
         r->mo_mean[k].speed = r->o->speed[k];
+        r->mo_mean[k].px_per_frame = r->nsc ? r->sc[0].mo[k].px_per_frame : 0.0;
         r->mo_mean[k].aligned = lm_metrics_acc_mean(&a);
         r->mo_mean[k].unaligned = lm_metrics_acc_mean(&u);
+        r->mo_mean[k].still = lm_metrics_acc_mean(&st);
     }
 }
 
@@ -311,14 +329,16 @@ static void print_table(const eval_run *r)
         printf("%9g %10.3f %8.4f %9.5f %9.3f\n", 100.0 * r->o->k[n], r->mean[n].psnr,
                r->mean[n].ssim, r->mean[n].mae, r->mean[n].sam);
     if (r->o->nmotion) {
-        printf("motion (3-frame video, middle frame, no noise; means over scenes)\n");
-        printf("%11s %12s %14s %8s %10s %11s %13s\n", "motion px/s", "PSNR aligned",
-               "PSNR unaligned", "SSIM al", "SSIM unal", "SAM aligned", "SAM unaligned");
+        printf("motion (3-frame video, middle frame, no noise, in-view region; means over "
+               "scenes; alignment %s)\n", align_names[r->o->align_plain]);
+        printf("%11s %8s %11s %12s %14s %8s %10s %11s %13s\n", "motion px/s", "px/frame",
+               "PSNR static", "PSNR aligned", "PSNR unaligned", "SSIM al", "SSIM unal",
+               "SAM aligned", "SAM unaligned");
         for (int k = 0; k < r->o->nmotion; k++) {
             const lm_eval_motion *m = &r->mo_mean[k];
-            printf("%11g %12.3f %14.3f %8.4f %10.4f %11.3f %13.3f\n", m->speed, m->aligned.psnr,
-                   m->unaligned.psnr, m->aligned.ssim, m->unaligned.ssim, m->aligned.sam,
-                   m->unaligned.sam);
+            printf("%11g %8.3g %11.3f %12.3f %14.3f %8.4f %10.4f %11.3f %13.3f\n", m->speed,
+                   m->px_per_frame, m->still.psnr, m->aligned.psnr, m->unaligned.psnr,
+                   m->aligned.ssim, m->unaligned.ssim, m->aligned.sam, m->unaligned.sam);
         }
     }
     if (r->o->rainbow > 0)
@@ -350,10 +370,12 @@ static void json_metrics(FILE *f, const eval_opts *o, const lm_metrics *m, const
 static void json_motion(FILE *f, const eval_opts *o, const lm_eval_motion *m, const char *ind)
 {
     for (int k = 0; k < o->nmotion; k++)
-        fprintf(f, "%s{\"speed_px_s\": %g, \"psnr_aligned\": %.6f, \"psnr_unaligned\": %.6f, "
+        fprintf(f, "%s{\"speed_px_s\": %g, \"px_per_frame\": %.6f, \"psnr_static\": %.6f, "
+                   "\"psnr_aligned\": %.6f, \"psnr_unaligned\": %.6f, "
                    "\"ssim_aligned\": %.6f, \"ssim_unaligned\": %.6f, \"mae_aligned\": %.8f, "
                    "\"mae_unaligned\": %.8f, \"sam_aligned\": %.6f, \"sam_unaligned\": %.6f}%s\n",
-                ind, m[k].speed, m[k].aligned.psnr, m[k].unaligned.psnr, m[k].aligned.ssim,
+                ind, m[k].speed, m[k].px_per_frame, m[k].still.psnr, m[k].aligned.psnr,
+                m[k].unaligned.psnr, m[k].aligned.ssim,
                 m[k].unaligned.ssim, m[k].aligned.mae, m[k].unaligned.mae, m[k].aligned.sam,
                 m[k].unaligned.sam, k + 1 < o->nmotion ? "," : "");
 }
@@ -415,13 +437,15 @@ static void write_csv(FILE *f, const eval_run *r)
 
 static void write_motion_csv(FILE *f, const eval_run *r)
 {
-    fprintf(f, "scene,motion_px_s,psnr_aligned,psnr_unaligned,ssim_aligned,ssim_unaligned,"
+    fprintf(f, "scene,motion_px_s,px_per_frame,psnr_static,psnr_aligned,psnr_unaligned,"
+               "ssim_aligned,ssim_unaligned,"
                "mae_aligned,mae_unaligned,sam_aligned,sam_unaligned\n");
     for (int i = 0; i <= r->nsc; i++) {
         const lm_eval_motion *m = i < r->nsc ? r->sc[i].mo : r->mo_mean;
         for (int k = 0; k < r->o->nmotion; k++)
-            fprintf(f, "%s,%g,%.6f,%.6f,%.6f,%.6f,%.8f,%.8f,%.6f,%.6f\n",
-                    i < r->nsc ? r->sc[i].name : "mean", m[k].speed, m[k].aligned.psnr,
+            fprintf(f, "%s,%g,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.8f,%.8f,%.6f,%.6f\n",
+                    i < r->nsc ? r->sc[i].name : "mean", m[k].speed, m[k].px_per_frame,
+                    m[k].still.psnr, m[k].aligned.psnr,
                     m[k].unaligned.psnr, m[k].aligned.ssim, m[k].unaligned.ssim,
                     m[k].aligned.mae, m[k].unaligned.mae, m[k].aligned.sam, m[k].unaligned.sam);
     }

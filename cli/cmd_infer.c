@@ -244,7 +244,7 @@ static lm_status align_step(infer_run *r, int i, lm_err *e)
     lm_err ae;
     lm_err_clear(&ae);
     if (lm_align_frame(a->prev, a->cur, a->next, a->np, a->ph, a->pw, a->t, a->ref, &a->fo,
-                       a->aligned, &ae) ||
+                       NULL, a->aligned, &ae) ||
         lm_align_remosaic(a->aligned, a->ph, a->pw, a->ty, a->tx, a->raw, &ae))
         return lm_err_set(e, ae.status, "%s: %s", r->seq.paths[i], ae.msg);
     return LM_OK;

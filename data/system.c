@@ -11,6 +11,7 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 typedef struct loader {
     const char *label;  /* file name used in messages */
@@ -596,6 +597,14 @@ int lm_system_led_index(const lm_system *s, const char *name)
     for (int i = 0; i < s->nleds; i++)
         if (strcmp(s->leds[i].name, name) == 0) return i;
     return -1;
+}
+
+int lm_system_reference_led(const lm_system *s)
+{
+    for (int i = 0; i < s->nleds; i++)
+        if (strcasecmp(s->leds[i].name, "Lime") == 0) return i;
+    int sub = (int)(0.5 * lm_system_exposure_us(s) / s->subframe_us);
+    return lm_system_subframe_led(s, sub < s->nsubframes ? sub : s->nsubframes - 1);
 }
 
 void lm_system_describe(const lm_system *s, FILE *f)

@@ -123,6 +123,19 @@ static inline double lm_system_exposure_us(const lm_system *s)
 {
     return s->nsubframes * s->subframe_us;
 }
+/* Centre of LED l's window, microseconds from the exposure start. */
+static inline double lm_system_led_centre_us(const lm_system *s, int led)
+{
+    return 0.5 * (s->leds[led].start_us + s->leds[led].end_us);
+}
+/* Frame period: frame i's exposure starts at i * frame_period_us (>= exposure + readout). */
+static inline double lm_system_frame_period_us(const lm_system *s) { return s->frame_period_us; }
+/* The reference LED of every frame (system.md §5, §9): its window's centre is the instant of a
+ * video frame's ground truth and the time temporal alignment moves every sub-image to. The LED
+ * named "Lime" (case-insensitive); a system without one uses the LED on during the sub-frame
+ * that holds the exposure midpoint. The one definition shared by the video simulator
+ * (data/video.h) and the alignment (infer/align.h). */
+int lm_system_reference_led(const lm_system *s);
 /* LED indices by increasing peak wavelength: the network's channel order (UV first). */
 static inline const int *lm_system_peak_order(const lm_system *s) { return s->by_peak; }
 /* Schedule: the LED on during sub-frame `sub` (I[s, l] = 1 for exactly this l), and whether

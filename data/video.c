@@ -185,7 +185,7 @@ lm_status lm_video_warp(const lm_cube *src, const lm_motion *m, double t_s, lm_c
 
 double lm_video_frame_start_us(const lm_system *sys, int frame)
 {
-    return frame * sys->frame_period_us;
+    return frame * lm_system_frame_period_us(sys);
 }
 
 double lm_video_led_instant_us(const lm_system *sys, int led, int k, int samples)
@@ -196,14 +196,7 @@ double lm_video_led_instant_us(const lm_system *sys, int led, int k, int samples
 
 double lm_video_gt_time_us(const lm_system *sys)
 {
-    int lime = lm_system_led_index(sys, "Lime");
-    if (lime < 0) {
-        double mid = 0.5 * lm_system_exposure_us(sys);
-        int sub = (int)(mid / sys->subframe_us);
-        if (sub >= sys->nsubframes) sub = sys->nsubframes - 1;
-        lime = lm_system_subframe_led(sys, sub);
-    }
-    return 0.5 * (sys->leds[lime].start_us + sys->leds[lime].end_us);
+    return lm_system_led_centre_us(sys, lm_system_reference_led(sys));
 }
 
 /* Per-LED, per-instant transforms of one frame: xf[l * K + k]. */

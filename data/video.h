@@ -6,6 +6,8 @@
  * into `samples` equal parts, the scene is taken at each part's midpoint and the spectra are
  * averaged (motion blur). Frame i starts at i * frame_period_us; its ground truth is the scene
  * at the reference instant (the centre of the Lime LED's window, see lm_video_gt_time_us).
+ * Every time comes from the system description (frame_period_us, the LEDs' windows), as in
+ * the alignment (infer/align.h).
  * What it is not: a renderer of 3-D scenes (occlusion is only "regions are drawn on top"), or
  * temporal alignment (that undoes this motion at inference, infer/).
  *
@@ -81,8 +83,8 @@ double lm_video_frame_start_us(const lm_system *sys, int frame);
  * start + (k + 0.5) / samples * (end - start). */
 double lm_video_led_instant_us(const lm_system *sys, int led, int k, int samples);
 /* The ground-truth instant from the exposure start (microseconds): the centre of the window of
- * the LED named "Lime"; a system without one uses the centre of the window that holds the
- * exposure midpoint. */
+ * the system's reference LED (lm_system_reference_led: Lime; a system without one uses the
+ * window that holds the exposure midpoint), the instant alignment moves sub-images to. */
 double lm_video_gt_time_us(const lm_system *sys);
 
 /* Frame `frame` (>= 0) of the video of `cube` (on the system's grid, as lm_forward_clean) moving

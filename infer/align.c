@@ -1,78 +1,118 @@
 /* align.c — temporal alignment of LED sub-images (see align.h for the scheme).
- * What it is: timestamps from the system description, the per-plane choice of frames and
- * interpolation time, the edge-frame fallbacks, and tile-phase (un)shuffling of raw frames.
+ * What it is: timestamps from the system description (window centres over the frame period),
+ * the per-plane choice of frames and interpolation time, the edge-frame fallbacks, the
+ * confidence blend, and tile-phase (un)shuffling of raw frames.
  * What it is not: the flow itself (flow.c). */
 #include "infer/align.h"
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include <strings.h>
 
 lm_status lm_align_phase_times(const lm_system *s, float *t, int *ref, lm_err *e)
 {
     if (!s || !t || !ref) return lm_err_set(e, LM_ERR_ARG, "align: NULL argument");
-    double period = lm_system_exposure_us(s) + s->readout_us;
-    int nph = s->tile_rows * s->tile_cols;
+    /* frames start frame_period_us apart: the same LED of frames i and i + 1 is one period
+     * apart, so one period is the unit of the flow's time axis */
+    double period = lm_system_frame_period_us(s);
+    int nph = s->tile_rows * s->tile_cols, rl = lm_system_reference_led(s);
     *ref = -1;
     for (int p = 0; p < nph; p++) {
         int led = lm_system_tile_led(s, p);
-        double a, b;
-        lm_system_led_window(s, led, &a, &b);
-        t[p] = (float)(0.5 * (a + b) / period);
-        if (!strcasecmp(s->leds[led].name, "Lime")) *ref = p;
+        t[p] = (float)(lm_system_led_centre_us(s, led) / period);
+        if (led == rl && *ref < 0) *ref = p;
     }
     if (*ref < 0)
-        return lm_err_set(e, LM_ERR_ARG, "align: system '%s' has no LED named Lime in its tile",
-                          s->name);
+        return lm_err_set(e, LM_ERR_ARG, "align: system '%s': its reference LED %s is not in "
+                          "the tile", s->name, s->leds[rl].name);
     return LM_OK;
 }
 
-/* Frame i's plane alone, warped under linear motion with the flow to neighbour n at relative
- * time dt (+1 or -1): out(p) = cur(p - (tau / dt) F_{i->n}(p)). */
-static lm_status warp_one_sided(const float *cur, const float *nb, int h, int w, float tau,
-                                float dt, const lm_flow_opts *o, float *out, lm_err *e)
+void lm_align_default_opts(lm_align_opts *o)
 {
-    float *f = malloc(sizeof(float) * 2 * (size_t)h * (size_t)w);
-    if (!f) return lm_err_set(e, LM_ERR_NOMEM, "align: out of memory");
-    lm_status s = lm_flow_compute(cur, nb, h, w, o, f, e);
-    if (!s) lm_flow_warp(cur, h, w, f, -tau / dt, out, o && o->nthreads > 0 ? o->nthreads : 1);
-    free(f);
+    o->confidence = 1;
+    o->fb_tol = 2.0f;
+}
+
+/* out <- cur + c (out - cur), c from the flows fc = F_{cur->n}, fn = F_{n->cur} (align.h). */
+static void blend_confidence(const float *cur, const float *fc, const float *fn, int h, int w,
+                             float tau, const lm_align_opts *ao, float *out)
+{
+    long n = (long)h * w;
+    float at = fabsf(tau), lo = 0.5f * ao->fb_tol, hi = ao->fb_tol;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            long i = (long)y * w + x;
+            float u = fc[i], v = fc[n + i];
+            float bx = (float)x + u, by = (float)y + v;
+            float eu = u + lm_flow_sample(fn, h, w, bx, by);
+            float ev = v + lm_flow_sample(fn + n, h, w, bx, by);
+            float d = at * sqrtf(eu * eu + ev * ev); /* position error the warp would make */
+            float c = d <= lo ? 1.0f : d >= hi ? 0.0f : (hi - d) / (hi - lo);
+            out[i] = cur[i] + c * (out[i] - cur[i]);
+        }
+}
+
+/* The neighbour plane p uses: +1 frame i+1, -1 frame i-1, 0 none (copy). */
+static int plane_side(const float *prev, const float *next, float tau)
+{
+    if (tau == 0.0f || (!prev && !next)) return 0;
+    if (tau > 0.0f) return next ? 1 : -1;
+    return prev ? -1 : 1;
+}
+
+/* One plane with neighbour nb (dt = +1: frame i+1, -1: frame i-1) at relative time tau: the
+ * flows fc = F_{cur->nb} and (when the interpolation or the confidence needs it) fn =
+ * F_{nb->cur} into f (4n floats); interpolation between the two frames when tau points towards
+ * nb, else frame i's plane warped alone under linear motion, out(p) = cur(p - (tau / dt)
+ * F_{i->n}(p)); then the confidence blend. */
+static lm_status align_pair(const float *cur, const float *nb, float dt, int h, int w,
+                            float tau, const lm_flow_opts *o, const lm_align_opts *ao, float *f,
+                            float *out, lm_err *e)
+{
+    long n = (long)h * w;
+    int nt = o && o->nthreads > 0 ? o->nthreads : 1, towards = tau * dt > 0.0f;
+    float *fc = f, *fn = f + 2 * n;
+    lm_status s = lm_flow_compute(cur, nb, h, w, o, fc, e);
+    if (!s && (towards || ao->confidence)) s = lm_flow_compute(nb, cur, h, w, o, fn, e);
+    if (!s && towards && dt > 0.0f)
+        s = lm_flow_interpolate_flows(cur, nb, h, w, tau, fc, fn, nt, out, e);
+    else if (!s && towards)
+        s = lm_flow_interpolate_flows(nb, cur, h, w, 1.0f + tau, fn, fc, nt, out, e);
+    else if (!s)
+        lm_flow_warp_cubic(cur, h, w, fc, -tau / dt, out, nt);
+    if (!s && ao->confidence) blend_confidence(cur, fc, fn, h, w, tau, ao, out);
     return s;
 }
 
-/* One plane: the pair of frames and the time, or a fallback (see align.h). */
-static lm_status align_plane(const float *prev, const float *cur, const float *next, int h,
-                             int w, float tau, const lm_flow_opts *o, float *out, lm_err *e)
-{
-    size_t n = (size_t)h * (size_t)w;
-    if (tau == 0.0f || (!prev && !next)) {
-        memcpy(out, cur, n * sizeof *out);
-        return LM_OK;
-    }
-    if (tau > 0.0f) {
-        if (next) return lm_flow_interpolate(cur, next, h, w, tau, o, out, e);
-        return warp_one_sided(cur, prev, h, w, tau, -1.0f, o, out, e);
-    }
-    if (prev) return lm_flow_interpolate(prev, cur, h, w, 1.0f + tau, o, out, e);
-    return warp_one_sided(cur, next, h, w, tau, 1.0f, o, out, e);
-}
-
 lm_status lm_align_frame(const float *prev, const float *cur, const float *next, int np, int h,
-                         int w, const float *t, int ref, const lm_flow_opts *o, float *out,
-                         lm_err *e)
+                         int w, const float *t, int ref, const lm_flow_opts *o,
+                         const lm_align_opts *ao, float *out, lm_err *e)
 {
     if (!cur || !t || !out) return lm_err_set(e, LM_ERR_ARG, "align: NULL frame, times or output");
     if (np < 1 || ref < 0 || ref >= np)
         return lm_err_set(e, LM_ERR_ARG, "align: reference plane %d outside 0..%d", ref, np - 1);
     if (h <= 0 || w <= 0)
         return lm_err_set(e, LM_ERR_SHAPE, "align: empty sub-images %dx%d", h, w);
+    lm_align_opts dao;
+    if (!ao) lm_align_default_opts(&dao);
+    if (!ao) ao = &dao;
     size_t n = (size_t)h * (size_t)w;
-    for (int p = 0; p < np; p++) {
-        const float *pp = prev ? prev + p * n : NULL, *nx = next ? next + p * n : NULL;
+    float *f = malloc(sizeof(float) * 4 * n);
+    if (!f) return lm_err_set(e, LM_ERR_NOMEM, "align: out of memory");
+    lm_status s = LM_OK;
+    for (int p = 0; p < np && !s; p++) {
+        int side = plane_side(prev, next, t[ref] - t[p]);
+        if (!side) {
+            memcpy(out + p * n, cur + p * n, sizeof(float) * n);
+            continue;
+        }
         lm_err pe = {0};
-        lm_status s = align_plane(pp, cur + p * n, nx, h, w, t[ref] - t[p], o, out + p * n, &pe);
-        if (s) return lm_err_set(e, s, "align: plane %d: %s", p, pe.msg);
+        s = align_pair(cur + p * n, (side > 0 ? next : prev) + p * n, (float)side, h, w,
+                       t[ref] - t[p], o, ao, f, out + p * n, &pe);
+        if (s) lm_err_set(e, s, "align: plane %d: %s", p, pe.msg);
     }
-    return LM_OK;
+    free(f);
+    return s;
 }
 
 lm_status lm_align_unshuffle(const float *raw, int height, int width, int ty, int tx,

@@ -184,14 +184,16 @@ lm_status lm_cond_simulate(const lm_infer_model *im, const lm_cube *truth, lm_co
 
 lm_status lm_cond_eval(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
                        lm_cond_family f, double level, const lm_tile_opts *to,
-                       const lm_rng *rng, lm_metrics *m, lm_metrics *unaligned, lm_err *err)
+                       const lm_rng *rng, lm_metrics *m, lm_metrics *unaligned,
+                       lm_metrics *still, lm_err *err)
 {
     if (f == LM_COND_MOTION) {
         if (bad_family(im, f, level, err)) return err->status;
         lm_eval_motion mo;
-        if (lm_eval_motion_run(c, im, truth, level, to, NULL, &mo, err)) return err->status;
+        if (lm_eval_motion_run(c, im, truth, level, to, NULL, NULL, &mo, err)) return err->status;
         *m = mo.aligned;
         if (unaligned) *unaligned = mo.unaligned;
+        if (still) *still = mo.still;
         return LM_OK;
     }
     float *frame;
@@ -206,6 +208,7 @@ lm_status lm_cond_eval(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth
                             err);
     lm_cube_free(&pred);
     if (!st && unaligned) *unaligned = *m;
+    if (!st && still) *still = *m;
     return st;
 }
 

@@ -82,12 +82,14 @@ lm_status lm_cond_simulate(const lm_infer_model *im, const lm_cube *truth, lm_co
                            lm_err *err);
 
 /* Score the model on the cube under (f, level): simulate, reconstruct (lm_eval_reconstruct
- * with the tiles of to), metrics into *m. For motion *m is the aligned frame's score and
- * *unaligned (may be NULL) the frame as recorded; for the other families *unaligned = *m.
+ * with the tiles of to), metrics into *m. For motion *m is the aligned frame's score, *unaligned
+ * (may be NULL) the frame as recorded and *still (may be NULL) the static reference, all over
+ * the in-view region (lm_eval_motion_run); for the other families *unaligned = *still = *m.
  * c must hold no tensors. */
 lm_status lm_cond_eval(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
                        lm_cond_family f, double level, const lm_tile_opts *to,
-                       const lm_rng *rng, lm_metrics *m, lm_metrics *unaligned, lm_err *err);
+                       const lm_rng *rng, lm_metrics *m, lm_metrics *unaligned,
+                       lm_metrics *still, lm_err *err);
 
 /* The 3-dB point: with psnr[i] at levels[i] (sweep order, mild to severe), the first i with
  * psnr[i] <= clean - drop. Returns 1 and *at = the linear interpolation between levels[i - 1]

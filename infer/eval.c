@@ -174,7 +174,7 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
     return st;
 }
 
-#define MOTION_FRAMES 3
+#define MOTION_FRAMES LM_EVAL_MOTION_FRAMES
 
 /* Buffers of one motion run: frames, their sub-images, the aligned frame. */
 typedef struct motion_buf {
@@ -223,7 +223,7 @@ static lm_status motion_simulate(const lm_infer_model *im, const lm_cube *cube31
 
 /* Frame 1 aligned to its lime instant with frames 0 and 2, re-mosaicked into b->remos. */
 static lm_status motion_align(const lm_system *sys, int H, int W, const lm_flow_opts *fo,
-                              motion_buf *b, lm_err *err)
+                              const lm_align_opts *ao, motion_buf *b, lm_err *err)
 {
     int ty = sys->tile_rows, tx = sys->tile_cols, np = ty * tx, ref;
     float t[LM_SYSTEM_MAX_TILE];
@@ -231,22 +231,69 @@ static lm_status motion_align(const lm_system *sys, int H, int W, const lm_flow_
     for (int i = 0; i < MOTION_FRAMES && !st; i++)
         st = lm_align_unshuffle(b->raw[i], H, W, ty, tx, b->planes[i], err);
     if (!st) st = lm_align_frame(b->planes[0], b->planes[1], b->planes[2], np, H / ty, W / tx,
-                                 t, ref, fo, b->aligned, err);
+                                 t, ref, fo, ao, b->aligned, err);
     if (!st) st = lm_align_remosaic(b->aligned, H / ty, W / tx, ty, tx, b->remos, err);
     return st;
 }
 
-/* Reconstruct frame and score it against b->truth. */
-static lm_status motion_score(lm_ctx *c, const lm_infer_model *im, const float *frame,
-                              const lm_tile_opts *to, const motion_buf *b, lm_metrics *m,
-                              lm_err *err)
+void lm_eval_motion_region(const lm_system *sys, double speed, int height, int width, int *y0,
+                           int *x0, int *h, int *w)
+{
+    double span = 1e-6 * lm_system_frame_period_us(sys) * (MOTION_FRAMES - 1);
+    int my = (int)ceil(fabs(speed * LM_EVAL_MOTION_DIR_Y) * span - 1e-9) +
+             LM_EVAL_MOTION_SUPPORT_TILES * sys->tile_rows;
+    int mx = (int)ceil(fabs(speed * LM_EVAL_MOTION_DIR_X) * span - 1e-9) +
+             LM_EVAL_MOTION_SUPPORT_TILES * sys->tile_cols;
+    *y0 = my;
+    *x0 = mx;
+    *h = height - 2 * my > 0 ? height - 2 * my : 0;
+    *w = width - 2 * mx > 0 ? width - 2 * mx : 0;
+}
+
+/* Metrics of pred against truth (31 x H x W each) over the region of out (y0, x0, h, w). */
+static lm_status region_metrics(const float *pred, const float *truth, int H, int W,
+                                const lm_eval_motion *r, lm_metrics *m, lm_err *err)
+{
+    size_t n = (size_t)31 * r->height * r->width;
+    float *a = malloc(sizeof(float) * 2 * (n ? n : 1)), *b = a + n;
+    if (!a) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    for (int k = 0; k < 31; k++)
+        for (int y = 0; y < r->height; y++) {
+            size_t src = ((size_t)k * H + r->y0 + y) * W + r->x0;
+            size_t dst = ((size_t)k * r->height + y) * r->width;
+            memcpy(a + dst, pred + src, sizeof(float) * r->width);
+            memcpy(b + dst, truth + src, sizeof(float) * r->width);
+        }
+    lm_status st = lm_metrics_compute(a, b, 31, r->height, r->width, 0, 31, m, err);
+    free(a);
+    return st;
+}
+
+/* Reconstruct frame (H x W, the layout of lm_eval_simulate) and score it against truth over
+ * the region of r. */
+static lm_status score_region(lm_ctx *c, const lm_infer_model *im, const float *frame,
+                              const lm_tile_opts *to, const lm_cube *truth,
+                              const lm_eval_motion *r, lm_metrics *m, lm_err *err)
 {
     lm_cube pred;
-    int H = b->truth.height, W = b->truth.width;
+    int H = truth->height, W = truth->width;
     lm_status st = lm_eval_reconstruct(c, im, frame, H, W, to, 0, &pred, err);
     if (st) return st;
-    st = lm_metrics_compute(pred.data, b->truth.data, 31, H, W, 0, 31, m, err);
+    st = region_metrics(pred.data, truth->data, H, W, r, m, err);
     lm_cube_free(&pred);
+    return st;
+}
+
+/* The static reference: truth as a still frame (noise-free), reconstructed, scored. */
+static lm_status score_still(lm_ctx *c, const lm_infer_model *im, const lm_tile_opts *to,
+                             const lm_cube *truth, lm_eval_motion *r, lm_err *err)
+{
+    size_t n = (size_t)(is_rgb(im) ? 3 : 1) * truth->height * truth->width;
+    float *frame = malloc(sizeof(float) * n);
+    if (!frame) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    lm_status st = simulate(im, truth, NULL, NULL, lm_nthreads(c), frame, err);
+    if (!st) st = score_region(c, im, frame, to, truth, r, &r->still, err);
+    free(frame);
     return st;
 }
 
@@ -272,9 +319,8 @@ static lm_status motion_rgb(lm_ctx *c, const lm_infer_model *im, const lm_cube *
     size_t n = (size_t)31 * H * W;
     double t[LM_VIDEO_MAX_SAMPLES];
     int ns = rgb_instants(&im->sys, t);
-    lm_cube acc, gt, w, pred;
+    lm_cube acc, gt, w;
     memset(&gt, 0, sizeof gt);
-    memset(&pred, 0, sizeof pred);
     if (lm_cube_alloc(&acc, 31, H, W, 400.0f, 10.0f))
         return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
     float *frame = malloc(sizeof(float) * 3 * (size_t)H * W);
@@ -291,24 +337,46 @@ static lm_status motion_rgb(lm_ctx *c, const lm_infer_model *im, const lm_cube *
     if (!st) st = simulate(im, &acc, NULL, NULL, nt, frame, err);
     double tg = (lm_video_frame_start_us(&im->sys, 1) + lm_video_gt_time_us(&im->sys)) * 1e-6;
     if (!st) st = lm_video_warp(cube, mo, tg, &gt, nt, err);
-    if (!st) st = lm_eval_reconstruct(c, im, frame, H, W, to, 0, &pred, err);
-    if (!st) st = lm_metrics_compute(pred.data, gt.data, 31, H, W, 0, 31, &out->unaligned, err);
+    if (!st) st = score_region(c, im, frame, to, &gt, out, &out->unaligned, err);
     out->aligned = out->unaligned; /* one camera frame, nothing to align */
-    lm_cube_free(&pred);
+    if (!st) st = score_still(c, im, to, &gt, out, err);
     lm_cube_free(&gt);
     lm_cube_free(&acc);
     free(frame);
     return st;
 }
 
+/* The buffers of a coded motion run; LM_ERR_NOMEM if any is missing. */
+static lm_status motion_alloc(motion_buf *b, size_t n, lm_err *err)
+{
+    memset(b, 0, sizeof *b);
+    int ok = 1;
+    for (int i = 0; i < MOTION_FRAMES; i++) {
+        b->raw[i] = malloc(sizeof(float) * n);
+        b->planes[i] = malloc(sizeof(float) * n);
+        ok = ok && b->raw[i] && b->planes[i];
+    }
+    b->aligned = malloc(sizeof(float) * n);
+    b->remos = malloc(sizeof(float) * n);
+    return ok && b->aligned && b->remos ? LM_OK
+                                        : lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+}
+
 lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
                              double speed, const lm_tile_opts *to, const lm_flow_opts *fo,
-                             lm_eval_motion *out, lm_err *err)
+                             const lm_align_opts *ao, lm_eval_motion *out, lm_err *err)
 {
     memset(out, 0, sizeof *out);
     out->speed = speed;
     if (!(speed >= 0.0) || !isfinite(speed))
         return lm_err_set(err, LM_ERR_ARG, "eval: motion speed %g px/s (need >= 0)", speed);
+    int H = truth->height, W = truth->width;
+    out->px_per_frame = speed * 1e-6 * lm_system_frame_period_us(&im->sys);
+    lm_eval_motion_region(&im->sys, speed, H, W, &out->y0, &out->x0, &out->height, &out->width);
+    if (out->height < LM_SSIM_WIN || out->width < LM_SSIM_WIN)
+        return lm_err_set(err, LM_ERR_SHAPE, "eval: motion at %g px/s: the %d x %d scene keeps "
+                          "%d x %d pixels in view over the video (need %d x %d)", speed, W, H,
+                          out->width, out->height, LM_SSIM_WIN, LM_SSIM_WIN);
     if (is_rgb(im)) {
         lm_motion mo;
         memset(&mo, 0, sizeof mo);
@@ -322,24 +390,13 @@ lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube 
         dfo.nthreads = lm_nthreads(c);
         fo = &dfo;
     }
-    int H = truth->height, W = truth->width;
-    size_t n = (size_t)H * W;
     motion_buf b;
-    memset(&b, 0, sizeof b);
-    int ok = 1;
-    for (int i = 0; i < MOTION_FRAMES; i++) {
-        b.raw[i] = malloc(sizeof(float) * n);
-        b.planes[i] = malloc(sizeof(float) * n);
-        ok = ok && b.raw[i] && b.planes[i];
-    }
-    b.aligned = malloc(sizeof(float) * n);
-    b.remos = malloc(sizeof(float) * n);
-    lm_status st = ok && b.aligned && b.remos ? LM_OK
-                                              : lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    lm_status st = motion_alloc(&b, (size_t)H * W, err);
     if (!st) st = motion_simulate(im, truth, speed, lm_nthreads(c), &b, err);
-    if (!st) st = motion_align(&im->sys, H, W, fo, &b, err);
-    if (!st) st = motion_score(c, im, b.raw[1], to, &b, &out->unaligned, err);
-    if (!st) st = motion_score(c, im, b.remos, to, &b, &out->aligned, err);
+    if (!st) st = motion_align(&im->sys, H, W, fo, ao, &b, err);
+    if (!st) st = score_region(c, im, b.raw[1], to, &b.truth, out, &out->unaligned, err);
+    if (!st) st = score_region(c, im, b.remos, to, &b.truth, out, &out->aligned, err);
+    if (!st) st = score_still(c, im, to, &b.truth, out, err);
     motion_buf_free(&b);
     return st;
 }

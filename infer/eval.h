@@ -8,7 +8,8 @@
  * Motion: the prepared cube translating at a given speed in a fixed direction is simulated as
  * a short coded video (data/video.h, §5 timing, noise-free), and its middle frame is
  * reconstructed with and without temporal alignment (infer/align.h), both scored against the
- * scene at that frame's lime instant.
+ * scene at that frame's lime instant, on the region that stays in view over the video, beside
+ * the static reference (that scene as a still frame).
  * RGB models (in_channels 3: the passive MST++ baseline) see the same cube through an RGB
  * camera (data/rgbcam.h: Nikon D5100, D65, white balanced; noise k x the largest clean value of
  * the three channels) and reconstruct the whole frame (lm_mst_reconstruct). In the motion test
@@ -22,6 +23,7 @@
 #define LM_EVAL_H
 #include "data/cube.h"
 #include "data/forward.h"
+#include "infer/align.h"
 #include "infer/flow.h"
 #include "infer/model_io.h"
 #include "infer/tile.h"
@@ -77,23 +79,49 @@ double lm_eval_peak_nm(const float *spec, int n, double wl0, double step);
 #define LM_EVAL_MOTION_DIR_X 0.8
 #define LM_EVAL_MOTION_DIR_Y 0.6
 #define LM_EVAL_MAX_MOTION 16
+/* Frames of the motion test's video; the middle one is scored. */
+#define LM_EVAL_MOTION_FRAMES 3
+/* Mosaic tiles added to the motion margin for the filters' support (one for the bilinear
+ * demosaic, one for the flow's smoothing across the last in-view pixels). */
+#define LM_EVAL_MOTION_SUPPORT_TILES 2
+
+/* The region of an H x W scene scored in the motion test: what the camera sees in every frame
+ * of the video. Content moving at `speed` px/s along the test's direction enters and leaves
+ * the view over the video's span, frame_period_us x (LM_EVAL_MOTION_FRAMES - 1); there the
+ * simulator can only repeat the border (nothing real to align or reconstruct). The margin on
+ * each side is ceil(|v_x| x span) + LM_EVAL_MOTION_SUPPORT_TILES x tile_cols columns, and
+ * ceil(|v_y| x span) + LM_EVAL_MOTION_SUPPORT_TILES x tile_rows rows; a still scene keeps the
+ * support margin too, so every speed is scored the same way. *y0, *x0: the region's top-left;
+ * *h, *w its size (0 when the margins leave nothing). */
+void lm_eval_motion_region(const lm_system *sys, double speed, int height, int width, int *y0,
+                           int *x0, int *h, int *w);
 
 typedef struct lm_eval_motion {
     double speed;          /* px/s along (LM_EVAL_MOTION_DIR_X, LM_EVAL_MOTION_DIR_Y) */
+    double px_per_frame;   /* speed x frame period: the displacement between frames */
+    int y0, x0, height, width; /* the scored region (lm_eval_motion_region) */
+    lm_metrics still;      /* the static reference: the still scene that frame 1's truth shows,
+                            * simulated and reconstructed (what a still camera would score) */
     lm_metrics aligned;    /* frame 1 aligned with frames 0 and 2, then reconstructed */
     lm_metrics unaligned;  /* frame 1 reconstructed as recorded */
 } lm_eval_motion;
 
 /* Frames 0, 1, 2 of the prepared 31-band cube moving at `speed` px/s (mirrored to the
  * system's 41-bin grid, lm_video_frame with the default motion-blur samples, no noise); the
- * truth is frame 1's scene at its lime instant (bands 400..700 nm). fo: flow options (NULL =
- * medium preset with lm_nthreads(c) threads; unused for RGB models, see above). c must hold no
- * tensors. Errors: LM_ERR_ARG for a
- * negative or non-finite speed; those of the video model, the alignment (sub-images smaller
- * than lm_flow_min_size: LM_ERR_SHAPE), lm_tile_infer and the metrics. */
+ * truth is frame 1's scene at its lime instant (bands 400..700 nm). All three scores are taken
+ * over lm_eval_motion_region only. The static reference simulates the truth itself as a still
+ * frame: at speed 0 it equals the unaligned score exactly; at other speeds it is the score the
+ * moving frames would reach if motion cost nothing (the simulator's sub-pixel resampling
+ * smooths the moving scene, so the speed-0 score is not that reference). fo: flow options
+ * (NULL = medium preset with lm_nthreads(c) threads; unused for RGB models, see above); ao:
+ * alignment options (NULL = lm_align_default_opts). c must hold no tensors. Errors:
+ * LM_ERR_ARG for a negative or non-finite speed; LM_ERR_SHAPE when the scored region is
+ * smaller than the SSIM window (the scene is too small for that speed); those of the video
+ * model, the alignment (sub-images smaller than lm_flow_min_size: LM_ERR_SHAPE), lm_tile_infer
+ * and the metrics. */
 lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
                              double speed, const lm_tile_opts *to, const lm_flow_opts *fo,
-                             lm_eval_motion *out, lm_err *err);
+                             const lm_align_opts *ao, lm_eval_motion *out, lm_err *err);
 
 typedef struct lm_eval_rainbow {
     int size;                 /* the scene simulated: size x size */

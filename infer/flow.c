@@ -61,16 +61,58 @@ float lm_flow_sample(const float *img, int h, int w, float x, float y)
     return top + ay * (bot - top);
 }
 
-void lm_flow_warp(const float *src, int h, int w, const float *flow, float s, float *out,
-                  int nthreads)
+typedef float (*sampler)(const float *img, int h, int w, float x, float y);
+
+/* out(p) = sample(src, p + s F(p)), rows split statically over the threads. */
+static void warp_with(sampler sample, const float *src, int h, int w, const float *flow,
+                      float s, float *out, int nthreads)
 {
     long n = (long)h * w;
 #pragma omp parallel for schedule(static) num_threads(nthreads > 0 ? nthreads : 1)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             long i = (long)y * w + x;
-            out[i] = lm_flow_sample(src, h, w, (float)x + s * flow[i], (float)y + s * flow[n + i]);
+            out[i] = sample(src, h, w, (float)x + s * flow[i], (float)y + s * flow[n + i]);
         }
+}
+
+void lm_flow_warp(const float *src, int h, int w, const float *flow, float s, float *out,
+                  int nthreads)
+{
+    warp_with(lm_flow_sample, src, h, w, flow, s, out, nthreads);
+}
+
+/* Catmull-Rom weights of the 4 taps around a sample at fraction f of the way from tap 1 to 2. */
+static void cubic_weights(float f, float *wt)
+{
+    float f2 = f * f, f3 = f2 * f;
+    wt[0] = 0.5f * (-f3 + 2.0f * f2 - f);
+    wt[1] = 0.5f * (3.0f * f3 - 5.0f * f2 + 2.0f);
+    wt[2] = 0.5f * (-3.0f * f3 + 4.0f * f2 + f);
+    wt[3] = 0.5f * (f3 - f2);
+}
+
+float lm_flow_sample_cubic(const float *img, int h, int w, float x, float y)
+{
+    x = x < 0.0f ? 0.0f : x > (float)(w - 1) ? (float)(w - 1) : x;
+    y = y < 0.0f ? 0.0f : y > (float)(h - 1) ? (float)(h - 1) : y;
+    int x0 = (int)x, y0 = (int)y;
+    float wx[4], wy[4], acc = 0.0f;
+    cubic_weights(x - (float)x0, wx);
+    cubic_weights(y - (float)y0, wy);
+    for (int j = 0; j < 4; j++) {
+        const float *r = img + (long)clampi(y0 - 1 + j, 0, h - 1) * w;
+        float row = 0.0f;
+        for (int i = 0; i < 4; i++) row += wx[i] * r[clampi(x0 - 1 + i, 0, w - 1)];
+        acc += wy[j] * row;
+    }
+    return acc;
+}
+
+void lm_flow_warp_cubic(const float *src, int h, int w, const float *flow, float s, float *out,
+                        int nthreads)
+{
+    warp_with(lm_flow_sample_cubic, src, h, w, flow, s, out, nthreads);
 }
 
 /* Central differences with border clamping: gx = (I(x+1) - I(x-1)) / 2. */
@@ -508,6 +550,25 @@ void lm_flow_intermediate(const float *f01, const float *f10, long n, float t, f
     }
 }
 
+lm_status lm_flow_interpolate_flows(const float *i0, const float *i1, int h, int w, float t,
+                                    const float *f01, const float *f10, int nthreads,
+                                    float *out, lm_err *e)
+{
+    if (!i0 || !i1 || !f01 || !f10 || !out)
+        return lm_err_set(e, LM_ERR_ARG, "flow: NULL image, flow or output buffer");
+    long n = (long)h * w;
+    float *b = malloc(sizeof(float) * (size_t)(6 * n));
+    if (!b) return lm_err_set(e, LM_ERR_NOMEM, "flow: out of memory for %dx%d images", h, w);
+    float *ft0 = b, *ft1 = b + 2 * n, *w0 = b + 4 * n, *w1 = b + 5 * n;
+    int nt = nthreads > 0 ? nthreads : 1;
+    lm_flow_intermediate(f01, f10, n, t, ft0, ft1);
+    lm_flow_warp_cubic(i0, h, w, ft0, 1.0f, w0, nt);
+    lm_flow_warp_cubic(i1, h, w, ft1, 1.0f, w1, nt);
+    for (long i = 0; i < n; i++) out[i] = (1.0f - t) * w0[i] + t * w1[i];
+    free(b);
+    return LM_OK;
+}
+
 lm_status lm_flow_interpolate(const float *i0, const float *i1, int h, int w, float t,
                               const lm_flow_opts *opts, float *out, lm_err *e)
 {
@@ -515,19 +576,13 @@ lm_status lm_flow_interpolate(const float *i0, const float *i1, int h, int w, fl
     long n = (long)h * w;
     if (h <= 0 || w <= 0)
         return lm_err_set(e, LM_ERR_SHAPE, "flow: image %dx%d (h x w) is empty", h, w);
-    float *b = malloc(sizeof(float) * (size_t)(10 * n));
+    float *b = malloc(sizeof(float) * (size_t)(4 * n));
     if (!b) return lm_err_set(e, LM_ERR_NOMEM, "flow: out of memory for %dx%d images", h, w);
-    float *f01 = b, *f10 = b + 2 * n, *ft0 = b + 4 * n, *ft1 = b + 6 * n, *w0 = b + 8 * n;
-    float *w1 = b + 9 * n;
+    float *f01 = b, *f10 = b + 2 * n;
     lm_status s = lm_flow_compute(i0, i1, h, w, opts, f01, e);
     if (!s) s = lm_flow_compute(i1, i0, h, w, opts, f10, e);
-    if (!s) {
-        int nt = opts && opts->nthreads > 0 ? opts->nthreads : 1;
-        lm_flow_intermediate(f01, f10, n, t, ft0, ft1);
-        lm_flow_warp(i0, h, w, ft0, 1.0f, w0, nt);
-        lm_flow_warp(i1, h, w, ft1, 1.0f, w1, nt);
-        for (long i = 0; i < n; i++) out[i] = (1.0f - t) * w0[i] + t * w1[i];
-    }
+    if (!s) s = lm_flow_interpolate_flows(i0, i1, h, w, t, f01, f10,
+                                          opts && opts->nthreads > 0 ? opts->nthreads : 1, out, e);
     free(b);
     return s;
 }

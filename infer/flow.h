@@ -5,7 +5,8 @@
  * by averaging overlapping patch displacements weighted by 1 / max(1, |photometric error|), then
  * a few red-black SOR sweeps of a variational energy (Charbonnier brightness constancy +
  * gradient constancy + smoothness, data terms normalised by their spatial derivatives);
- * backward bilinear warping with border clamping; intermediate flows under linear motion.
+ * backward bilinear warping with border clamping (bicubic for the interpolated frames);
+ * intermediate flows under linear motion.
  * Images are row-major float h x w; intensities are rescaled internally so that the brighter
  * image's maximum is 255 (the weights are those for 8-bit images).
  * What it is not: occlusion reasoning, multi-channel images, tensors or autograd.
@@ -57,6 +58,13 @@ lm_status lm_flow_compute(const float *i0, const float *i1, int h, int w,
 void lm_flow_warp(const float *src, int h, int w, const float *flow, float s, float *out,
                   int nthreads);
 
+/* The same with Catmull-Rom (bicubic) interpolation: sharper, used for the final warps of
+ * temporal alignment (bilinear resampling at half a pixel halves the highest frequencies of
+ * these small sub-images). Taps outside the image repeat the border. */
+void lm_flow_warp_cubic(const float *src, int h, int w, const float *flow, float s, float *out,
+                        int nthreads);
+float lm_flow_sample_cubic(const float *img, int h, int w, float x, float y);
+
 /* Bilinear sample of img (h x w) at (x, y), coordinates clamped to [0, w-1] x [0, h-1]. */
 float lm_flow_sample(const float *img, int h, int w, float x, float y);
 
@@ -67,9 +75,16 @@ void lm_flow_intermediate(const float *f01, const float *f10, long n, float t, f
                           float *ft1);
 
 /* Frame at time t between i0 (t = 0) and i1 (t = 1): computes F_{0->1}, F_{1->0}, the
- * intermediate flows and out = (1-t) warp(i0, F_{t->0}) + t warp(i1, F_{t->1}).
+ * intermediate flows and out = (1-t) warp(i0, F_{t->0}) + t warp(i1, F_{t->1}), both warps
+ * bicubic (lm_flow_warp_cubic).
  * t may lie outside [0, 1] (extrapolation, less accurate). Errors as lm_flow_compute. */
 lm_status lm_flow_interpolate(const float *i0, const float *i1, int h, int w, float t,
                               const lm_flow_opts *o, float *out, lm_err *e);
+
+/* The interpolation of lm_flow_interpolate from flows already computed (f01 = F_{0->1},
+ * f10 = F_{1->0}, 2 * h * w floats each). Errors: LM_ERR_ARG (NULL buffers), LM_ERR_NOMEM. */
+lm_status lm_flow_interpolate_flows(const float *i0, const float *i1, int h, int w, float t,
+                                    const float *f01, const float *f10, int nthreads,
+                                    float *out, lm_err *e);
 
 #endif

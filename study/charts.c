@@ -364,7 +364,8 @@ static lm_status rainbow_chart(const json_t *runs, const char *dir, lm_err *err)
     return close_file(f, path, err);
 }
 
-/* cond_<family>_<preset>.dat: level psnr ssim sam [psnr_unaligned]; fail_<family>.dat: each
+/* cond_<family>_<preset>.dat: level psnr ssim sam psnr_unaligned psnr_static px_per_frame
+ * (the last three: motion's, else psnr, psnr and the level); fail_<family>.dat: each
  * model's 3-dB point (level, clean - 3 dB). Returns the number of models with data. */
 static int cond_data(const json_t *runs, const char *fam, const char *dir, int *ncross,
                      lm_err *err)
@@ -383,13 +384,15 @@ static int cond_data(const json_t *runs, const char *fam, const char *dir, int *
         snprintf(name, sizeof name, "cond_%s_%s.dat", fam, preset(r));
         FILE *f = open_in(dir, name, path, err);
         if (!f) return fclose(ff), -1;
-        fprintf(f, "# level psnr ssim sam psnr_unaligned\n");
+        fprintf(f, "# level psnr ssim sam psnr_unaligned psnr_static px_per_frame\n");
         const json_t *lv = json_object_get(fr, "levels");
         for (size_t k = 0; k < json_array_size(lv); k++) {
             const json_t *l = json_array_get(lv, k);
-            double u = num(l, "psnr_unaligned");
-            fprintf(f, "%.9g %.6f %.6f %.6f %.6f\n", num(l, "level"), num(l, "psnr"),
-                    num(l, "ssim"), num(l, "sam"), isfinite(u) ? u : num(l, "psnr"));
+            double u = num(l, "psnr_unaligned"), st = num(l, "psnr_static");
+            double px = num(l, "px_per_frame");
+            fprintf(f, "%.9g %.6f %.6f %.6f %.6f %.6f %.9g\n", num(l, "level"), num(l, "psnr"),
+                    num(l, "ssim"), num(l, "sam"), isfinite(u) ? u : num(l, "psnr"),
+                    isfinite(st) ? st : num(l, "psnr"), isfinite(px) ? px : num(l, "level"));
         }
         if (close_file(f, path, err)) return fclose(ff), -1;
         double at = num(fr, "drop_3db");
@@ -435,7 +438,8 @@ static lm_status cond_chart(const json_t *runs, lm_cond_family fam, const char *
     return close_file(f, path, err);
 }
 
-/* motion.gp: PSNR against speed, aligned (solid) and as recorded (dashed), from cond_motion_*. */
+/* motion.gp: PSNR against the displacement per frame, aligned (solid), as recorded (dashed)
+ * and the static reference (dotted: the same scene still), from cond_motion_*. */
 static lm_status motion_chart(const json_t *runs, const char *dir, lm_err *err)
 {
     char path[CPATH];
@@ -445,17 +449,19 @@ static lm_status motion_chart(const json_t *runs, const char *dir, lm_err *err)
     if (!any) return drop_chart(dir, "motion"), LM_OK;
     FILE *f = open_in(dir, "motion.gp", path, err);
     if (!f) return err->status;
-    gp_head(f, "motion", "PSNR against motion speed: with (solid) and without (dashed) temporal "
-            "alignment", "speed (px/s)", "PSNR (dB)");
+    gp_head(f, "motion", "PSNR against motion: aligned (solid), unaligned (dashed), static "
+            "reference (dotted)", "motion (px/frame)", "PSNR (dB)");
     fprintf(f, "plot ");
     int first = 1;
     for (size_t i = 0; i < json_array_size(runs); i++) {
         const json_t *r = json_array_get(runs, i);
         if (!family_rec(r, "motion")) continue;
-        fprintf(f, "%s\"cond_motion_%s.dat\" using 1:2 with linespoints lw 1.5 lc %zu title "
-                   "\"%s aligned\", \\\n     \"cond_motion_%s.dat\" using 1:5 with linespoints "
-                   "dt 2 lw 1.5 lc %zu title \"%s unaligned\"", first ? "" : ", \\\n     ",
-                preset(r), i + 1, preset(r), preset(r), i + 1, preset(r));
+        fprintf(f, "%s\"cond_motion_%s.dat\" using 7:2 with linespoints lw 1.5 lc %zu title "
+                   "\"%s aligned\", \\\n     \"cond_motion_%s.dat\" using 7:5 with linespoints "
+                   "dt 2 lw 1.5 lc %zu title \"%s unaligned\", \\\n     \"cond_motion_%s.dat\" "
+                   "using 7:6 with lines dt 3 lw 1.5 lc %zu title \"%s static\"",
+                first ? "" : ", \\\n     ", preset(r), i + 1, preset(r), preset(r), i + 1,
+                preset(r), preset(r), i + 1, preset(r));
         first = 0;
     }
     fprintf(f, "\n");

@@ -21,18 +21,20 @@ lm_status lm_study_cond_add(lm_ctx *c, const lm_infer_model *im, const lm_study_
 {
     lm_tile_opts to;
     lm_tile_default_opts(&to);
-    lm_metrics m, u;
-    if (lm_cond_eval(c, im, truth, LM_COND_PHOTONS, 0.0, &to, rs, &m, NULL, err))
+    lm_metrics m, u, st;
+    if (lm_cond_eval(c, im, truth, LM_COND_PHOTONS, 0.0, &to, rs, &m, NULL, NULL, err))
         return err->status;
     lm_metrics_acc_add(&a->clean, &m);
     for (int i = 0; i < cfg->ncond; i++) {
         const lm_study_cond *sc = &cfg->cond[i];
         if (!lm_cond_applies(sc->family, lm_model_has(im->model, LM_CAP_RGB_INPUT))) continue;
         for (int k = 0; k < sc->nlevels; k++) {
-            if (lm_cond_eval(c, im, truth, sc->family, sc->levels[k], &to, rs, &m, &u, err))
+            if (lm_cond_eval(c, im, truth, sc->family, sc->levels[k], &to, rs, &m, &u, &st,
+                             err))
                 return err->status;
             lm_metrics_acc_add(&a->m[i][k], &m);
             lm_metrics_acc_add(&a->u[i][k], &u);
+            lm_metrics_acc_add(&a->s[i][k], &st);
         }
     }
     a->nscenes++;
@@ -45,7 +47,7 @@ static json_t *jnum(double v)
 }
 
 static json_t *family_json(const lm_study_cond *sc, const lm_study_cond_acc *a, int i,
-                           double clean)
+                           double clean, double frame_period_us)
 {
     json_t *lv = json_array();
     double psnr[LM_COND_MAX_LEVELS], at;
@@ -54,9 +56,13 @@ static json_t *family_json(const lm_study_cond *sc, const lm_study_cond_acc *a, 
         psnr[k] = m.psnr;
         json_t *o = json_pack("{s:f, s:o, s:o, s:o}", "level", sc->levels[k], "psnr",
                               jnum(m.psnr), "ssim", jnum(m.ssim), "sam", jnum(m.sam));
-        if (sc->family == LM_COND_MOTION)
+        if (sc->family == LM_COND_MOTION) {
             json_object_set_new(o, "psnr_unaligned",
                                 jnum(lm_metrics_acc_mean(&a->u[i][k]).psnr));
+            json_object_set_new(o, "psnr_static", jnum(lm_metrics_acc_mean(&a->s[i][k]).psnr));
+            json_object_set_new(o, "px_per_frame",
+                                json_real(sc->levels[k] * 1e-6 * frame_period_us));
+        }
         json_array_append_new(lv, o);
     }
     int hit = lm_cond_crossing(sc->levels, psnr, sc->nlevels, clean, 3.0, &at);
@@ -73,7 +79,8 @@ json_t *lm_study_cond_json(const lm_study_cfg *cfg, const lm_infer_model *im,
     for (int i = 0; i < cfg->ncond; i++) {
         const lm_study_cond *sc = &cfg->cond[i];
         if (lm_cond_applies(sc->family, lm_model_has(im->model, LM_CAP_RGB_INPUT)))
-            json_array_append_new(fam, family_json(sc, a, i, cm.psnr));
+            json_array_append_new(fam, family_json(sc, a, i, cm.psnr,
+                                                   lm_system_frame_period_us(&im->sys)));
         else
             json_array_append_new(fam, json_pack("{s:s, s:s, s:b}", "family",
                                                  lm_cond_name(sc->family), "unit",

@@ -245,7 +245,8 @@ static void md_failure(FILE *f, const lm_study_cfg *cfg, const json_t *runs)
                 const json_t *l = json_array_get(lv, k);
                 fprintf(f, " %g: %.2f", num(l, "level"), num(l, "psnr"));
                 if (isfinite(num(l, "psnr_unaligned")))
-                    fprintf(f, " (unaligned %.2f)", num(l, "psnr_unaligned"));
+                    fprintf(f, " (unaligned %.2f, static %.2f)", num(l, "psnr_unaligned"),
+                            num(l, "psnr_static"));
                 fprintf(f, "%s", k + 1 < json_array_size(lv) ? ";" : "");
             }
             fprintf(f, " |\n");
@@ -339,7 +340,7 @@ static void write_md(FILE *f, const lm_study_cfg *cfg, const lm_study *s, const 
         {"noise_sam", "SAM against noise"}, {"train_loss", "training loss"},
         {"train_val_psnr", "validation PSNR during training"},
         {"rainbow_peaks", "rainbow: recovered against true peak per row"},
-        {"motion", "PSNR against motion speed, aligned and unaligned"},
+        {"motion", "PSNR against motion (px/frame), aligned, unaligned and static"},
         {"narrowband", "rainbow accuracy against the synthetic share of training"},
         {"failure_3db", "level of the 3-dB loss per condition"},
         {"cond_photons", "PSNR against the photon budget"},

@@ -123,6 +123,7 @@ typedef struct lm_study_cond_acc {
     lm_metrics_acc clean;
     lm_metrics_acc m[LM_COND_NFAMILIES][LM_COND_MAX_LEVELS]; /* aligned for motion */
     lm_metrics_acc u[LM_COND_NFAMILIES][LM_COND_MAX_LEVELS]; /* motion unaligned */
+    lm_metrics_acc s[LM_COND_NFAMILIES][LM_COND_MAX_LEVELS]; /* motion static reference */
     int nscenes;
 } lm_study_cond_acc;
 void lm_study_cond_init(lm_study_cond_acc *a);
@@ -132,7 +133,9 @@ lm_status lm_study_cond_add(lm_ctx *c, const lm_infer_model *im, const lm_study_
                             const lm_cube *truth, const lm_rng *rs, lm_study_cond_acc *a,
                             lm_err *err);
 /* {"scenes", "clean_psnr", "drop_db": 3, "families": [{"family", "unit", "applies",
- * "levels": [{"level", "psnr", "ssim", "sam", "psnr_unaligned" (motion)}], "drop_3db": level
+ * "levels": [{"level", "psnr", "ssim", "sam", and for motion "psnr_unaligned", "psnr_static"
+ * (the static reference on the same in-view region) and "px_per_frame" (level x the system's
+ * frame period)}], "drop_3db": level
  * or null, "beyond_last_level"}]} */
 struct json_t *lm_study_cond_json(const lm_study_cfg *cfg, const lm_infer_model *im,
                                   const lm_study_cond_acc *a);

@@ -102,7 +102,7 @@ static lm_status align(const seq *s, int i, float *out, lm_err *e)
     lm_flow_default_opts(&fo, LM_FLOW_MEDIUM);
     lm_status st = lm_align_frame(i > 0 ? s->planes[i - 1] : NULL, s->planes[i],
                                   i + 1 < NF ? s->planes[i + 1] : NULL, ty * tx, H / ty, W / tx,
-                                  t, ref, &fo, aligned, e);
+                                  t, ref, &fo, NULL, aligned, e);
     if (st) return st;
     return lm_align_remosaic(aligned, H / ty, W / tx, ty, tx, out, e);
 }
@@ -197,7 +197,7 @@ static void test_too_small_fails(void)
     lm_err_clear(&e);
     CHECK(lm_align_phase_times(&g_sys, t, &ref, &e) == LM_OK);
     for (size_t i = 0; i < (size_t)np * h * w; i++) a[i] = b[i] = (float)(i % 7) / 7.0f;
-    CHECK(lm_align_frame(a, b, NULL, np, h, w, t, ref, NULL, o, &e) == LM_ERR_SHAPE);
+    CHECK(lm_align_frame(a, b, NULL, np, h, w, t, ref, NULL, NULL, o, &e) == LM_ERR_SHAPE);
     CHECK_MSG(strstr(e.msg, "align: plane"), "%s", e.msg);
     free(a);
     free(b);

@@ -6,17 +6,20 @@
  * small smooth cube with a linear model fitted to it by least squares: noise 0 beats 20 %,
  * the noise-0 PSNR equals a plain-loop PSNR of lm_tile_infer's reconstruction of the clean
  * frame, a level draws the same noise wherever it sits in the list, and bad level lists fail;
- * lm_eval_motion_run on the same model: a still scene scores the same aligned or not, at 400 px/s
- * the unaligned frame loses >= 3 dB and alignment wins >= 0.25 dB back (0.5 measured on
- * these 24 x 24 sub-images); a negative speed fails.
+ * lm_eval_motion_region (the in-view margin from the frame period) and lm_eval_motion_run on
+ * the same model: a still scene scores the same aligned or not and equals the static
+ * reference, at 60 px/s alignment is not worse than none, at 400 px/s the unaligned frame loses
+ * >= 3 dB against the static reference and alignment wins at least half of it back; a
+ * negative speed fails.
  * lm_eval_simulate: the coded frame equals lm_forward_simulate31's (noise-free, and with noise
  * for the same rng, which is not advanced); the RGB frame (mst-tiny) equals lm_rgbcam_render and
  * a plain loop over the camera weights; a 30-band cube fails. lm_eval_reconstruct: the linear
  * model equals lm_tile_infer (whole 0) and lm_whole_infer (whole 1); mst-tiny equals
  * lm_mst_reconstruct of the frame. The RGB path (mst-tiny, 24 x 32 cube) through lm_eval_scene
  * (noise 0 and 20 % against plain-loop PSNRs of independently simulated and reconstructed
- * frames), lm_eval_motion_run (still scene = static frame, aligned = unaligned, motion changes
- * the score) and lm_eval_rainbow_run. */
+ * frames), lm_eval_motion_run on a 48 x 64 cube (still scene = static reference, aligned =
+ * unaligned, motion changes the score; the 24 x 32 cube keeps nothing in view at 400 px/s and
+ * fails) and lm_eval_rainbow_run. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -220,26 +223,58 @@ static double plain_psnr(const float *a, const float *b, size_t n)
     return -10.0 * log10(s / (double)n);
 }
 
-/* Motion: still scene -> aligned and unaligned agree and score like the static frame; fast
- * motion -> the unaligned frame loses PSNR and alignment recovers part of it. */
+/* The scored region: the margin is the motion over two frame periods plus two tiles, from
+ * the system's frame period (a system with frames 50 ms apart gets a wider margin). */
+static void test_motion_region(void)
+{
+    if (!g_ok) return;
+    int y0, x0, h, w;
+    lm_eval_motion_region(&g_sys, 400.0, 72, 96, &y0, &x0, &h, &w);
+    /* 30 fps: span 66.7 ms; x: 320 px/s -> 21.3 -> 22 + 8; y: 240 px/s -> 16 + 6 */
+    CHECK(x0 == 30 && y0 == 22 && w == 36 && h == 28);
+    lm_eval_motion_region(&g_sys, 0.0, 72, 96, &y0, &x0, &h, &w);
+    CHECK(x0 == 8 && y0 == 6 && w == 80 && h == 60);
+    lm_system slow = g_sys;
+    slow.frame_period_us = 50000.0; /* span 100 ms: x 32 + 8, y 24 + 6 */
+    lm_eval_motion_region(&slow, 400.0, 72, 96, &y0, &x0, &h, &w);
+    CHECK(x0 == 40 && y0 == 30 && w == 16 && h == 12);
+    lm_eval_motion_region(&slow, 400.0, 40, 96, &y0, &x0, &h, &w);
+    CHECK(h == 0);
+}
+
+/* Motion: still scene -> aligned and unaligned agree (within 0.1 dB) and equal the static
+ * reference; slow motion -> alignment is not worse than none (within 0.1 dB); fast motion ->
+ * the unaligned frame loses >= 3 dB against the static reference and alignment recovers at
+ * least half of it. Scores cover the in-view region only. */
 static void test_motion(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
                         const lm_tile_opts *to)
 {
     lm_err e;
     lm_err_clear(&e);
-    lm_eval_motion m0, m1;
-    CHECK_MSG(lm_eval_motion_run(c, im, truth, 0.0, to, NULL, &m0, &e) == LM_OK, "%s", e.msg);
-    CHECK_MSG(lm_eval_motion_run(c, im, truth, 400.0, to, NULL, &m1, &e) == LM_OK, "%s", e.msg);
-    printf("  motion 0 px/s: aligned %.3f dB, unaligned %.3f dB; 400 px/s: aligned %.3f dB, "
-           "unaligned %.3f dB\n", m0.aligned.psnr, m0.unaligned.psnr, m1.aligned.psnr,
-           m1.unaligned.psnr);
+    lm_eval_motion m0, m1, ms;
+    CHECK_MSG(lm_eval_motion_run(c, im, truth, 0.0, to, NULL, NULL, &m0, &e) == LM_OK, "%s",
+              e.msg);
+    CHECK_MSG(lm_eval_motion_run(c, im, truth, 60.0, to, NULL, NULL, &ms, &e) == LM_OK, "%s",
+              e.msg);
+    CHECK_MSG(lm_eval_motion_run(c, im, truth, 400.0, to, NULL, NULL, &m1, &e) == LM_OK, "%s",
+              e.msg);
+    printf("  motion 0 px/s: aligned %.3f dB, unaligned %.3f dB; 60 px/s: static %.3f, aligned "
+           "%.3f, unaligned %.3f; 400 px/s: static %.3f, aligned %.3f, unaligned %.3f\n",
+           m0.aligned.psnr, m0.unaligned.psnr, ms.still.psnr, ms.aligned.psnr,
+           ms.unaligned.psnr, m1.still.psnr, m1.aligned.psnr, m1.unaligned.psnr);
     CHECK(m0.speed == 0.0 && m1.speed == 400.0);
-    CHECK_CLOSE(m0.aligned.psnr, m0.unaligned.psnr, 0.1, 0);
-    CHECK_MSG(m1.unaligned.psnr < m0.unaligned.psnr - 3.0, "motion costs: %g vs %g",
-              m1.unaligned.psnr, m0.unaligned.psnr);
-    CHECK_MSG(m1.aligned.psnr > m1.unaligned.psnr + 0.25, "alignment helps: %g vs %g",
-              m1.aligned.psnr, m1.unaligned.psnr);
-    CHECK(lm_eval_motion_run(c, im, truth, -1.0, to, NULL, &m1, &e) == LM_ERR_ARG);
+    CHECK_CLOSE(m1.px_per_frame, 400.0 / 30.0, 1e-6, 0);
+    CHECK(m1.x0 == 30 && m1.y0 == 22 && m1.width == 36 && m1.height == 28);
+    CHECK(m0.still.psnr == m0.unaligned.psnr && m0.still.sam == m0.unaligned.sam);
+    CHECK_MSG(m0.aligned.psnr > m0.unaligned.psnr - 0.1, "still: aligned %g vs %g",
+              m0.aligned.psnr, m0.unaligned.psnr);
+    CHECK_MSG(ms.aligned.psnr > ms.unaligned.psnr - 0.1, "60 px/s: aligned %g vs %g",
+              ms.aligned.psnr, ms.unaligned.psnr);
+    double loss = m1.still.psnr - m1.unaligned.psnr;
+    CHECK_MSG(loss > 3.0, "motion costs: %g vs %g", m1.unaligned.psnr, m1.still.psnr);
+    CHECK_MSG(m1.aligned.psnr > m1.unaligned.psnr + 0.5 * loss, "alignment recovers half: %g "
+              "vs %g (static %g)", m1.aligned.psnr, m1.unaligned.psnr, m1.still.psnr);
+    CHECK(lm_eval_motion_run(c, im, truth, -1.0, to, NULL, NULL, &m1, &e) == LM_ERR_ARG);
     CHECK(strstr(e.msg, "eval: motion") != NULL);
 }
 
@@ -406,19 +441,23 @@ static void test_reconstruct_linear(void)
     lm_model_free(im.model);
 }
 
-/* A small prepared cube for MST++ (24 x 32 after the 3 x 4 tile crop). */
-static void tiny_scene(lm_cube *c)
+/* A small prepared cube for MST++ (h x w after the 3 x 4 tile crop; h, w multiples of 3, 4). */
+static void tiny_scene_sized(lm_cube *c, int h, int w)
 {
-    CHECK(lm_cube_alloc(c, 31, 25, 34, 400, 10) == LM_OK);
+    int H = h + 1, W = w + 2;
+    CHECK(lm_cube_alloc(c, 31, H, W, 400, 10) == LM_OK);
     for (int b = 0; b < 31; b++)
-        for (int y = 0; y < 25; y++)
-            for (int x = 0; x < 34; x++)
-                c->data[((size_t)b * 25 + y) * 34 + x] =
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                c->data[((size_t)b * H + y) * W + x] =
                     (float)(0.4 + 0.3 * sin(0.3 * x + 0.2 * y + 0.1 * b) * cos(0.05 * b * y));
     lm_err e;
     lm_err_clear(&e);
     CHECK_MSG(lm_eval_prepare(c, 3, 4, &e) == LM_OK, "%s", e.msg);
 }
+
+/* 24 x 32 after the crop. */
+static void tiny_scene(lm_cube *c) { tiny_scene_sized(c, 24, 32); }
 
 /* RGB frame = lm_rgbcam_render = a plain loop over the camera weights */
 static void check_rgb_frame(const lm_infer_model *im, const lm_cube *t)
@@ -483,16 +522,25 @@ static void test_rgb_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *t
     CHECK(lm_rgbcam_simulate(&cam, t->data, t->height, t->width, &no, &r, rgb, 1, &e) == LM_OK);
     CHECK_CLOSE(m[1].psnr, mst_psnr(im->model, rgb, t), 1e-4, 1e-6);
     CHECK(m[1].psnr != m[0].psnr);
-    /* motion: still = the static frame, nothing to align; moving = another score */
+    /* motion: still = the static frame, nothing to align; moving = another score; a scene
+     * too small to keep anything in view at that speed fails */
+    lm_cube big;
+    tiny_scene_sized(&big, 48, 64);
     lm_eval_motion m0, m1;
-    CHECK_MSG(lm_eval_motion_run(c, im, t, 0.0, &to, NULL, &m0, &e) == LM_OK, "%s", e.msg);
-    CHECK_MSG(lm_eval_motion_run(c, im, t, 400.0, &to, NULL, &m1, &e) == LM_OK, "%s", e.msg);
-    printf("  mst-tiny motion: 0 px/s %.3f dB, 400 px/s %.3f dB\n", m0.unaligned.psnr,
-           m1.unaligned.psnr);
-    CHECK(m0.unaligned.psnr == m[0].psnr && m0.unaligned.sam == m[0].sam);
+    CHECK_MSG(lm_eval_motion_run(c, im, &big, 0.0, &to, NULL, NULL, &m0, &e) == LM_OK, "%s",
+              e.msg);
+    CHECK_MSG(lm_eval_motion_run(c, im, &big, 150.0, &to, NULL, NULL, &m1, &e) == LM_OK, "%s",
+              e.msg);
+    printf("  mst-tiny motion: 0 px/s %.3f dB, 150 px/s %.3f dB (static %.3f)\n",
+           m0.unaligned.psnr, m1.unaligned.psnr, m1.still.psnr);
+    CHECK(m0.unaligned.psnr == m0.still.psnr && m0.unaligned.sam == m0.still.sam);
     CHECK(m0.aligned.psnr == m0.unaligned.psnr && m1.aligned.psnr == m1.unaligned.psnr);
     CHECK(m1.unaligned.psnr != m0.unaligned.psnr && isfinite(m1.unaligned.psnr));
-    CHECK(lm_eval_motion_run(c, im, t, -1.0, &to, NULL, &m1, &e) == LM_ERR_ARG);
+    CHECK(m1.width == 32 && m1.height == 24);
+    CHECK(lm_eval_motion_run(c, im, t, 400.0, &to, NULL, NULL, &m1, &e) == LM_ERR_SHAPE);
+    CHECK(strstr(e.msg, "in view") != NULL);
+    CHECK(lm_eval_motion_run(c, im, t, -1.0, &to, NULL, NULL, &m1, &e) == LM_ERR_ARG);
+    lm_cube_free(&big);
     lm_eval_rainbow rb;
     CHECK_MSG(lm_eval_rainbow_run(c, im, 24, &to, &rb, &e) == LM_OK, "%s", e.msg);
     CHECK(rb.height == 24 && rb.width == 24 && isfinite(rb.m.psnr));
@@ -549,6 +597,7 @@ int main(void)
     RUN(test_peak_ties_and_flat);
     RUN(test_prepare_crops_and_normalises);
     RUN(test_prepare_errors);
+    RUN(test_motion_region);
     RUN(test_scene_linear_model);
     RUN(test_simulate_coded);
     RUN(test_reconstruct_linear);

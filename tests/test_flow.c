@@ -14,6 +14,7 @@
 #include "check.h"
 #include "data/cube_io.h"
 #include "data/system.h"
+#include "data/video.h"
 #include "infer/align.h"
 #include "infer/flow.h"
 
@@ -431,7 +432,8 @@ static void test_unshuffle_remosaic(void)
     CHECK(lm_align_remosaic(planes, 0, 2, 3, 4, back, &e) == LM_ERR_SHAPE);
 }
 
-/* Times of the default system, by hand from system.md §2 (windows in us over 23700 + 6000). */
+/* Times of the default system, by hand from system.md §1-2: window centres in us over the
+ * frame period (1e6 / 30 us: frames start 33.3 ms apart), not exposure + readout (29.7 ms). */
 static void test_phase_times(void)
 {
     lm_system sys;
@@ -443,13 +445,51 @@ static void test_phase_times(void)
     }
     float t[12];
     int ref = -1;
+    const double T = 1e6 / 30.0;
     CHECK(lm_align_phase_times(&sys, t, &ref, &e) == LM_OK);
-    CHECK(ref == 6);                               /* row 1, col 2: Lime */
-    CHECK_CLOSE(t[6], 11700.0 / 29700.0, 1e-6, 0); /* Lime 11100-12300 */
-    CHECK_CLOSE(t[0], 2250.0 / 29700.0, 1e-6, 0);  /* FarRed 0-4500 */
-    CHECK_CLOSE(t[8], 16650.0 / 29700.0, 1e-6, 0); /* Amber 13650-19650 */
-    CHECK_CLOSE(t[11], 23025.0 / 29700.0, 1e-6, 0); /* Cyan 22350-23700 */
+    CHECK(ref == 6);                            /* row 1, col 2: Lime */
+    CHECK_CLOSE(t[6], 11700.0 / T, 1e-6, 0);  /* Lime 11100-12300 */
+    CHECK_CLOSE(t[0], 2250.0 / T, 1e-6, 0);   /* FarRed 0-4500 */
+    CHECK_CLOSE(t[8], 16650.0 / T, 1e-6, 0);  /* Amber 13650-19650 */
+    CHECK_CLOSE(t[11], 23025.0 / T, 1e-6, 0); /* Cyan 22350-23700 */
     lm_system_free(&sys);
+}
+
+/* A 2 x 2 tile, 1000-us sub-frames: A 0-2000, lime 2000-3000, B 3000-6000, C 6000-8000;
+ * readout 1000 us but frames every 10000 us (exposure + readout would be 9000). */
+static const char *SYS4 =
+    "{\"version\": 1, \"grid\": {\"start_nm\": 500, \"step_nm\": 10, \"count\": 2},"
+    "\"sensor\": {\"width\": 64, \"height\": 64, \"qe\": [1, 1]},"
+    "\"subframe_us\": 1000, \"readout_us\": 1000, \"frame_period_us\": 10000,"
+    "\"leds\": [{\"name\": \"A\", \"subframes\": 2, \"emission\": [1, 0.5]},"
+    "           {\"name\": \"%s\", \"subframes\": 1, \"emission\": [0.5, 1]},"
+    "           {\"name\": \"B\", \"subframes\": 3, \"emission\": [0.2, 1]},"
+    "           {\"name\": \"C\", \"subframes\": 2, \"emission\": [1, 0.2]}],"
+    "\"tile_map\": [[\"A\", \"%s\"], [\"B\", \"C\"]]}";
+
+/* The time base is the system's frame period, and the reference phase is the LED whose window
+ * centre the video simulator uses as ground-truth instant (with and without a Lime LED). */
+static void test_phase_times_frame_period(void)
+{
+    const char *names[2] = {"lime", "D"};
+    const int want_ref[2] = {1, 2}; /* no Lime: B, on at the exposure midpoint (4000 us) */
+    for (int k = 0; k < 2; k++) {
+        char json[1024];
+        snprintf(json, sizeof json, SYS4, names[k], names[k]);
+        lm_system sys;
+        lm_err e = {0};
+        CHECK_MSG(lm_system_parse(json, ".", "sys4", &sys, &e) == LM_OK, "%s", e.msg);
+        float t[4];
+        int ref = -1;
+        CHECK_MSG(lm_align_phase_times(&sys, t, &ref, &e) == LM_OK, "%s", e.msg);
+        const float want[4] = {0.1f, 0.25f, 0.45f, 0.7f};
+        CHECK_ARRAY_CLOSE(t, want, 4, 1e-6, 0);
+        CHECK(ref == want_ref[k]);
+        CHECK_CLOSE(lm_video_gt_time_us(&sys), t[ref] * 10000.0, 1e-3, 0);
+        CHECK_CLOSE(lm_video_frame_start_us(&sys, 2) - lm_video_frame_start_us(&sys, 1), 10000.0,
+                    1e-9, 0);
+        lm_system_free(&sys);
+    }
 }
 
 #define AH 64
@@ -497,7 +537,7 @@ static void test_align_video(void)
     lm_flow_default_opts(&o, LM_FLOW_MEDIUM);
     for (int c = 0; c < 3; c++) {
         lm_err e = {0};
-        CHECK(lm_align_frame(cases[c][0], fr + n, cases[c][1], NP, AH, AH, t, ref, &o, out,
+        CHECK(lm_align_frame(cases[c][0], fr + n, cases[c][1], NP, AH, AH, t, ref, &o, NULL, out,
                              &e) == LM_OK);
         double worst = 0.0, before = 0.0;
         for (int p = 0; p < NP; p++) {
@@ -517,12 +557,12 @@ static void test_align_video(void)
         printf("  align (%s): worst plane RMS %.4f (unaligned %.4f)\n", names[c], worst, before);
     }
     lm_err e = {0};
-    CHECK(lm_align_frame(NULL, fr + n, NULL, NP, AH, AH, t, ref, &o, out, &e) == LM_OK);
+    CHECK(lm_align_frame(NULL, fr + n, NULL, NP, AH, AH, t, ref, &o, NULL, out, &e) == LM_OK);
     CHECK_ARRAY_CLOSE(out, fr + n, (long)n, 0, 0);
-    CHECK(lm_align_frame(fr, fr + n, NULL, NP, AH, AH, t, NP, &o, out, &e) == LM_ERR_ARG);
+    CHECK(lm_align_frame(fr, fr + n, NULL, NP, AH, AH, t, NP, &o, NULL, out, &e) == LM_ERR_ARG);
     CHECK(strstr(e.msg, "align:") != NULL);
     lm_err_clear(&e);
-    CHECK(lm_align_frame(fr, fr + n, NULL, NP, 16, 16 * 16, t, ref, &o, out, &e) == LM_ERR_SHAPE);
+    CHECK(lm_align_frame(fr, fr + n, NULL, NP, 16, 16 * 16, t, ref, &o, NULL, out, &e) == LM_ERR_SHAPE);
     CHECK(strstr(e.msg, "plane 0") != NULL && strstr(e.msg, "flow:") != NULL);
     free(fr);
 }
@@ -542,6 +582,7 @@ int main(void)
     RUN(test_flow_errors);
     RUN(test_unshuffle_remosaic);
     RUN(test_phase_times);
+    RUN(test_phase_times_frame_period);
     RUN(test_align_video);
     return check_summary();
 }

@@ -5,14 +5,15 @@
 # eval.csv has a row per scene and level plus the means, the printed table has a row per level,
 # the same seed gives the same files and another seed other noisy numbers; the scene belongs to
 # exactly one of the test/val/train splits; --motion 0,240: per-scene and mean motion rows in
-# eval.json and eval_motion.csv, the still row equals the static frame, aligned >= unaligned
-# (- 0.1 dB) at 240 px/s; bad input: missing model, not a model, no DATA,
+# eval.json and eval_motion.csv (px/frame, static reference, aligned, unaligned), the still
+# row's unaligned score equals its static reference, aligned >= unaligned (- 0.1 dB) at 0 and
+# 240 px/s, --align plain runs and --align bogus is refused; bad input: missing model, not a model, no DATA,
 # missing scene, bad noise / motion list, too small rainbow, bad split, unknown option, used output
 # folder — one line on stderr, exit 2, no output left.
 # The passive RGB baseline: a 3-iteration mst-tiny run (its saved model takes 3-channel RGB
 # input: conv_in 31 x 3 x 3 x 3) evaluated with --noise 0,10 --motion 0,120 --rainbow 66: the
 # same eval.json / eval.csv / eval_motion.csv fields, finite values, aligned = unaligned, the
-# still motion row = the noise-0 row; --device opencl is refused for MST++ (or no OpenCL).
+# still motion row = its static reference; --device opencl is refused for MST++ (or no OpenCL).
 # usage: eval.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 
@@ -85,12 +86,12 @@ check "the scene is in exactly one split ($n_ok)" [ $n_ok -eq 1 ]
 check "eval --motion: $(cat "$T/merr")" [ $? -eq 0 ]
 cat "$T/mtable"
 check "motion table has a row per speed" \
-  [ "$(grep -cE '^ +(0|240) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/mtable")" -eq 2 ]
-python3 - "$T/evm/eval.json" "$O/eval.json" <<'PY'
+  [ "$(grep -cE '^ +(0|240) +[0-9.]+( +[0-9.]+){7}$' "$T/mtable")" -eq 2 ]
+python3 - "$T/evm/eval.json" <<'PY'
 import json, math, sys
-j = json.load(open(sys.argv[1])); j0 = json.load(open(sys.argv[2]))
+j = json.load(open(sys.argv[1]))
 assert j["motion_speeds_px_s"] == [0, 240], j
-keys = ["speed_px_s", "psnr_aligned", "psnr_unaligned", "ssim_aligned", "ssim_unaligned",
+keys = ["speed_px_s", "px_per_frame", "psnr_static", "psnr_aligned", "psnr_unaligned", "ssim_aligned", "ssim_unaligned",
         "mae_aligned", "mae_unaligned", "sam_aligned", "sam_unaligned"]
 for rows in (j["scenes"][0]["motion"], j["motion_mean"]):
     assert [r["speed_px_s"] for r in rows] == [0, 240], rows
@@ -100,16 +101,25 @@ for rows in (j["scenes"][0]["motion"], j["motion_mean"]):
     still, fast = rows
     # still scene: the middle frame is the static frame, alignment keeps it
     assert abs(still["psnr_aligned"] - still["psnr_unaligned"]) < 0.05, still
-    assert abs(still["psnr_unaligned"] - j0["mean"][0]["psnr"]) < 1e-3, (still, j0["mean"])
+    assert abs(still["psnr_unaligned"] - still["psnr_static"]) < 1e-6, still
+    assert still["px_per_frame"] == 0 and abs(fast["px_per_frame"] - 8) < 1e-6, fast
     assert fast["psnr_aligned"] >= fast["psnr_unaligned"] - 0.1, fast
+    assert fast["psnr_static"] > fast["psnr_unaligned"], fast
     assert fast["sam_aligned"] <= fast["sam_unaligned"] + 0.1, fast
 PY
 check "eval.json motion fields, still = static, aligned >= unaligned at 240 px/s" [ $? -eq 0 ]
 check "motion csv header" [ "$(head -1 "$T/evm/eval_motion.csv")" = \
-  "scene,motion_px_s,psnr_aligned,psnr_unaligned,ssim_aligned,ssim_unaligned,mae_aligned,mae_unaligned,sam_aligned,sam_unaligned" ]
+  "scene,motion_px_s,px_per_frame,psnr_static,psnr_aligned,psnr_unaligned,ssim_aligned,ssim_unaligned,mae_aligned,mae_unaligned,sam_aligned,sam_unaligned" ]
 check "motion csv rows: scene and mean per speed" \
   [ "$(grep -cE '^(balloons_crop100|mean),(0|240),' "$T/evm/eval_motion.csv")" -eq 4 ]
 check "no motion csv without --motion" [ ! -e "$O/eval_motion.csv" ]
+"$LM" eval --model "$R" "$CAVE" --split all --noise 0 --rainbow 0 --motion 240 --align plain \
+  > "$T/ptable" 2> "$T/perr"
+check "eval --align plain: $(cat "$T/perr")" [ $? -eq 0 ]
+check "plain alignment is named in the table" grep -q 'alignment plain' "$T/ptable"
+"$LM" eval --model "$R" "$CAVE" --split all --noise 0 --rainbow 0 --motion 240 --align bogus \
+  > /dev/null 2> "$T/perr"
+check "eval --align bogus refused (exit 2)" [ $? -eq 2 ]
 
 # ---- the passive RGB baseline (MST++): train briefly on RGB, evaluate --------------------
 RM=$T/run_mst
@@ -145,12 +155,12 @@ for rows in (s["motion"], j["motion_mean"]):
     for r in rows:  # one RGB frame: nothing to align
         for m in ("psnr", "ssim", "mae", "sam"):
             assert math.isfinite(r[m + "_aligned"]) and r[m + "_aligned"] == r[m + "_unaligned"], r
-    assert abs(rows[0]["psnr_unaligned"] - s["results"][0]["psnr"]) < 1e-3, rows
+    assert abs(rows[0]["psnr_unaligned"] - rows[0]["psnr_static"]) < 1e-6, rows
 rb = j["rainbow"]
 assert rb["height"] == 66 and rb["width"] == 64 and math.isfinite(rb["psnr"]), rb
 assert 0 <= rb["peak_error_mean_nm"] <= rb["peak_error_max_nm"] <= 300, rb
 PY
-check "mst eval.json fields, aligned = unaligned, still = noise-0 row" [ $? -eq 0 ]
+check "mst eval.json fields, aligned = unaligned, still = static reference" [ $? -eq 0 ]
 check "mst csv rows" [ "$(grep -cE '^(balloons_crop100|mean),(0|10),' "$T/evr/eval.csv")" -eq 4 ]
 check "mst motion csv rows" \
   [ "$(grep -cE '^(balloons_crop100|mean),(0|120),' "$T/evr/eval_motion.csv")" -eq 4 ]

@@ -83,6 +83,9 @@ for r in j["runs"]:
             assert abs(ps[0] - c["clean_psnr"]) < 1e-9, (name, ps[0], c["clean_psnr"])
         if name == "motion":
             assert all(5 < l["psnr_unaligned"] < 100 for l in f["levels"])
+            assert all(5 < l["psnr_static"] < 100 for l in f["levels"])
+            assert [round(l["px_per_frame"], 6) for l in f["levels"]] == [0, 4, 16], f
+            assert f["levels"][0]["psnr_static"] == f["levels"][0]["psnr_unaligned"], f
         x = crossing(lv, ps, c["clean_psnr"])
         if x is None:
             assert f["drop_3db"] is None and f["beyond_last_level"], f
