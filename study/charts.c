@@ -555,7 +555,7 @@ static lm_status narrowband_chart(const json_t *nb, const char *dir, lm_err *err
     char title[160];
     snprintf(title, sizeof title, "Rainbow accuracy of %s against the synthetic share of "
              "training", preset(json_array_get(nb, 0)));
-    gp_head(f, "narrowband", title, "synthetic (narrowband / procedural) samples in training (%)",
+    gp_head(f, "narrowband", title, "narrowband synthetic samples in training (%)",
             "rainbow mean peak error (nm)");
     fprintf(f, "set y2label \"PSNR (dB)\"\nset y2tics\nset ytics nomirror\nset xrange [-5:105]\n"
                "plot \"narrowband.dat\" using 1:2 with linespoints lw 2 pt 7 title \"rainbow "
