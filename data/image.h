@@ -1,5 +1,6 @@
 /* image.h — the C-callable shim around OpenImageIO (implemented in image_oiio.cpp).
- * What it is: read one image file (PNG, TIFF or EXR, chosen by the extension; no other
+ * What it is: read one image file (PNG through libpng, so that its messages end up in the
+ * lm_err and nothing is printed; TIFF or EXR through OpenImageIO; chosen by the extension; no other
  * OpenImageIO reader is ever tried) as float samples with its bit depth and channel names,
  * its header checked first (see lm_image_want, data/limits.h); write 8-bit RGB, 16-bit
  * single-channel and

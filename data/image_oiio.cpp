@@ -3,7 +3,9 @@
  * header against the caller's wishes and data/limits.h (nothing is allocated for pixels before;
  * an EXR header is parsed by OpenEXR's C API first, see exr_header_ok),
  * and atomic writers for 8-bit RGB, 16-bit grey and float EXR. No exception crosses the C
- * boundary.
+ * boundary. PNG files are read with libpng directly (read_png), its errors and warnings caught:
+ * OpenImageIO's PNG reader installs no libpng handlers, so libpng printed its own line on stderr
+ * before our error for a corrupt PNG.
  * What it is not: a place for format logic (CAVE folders, frame sequences, spectral layouts
  * live in C files that call this). */
 #include "data/image.h"
@@ -11,6 +13,7 @@
 
 #include <OpenImageIO/imageio.h>
 #include <openexr.h>
+#include <png.h>
 
 #include <cctype>
 #include <cerrno>
@@ -122,6 +125,92 @@ static lm_status exr_header_ok(const char *path, lm_err *e)
                       first_line(exr_msg[0] ? exr_msg : exr_get_default_error_message(rv)).c_str());
 }
 
+static lm_status png_header_ok(const char *path, int w, int h, int ch, int bits,
+                               const lm_image_want *want, lm_err *e);
+
+/* ---- PNG through libpng ------------------------------------------------------------------ */
+/* libpng reports through these: errors are kept for the lm_err and jump back to read_png;
+ * warnings (a damaged ancillary chunk: the image itself is whole) are dropped. */
+static void png_on_error(png_structp p, png_const_charp msg)
+{
+    char *keep = (char *)png_get_error_ptr(p);
+    snprintf(keep, 200, "%s", msg ? msg : "libpng error");
+    png_longjmp(p, 1);
+}
+static void png_on_warning(png_structp, png_const_charp) {}
+
+/* Channel names as OpenImageIO gives them: Y; Y A; R G B; R G B A. */
+static void png_names(lm_image *img)
+{
+    static const char *const n[4][4] = {{"Y"}, {"Y", "A"}, {"R", "G", "B"}, {"R", "G", "B", "A"}};
+    for (int c = 0; c < img->channels && c < 4; c++)
+        snprintf(img->names[c], LM_IMAGE_NAME_LEN, "%s", n[img->channels - 1][c]);
+}
+
+/* The samples OpenImageIO's reader gives: palette and grey < 8 bits expanded to 8 bits, tRNS as
+ * an alpha channel, 16-bit samples in host order; no gamma. Plain C in here: the longjmp of an
+ * error must not skip C++ destructors. */
+static lm_status read_png(const char *path, const lm_image_want *want, lm_image *img, int pixels,
+                          lm_err *e)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return lm_err_set(e, LM_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    char msg[200] = "";
+    png_structp p = png_create_read_struct(PNG_LIBPNG_VER_STRING, msg, png_on_error,
+                                           png_on_warning);
+    png_infop info = p ? png_create_info_struct(p) : NULL;
+    unsigned char *volatile buf = NULL;
+    png_bytep *volatile rows = NULL;
+    volatile lm_status st = LM_OK;
+    if (!info) {
+        st = lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", path);
+    } else if (setjmp(png_jmpbuf(p))) {
+        st = lm_err_set(e, LM_ERR_FORMAT, "%s: truncated or corrupt image: %s", path, msg);
+    } else {
+        png_init_io(p, f);
+        png_read_info(p, info);
+        png_set_expand(p);
+        if (png_get_bit_depth(p, info) == 16) png_set_swap(p); /* little-endian host */
+        png_set_interlace_handling(p);
+        png_read_update_info(p, info);
+        img->width = (int)png_get_image_width(p, info);
+        img->height = (int)png_get_image_height(p, info);
+        img->channels = png_get_channels(p, info);
+        img->bits = png_get_bit_depth(p, info);
+        size_t n = (size_t)img->width * img->height * img->channels, rb = png_get_rowbytes(p, info);
+        img->names = img->channels >= 1 && img->channels <= 4
+                         ? (char(*)[LM_IMAGE_NAME_LEN])calloc((size_t)img->channels,
+                                                             LM_IMAGE_NAME_LEN)
+                         : NULL;
+        if (img->channels < 1 || img->channels > 4)
+            st = lm_err_set(e, LM_ERR_FORMAT, "%s: unsupported PNG with %d channels", path,
+                            img->channels);
+        else st = png_header_ok(path, img->width, img->height, img->channels, img->bits, want, e);
+        if (!st && !img->names) st = lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", path);
+        else png_names(img);
+        if (!st && pixels) {
+            buf = (unsigned char *)malloc(rb * img->height);
+            rows = (png_bytep *)malloc(sizeof(png_bytep) * img->height);
+            img->data = (float *)malloc(n * sizeof(float));
+            if (!buf || !rows || !img->data)
+                st = lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", path);
+        }
+        if (!st && pixels) {
+            for (int y = 0; y < img->height; y++) rows[y] = buf + rb * y;
+            png_read_image(p, rows);
+            png_read_end(p, NULL);
+            const unsigned short *u = (const unsigned short *)(const void *)buf;
+            for (size_t i = 0; i < n; i++) /* rows are packed: rb = width * channels * size */
+                img->data[i] = img->bits == 16 ? (float)u[i] / 65535.0f : (float)buf[i] / 255.0f;
+        }
+    }
+    png_destroy_read_struct(&p, &info, NULL);
+    fclose(f);
+    free(buf);
+    free(rows);
+    return st;
+}
+
 static void fill_header(const ImageSpec &sp, lm_image *img)
 {
     img->width = sp.width;
@@ -203,6 +292,33 @@ static lm_status check_header(const char *path, const char *plugin, const ImageS
                             lm_codec_ratio(codec.c_str()), e);
 }
 
+/* The PNG header (after libpng's expansion: channels, bits) against the caller's wishes and the
+ * limits, as check_header does for OpenImageIO's readers. Its own function: the ImageSpec (a C++
+ * object) lives and dies here, never across a libpng call that may longjmp. */
+static lm_status png_header_ok(const char *path, int w, int h, int ch, int bits,
+                               const lm_image_want *want, lm_err *e)
+{
+    try {
+        ImageSpec sp(w, h, ch, bits == 16 ? TypeDesc::UINT16 : TypeDesc::UINT8);
+        return check_header(path, "png", sp, want, e);
+    } catch (...) {
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read image (exception)", path);
+    }
+}
+
+/* A .png goes to libpng (after the chunk and CRC check): 1 and *st, or 0 for other files. */
+static int png_route(const char *path, const lm_image_want *want, lm_image *img, int pixels,
+                     lm_err *e, lm_status *st)
+{
+    std::memset(img, 0, sizeof *img);
+    const char *plugin = plugin_of(path);
+    if (!plugin || std::strcmp(plugin, "png")) return 0;
+    if ((*st = check_regular_file(path, e)) == LM_OK && (*st = png_check(path, true, e)) == LM_OK)
+        *st = read_png(path, want, img, pixels, e);
+    if (*st != LM_OK) lm_image_free(img);
+    return 1;
+}
+
 static lm_status open_input(const char *path, const lm_image_want *want,
                             std::unique_ptr<ImageInput> &in, lm_image *img, lm_err *e)
 {
@@ -232,6 +348,8 @@ static lm_status open_input(const char *path, const lm_image_want *want,
 extern "C" lm_status lm_image_info(const char *path, const lm_image_want *want, lm_image *img,
                                    lm_err *e)
 {
+    lm_status ps;
+    if (png_route(path, want, img, 0, e, &ps)) return ps;
     try {
         std::unique_ptr<ImageInput> in;
         lm_status s = open_input(path, want, in, img, e);
@@ -276,6 +394,7 @@ extern "C" lm_status lm_image_read(const char *path, const lm_image_want *want, 
                                    lm_err *e)
 {
     lm_status s;
+    if (png_route(path, want, img, 1, e, &s)) return s;
     try {
         std::unique_ptr<ImageInput> in;
         s = open_input(path, want, in, img, e);

@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
 # setup.sh — everything a fresh Debian 12 machine needs, then a Release build in build/.
 # Installs (apt-get, only what is missing): compiler, CMake, OpenBLAS, jansson, OpenImageIO,
-# matio, HDF5 (headers: the .mat reader's v7.3 checks), OpenEXR, the OpenCL ICD loader + headers
+# libpng, matio, HDF5 (headers: the .mat reader's v7.3 checks), OpenEXR, the OpenCL ICD loader + headers
 # and PoCL (CPU OpenCL driver), gnuplot (the charts of `lumosaic study`), Open MPI (data-parallel
 # training: `mpirun -np N lumosaic train`).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 pkgs=(build-essential cmake pkg-config libopenblas-dev libjansson-dev libopenimageio-dev
-      libmatio-dev libhdf5-dev libopenexr-dev zlib1g-dev ocl-icd-opencl-dev opencl-headers
+      libpng-dev libmatio-dev libhdf5-dev libopenexr-dev zlib1g-dev ocl-icd-opencl-dev opencl-headers
       pocl-opencl-icd clinfo python3 gnuplot-nox libopenmpi-dev openmpi-bin)
 missing=()
 for p in "${pkgs[@]}"; do

@@ -109,6 +109,14 @@ expect_error "render: output cannot be written" 1 "x.png: write failed" "$T/afil
   "$LM" render --input "$CAVE" --output "$T/afile/x.png"
 expect_error "study: output cannot be written" 1 "runs: cannot create (Not a directory)" \
   "$T/afile/st" -- "$LM" study --config "$T/study_ok.json" --output "$T/afile/st" --no-charts
+if [ "$(id -u)" -ne 0 ]; then # a read-only folder (root writes anyway)
+  mkdir -p "$T/ro" && chmod 555 "$T/ro"
+  "$LM" fit-auto --models "$R,$R" --synth 1 --synth-size 66x64 --bins 1 \
+    --output "$T/ro/auto.json" > /dev/null 2> "$T/cal2.err"
+  check "fit-auto: read-only folder: exit 1 and why: $(cat "$T/cal2.err")" \
+    grep -q "auto.json': Permission denied" "$T/cal2.err"
+  chmod 755 "$T/ro"
+fi
 # ... and input that cannot be read is bad input (2), for train too (it was 1)
 expect_error "train: missing data" 2 "$T/nope: no such file or folder" "$T/nd" -- \
   $TR --iterations 2 --data "$T/nope" --output "$T/nd"
@@ -195,5 +203,39 @@ check "infer SIGINT: says so: $(cat "$T/isig.err")" \
   grep -q "interrupted (SIGINT): partial output removed" "$T/isig.err"
 check "infer SIGINT: no staging folder or output left: $(ls -d "$O"* 2>&1)" no_output "$O"
 check "infer SIGINT: nothing set aside either" [ -z "$(ls -d "$O".* 2>/dev/null)" ]
+
+# ---- library messages: only ours ------------------------------------------------------------
+# a PNG whose image data is damaged (IDAT CRC, and a bad filter byte with a good CRC): libpng
+# printed "libpng error: ..." on stderr before our line
+python3 - "$CAVE" "$T/png" <<'PY'
+import os, shutil, struct, sys, zlib
+src, out = sys.argv[1], sys.argv[2]
+def chunks(b):
+    pos = 8
+    while pos < len(b):
+        n = struct.unpack('>I', b[pos:pos + 4])[0]
+        yield pos, n, b[pos + 4:pos + 8]
+        pos += 12 + n
+for name in ('crc', 'filter'):
+    d = os.path.join(out, name, 'balloons_crop100')
+    shutil.copytree(src, d)
+    p = os.path.join(d, 'balloons_crop100_ms_01.png')
+    b = bytearray(open(p, 'rb').read())
+    pos, n, _ = next(c for c in chunks(bytes(b)) if c[2] == b'IDAT')
+    if name == 'crc':
+        b[pos + 8 + n] ^= 0xff
+    else:  # zlib data of a bad filter byte (5) before the first row, with a valid CRC
+        raw = zlib.decompress(bytes(b[pos + 8:pos + 8 + n]))
+        comp = zlib.compress(b'\x05' + raw[1:])
+        c = struct.pack('>I', len(comp)) + b'IDAT' + comp
+        c += struct.pack('>I', zlib.crc32(b'IDAT' + comp) & 0xffffffff)
+        b[pos:pos + 12 + n] = c
+    open(p, 'wb').write(bytes(b))
+PY
+check "corrupt PNG fixtures" [ -d "$T/png/filter/balloons_crop100" ]
+expect_error "PNG with a bad IDAT CRC: one line" 2 "ms_01.png: corrupt PNG: chunk IDAT at byte 33 fails its CRC" \
+  "$T/p1" -- "$LM" simulate --input "$T/png/crc/balloons_crop100" --crop --output "$T/p1"
+expect_error "PNG with a bad filter byte: one line" 2 "ms_01.png: truncated or corrupt image: bad adaptive filter value" \
+  "$T/p2" -- "$LM" simulate --input "$T/png/filter/balloons_crop100" --crop --output "$T/p2"
 
 finish
