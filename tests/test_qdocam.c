@@ -1,8 +1,10 @@
 /* test_qdocam.c — the QDO camera (data/qdocam.h): a point source gives the (RGB-weighted) PSF,
  * the FFT path equals a direct edge-padded convolution, a uniform scene stays uniform,
- * linearity, the noise path and argument errors; once with the bundled DOE.
+ * linearity, the noise path and argument errors; once with the bundled DOE, and eval's
+ * simulation for a qdo-* preset (infer/eval.h) equal to this camera.
  * Not here: the PSFs' optics (test_doe.c). */
 #include "data/qdocam.h"
+#include "infer/eval.h"
 #include "tests/check.h"
 #include <math.h>
 #include <stdlib.h>
@@ -139,6 +141,23 @@ static void test_default_doe(void)
     for (int k = 0; k < 3; k++) peak[k] = rgb[k * pl + 33 * w + 32];
     printf("default DOE: point source peak R %.4f G %.4f B %.4f\n", peak[0], peak[1], peak[2]);
     CHECK(peak[1] > peak[0] && peak[1] > peak[2]); /* green is in focus */
+    /* eval simulates a qdo-* model's frame through the same camera */
+    lm_infer_model im = {.model = lm_model_create("qdo-mst", NULL, 3, &e)};
+    CHECK_MSG(im.model && lm_model_has(im.model, LM_CAP_QDO_OPTICS | LM_CAP_RGB_INPUT), "%s",
+              e.msg);
+    lm_cube cb = {0};
+    CHECK(lm_cube_alloc(&cb, NB, h, w, 400.0f, 10.0f) == LM_OK);
+    memcpy(cb.data, cube, sizeof(float) * NB * pl);
+    float *fr = NULL;
+    size_t n = 0;
+    im.qdo = &q;
+    CHECK_MSG(im.model && lm_eval_simulate(&im, &cb, NULL, NULL, &fr, &n, &e) == LM_OK, "%s",
+              e.msg);
+    CHECK(n == 3 * (size_t)pl);
+    if (fr) CHECK_ARRAY_CLOSE(fr, rgb, 3 * pl, 0, 0);
+    free(fr);
+    lm_cube_free(&cb);
+    lm_model_free(im.model);
     free(cube);
     free(rgb);
     lm_qdocam_free(&q);
