@@ -402,3 +402,52 @@ lm_status lm_doe_psfs(const lm_doe *d, double start_nm, double step_nm, int nb, 
     }
     return LM_OK;
 }
+
+/* Centroid (px from the centre) and the radius holding half the energy of a unit-sum PSF. */
+static void psf_stats(const float *psf, int S, double *cy, double *cx, double *r50)
+{
+    double y = 0, x = 0;
+    for (int k = 0; k < S * S; k++) y += psf[k] * (k / S - S / 2), x += psf[k] * (k % S - S / 2);
+    *cy = y, *cx = x, *r50 = S;
+    for (double r = 0.5; r < S; r += 0.5) {
+        double e = 0;
+        for (int k = 0; k < S * S; k++) {
+            double dy = k / S - S / 2, dx = k % S - S / 2;
+            if (dy * dy + dx * dx <= r * r) e += psf[k];
+        }
+        if (e >= 0.5) {
+            *r50 = r;
+            return;
+        }
+    }
+}
+
+lm_status lm_doe_describe(const lm_doe *d, FILE *f, lm_err *err)
+{
+    char lv[32];
+    if (d->levels) snprintf(lv, sizeof lv, "%d levels", d->levels);
+    else snprintf(lv, sizeof lv, "continuous");
+    fprintf(f, "doe %s: Fresnel lens f = %g mm at %g nm, aperture %g mm, DOE pitch %g um, grid "
+            "%d (%d samples across), %s, max height %.4g um, %s n(%g nm) = %.5f\n", d->name,
+            d->focal_m * 1e3, d->design_m * 1e9, d->aperture_m * 1e3, d->pitch_m * 1e6, d->grid,
+            d->m, lv, d->max_height_m * 1e6,
+            d->material == LM_DOE_CAUCHY ? "Cauchy" : "Sellmeier", d->design_m * 1e9,
+            lm_doe_index(d, d->design_m));
+    fprintf(f, "  sensor at %g mm, pixel %g um, PSF %d x %d px\n  %6s %8s %10s %9s\n",
+            d->distance_m * 1e3, d->sensor_pitch_m * 1e6, d->psf_size, d->psf_size, "nm",
+            "peak", "centroid", "r50 px");
+    int S = d->psf_size;
+    float *psf = malloc((size_t)S * S * sizeof(float));
+    if (!psf) return lm_err_set(err, LM_ERR_NOMEM, "doe: out of memory");
+    lm_status st = LM_OK;
+    for (int l = 400; l <= 700 && !st; l += 50) {
+        double cy, cx, r50, peak = 0;
+        st = lm_doe_psf(d, l * 1e-9, psf, err);
+        if (st) break;
+        for (int k = 0; k < S * S; k++) peak = psf[k] > peak ? psf[k] : peak;
+        psf_stats(psf, S, &cy, &cx, &r50);
+        fprintf(f, "  %6d %8.4f %4.1f,%4.1f %9.1f\n", l, peak, cy, cx, r50);
+    }
+    free(psf);
+    return st;
+}

@@ -49,6 +49,7 @@
  * over its window (light falling outside the window is dropped). */
 #ifndef LM_DOE_H
 #define LM_DOE_H
+#include <stdio.h>
 #include "tensor/status.h"
 
 #define LM_DOE_VERSION 1
@@ -104,6 +105,10 @@ lm_status lm_doe_psf(const lm_doe *doe, double lambda_m, float *psf, lm_err *err
 /* PSFs for nb wavelengths start_nm + i step_nm (e.g. 400, 10, 31): nb x psf_size^2. */
 lm_status lm_doe_psfs(const lm_doe *doe, double start_nm, double step_nm, int nb, float *psfs,
                       lm_err *err);
+
+/* Print the description and, at 400..700 nm every 50 nm, the PSF's peak, its centroid offset
+ * and the radius (px) holding half its energy (computes 7 PSFs). */
+lm_status lm_doe_describe(const lm_doe *doe, FILE *f, lm_err *err);
 
 /* FFTW's planner is not thread-safe: every plan made or destroyed in this project goes through
  * these (the dataset's workers simulate in parallel). */

@@ -13,7 +13,8 @@
 # input: conv_in 31 x 3 x 3 x 3) evaluated with --noise 0,10 --motion 0,120 --rainbow 66: the
 # same eval.json / eval.csv / eval_motion.csv fields, finite values, aligned = unaligned, the
 # still motion row = the noise-0 row; --device opencl is refused for MST++ (or no OpenCL).
-# The QDO baseline: a 2-iteration qdo-mst run evaluated with --noise 0,10 --rainbow 66.
+# The QDO baseline: a 2-iteration qdo-mst run evaluated with --noise 0,10 --rainbow 66;
+# `info --doe` on the bundled DOE and on a file missing a field (exit 2, one line).
 # usage: eval.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 
@@ -173,6 +174,13 @@ check "eval qdo-mst: $(cat "$T/qerr")" [ $? -eq 0 ]
 check "qdo table has a row per noise level" \
   [ "$(grep -cE '^ +(0|10) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/qtable")" -eq 2 ]
 check "qdo csv rows" [ "$(grep -cE '^(balloons_crop100|mean),(0|10),' "$T/evq/eval.csv")" -eq 4 ]
+"$LM" info --doe default > "$T/doe_info" 2>&1
+check "info --doe default: $(cat "$T/doe_info")" grep -qE '^ +550 +0\.[0-9]+ ' "$T/doe_info"
+echo '{"version": 1, "aperture_mm": 0.5}' > "$T/bad_doe.json"
+"$LM" info --doe "$T/bad_doe.json" > /dev/null 2> "$T/doe_err"
+check "bad DOE file: exit 2" [ $? -eq 2 ]
+check "bad DOE file: one line" [ "$(wc -l < "$T/doe_err")" -eq 1 ]
+check "bad DOE file: names the file and field" grep -q 'bad_doe.json: doe_pitch_um: missing' "$T/doe_err"
 
 # ---- bad input ---------------------------------------------------------------------------
 expect_error "missing model" 2 "no such model" "$T/e1" -- "$LM" eval --model "$T/nope" "$CAVE" --output "$T/e1"
