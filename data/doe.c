@@ -3,11 +3,11 @@
  * What it is not: the camera convolution (qdocam.c) or any gradient of the PSF. */
 #include "data/doe.h"
 #include "data/spectra.h"
+#include "data/util.h"
 #include <fftw3.h>
 #include <jansson.h>
 #include <math.h>
 #include <pthread.h>
-#include <stdarg.h>
 #include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
@@ -22,17 +22,9 @@ typedef struct parser {
     lm_err *err;
 } parser;
 
-static lm_status bad(parser *p, const char *field, const char *fmt, ...)
-    __attribute__((format(printf, 3, 4)));
-static lm_status bad(parser *p, const char *field, const char *fmt, ...)
-{
-    char msg[300];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(msg, sizeof msg, fmt, ap);
-    va_end(ap);
-    return lm_err_set(p->err, LM_ERR_FORMAT, "doe file %s: %s: %s", p->label, field, msg);
-}
+/* "doe file <label>: <field>: <message>" */
+#define bad(p, field, ...) lm_err_field((p)->err, LM_ERR_FORMAT, "doe file", (p)->label, field, \
+                                        __VA_ARGS__)
 
 /* A positive number field of obj (named `name` in messages), scaled by `unit`. */
 static lm_status positive(parser *p, json_t *obj, const char *key, const char *name, double unit,
