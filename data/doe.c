@@ -168,9 +168,10 @@ static lm_status check_sampling(parser *p, const lm_doe *d)
     if (field < need)
         return bad(p, "psf_size", "the PSF window (%.3g mm) exceeds the Fresnel field at 400 nm "
                    "(%.3g mm = lambda z / doe_pitch)", need * 1e3, field * 1e3);
-    if (d->m > d->grid)
-        return bad(p, "aperture_mm", "the aperture spans %d DOE pixels, more than the grid (%d)",
-                   d->m, d->grid);
+    double across = 2 * ceil(d->aperture_m / (2 * d->pitch_m)) + 1;
+    if (across > d->grid)
+        return bad(p, "aperture_mm", "the aperture spans %.0f DOE pixels, more than the grid "
+                   "(%d)", across, d->grid);
     return LM_OK;
 }
 
@@ -198,7 +199,6 @@ static lm_status parse_root(parser *p, json_t *root, lm_doe *d)
         st = bad(p, "material", "refractive index %g at %g nm (must be in 1..5)", n0,
                  d->design_m * 1e9);
     if (!st && d->max_height_m == 0) d->max_height_m = d->design_m / (n0 - 1.0);
-    d->m = 2 * (int)ceil(d->aperture_m / (2 * d->pitch_m)) + 1;
     if (!st) st = check_sampling(p, d);
     return st;
 }
@@ -266,7 +266,11 @@ double lm_doe_index(const lm_doe *d, double lambda_m)
 
 lm_status lm_doe_build_height(lm_doe *d, lm_err *err)
 {
-    int m = d->m = 2 * (int)ceil(d->aperture_m / (2 * d->pitch_m)) + 1;
+    double across = 2 * ceil(d->aperture_m / (2 * d->pitch_m)) + 1;
+    if (!(across >= 1 && across <= d->grid))
+        return lm_err_set(err, LM_ERR_ARG, "doe: the aperture spans %g DOE pixels; the grid "
+                          "has %d", across, d->grid);
+    int m = d->m = (int)across;
     free(d->height);
     free(d->mask);
     d->height = malloc((size_t)m * m * sizeof(float));

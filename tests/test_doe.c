@@ -215,6 +215,7 @@ static void test_bad_fields(void)
         {"grid", "256", "grid: too small"},
         {"aperture_mm", "-1", "aperture_mm: must be a positive"},
         {"aperture_mm", "3", "aperture_mm: the aperture spans"},
+        {"aperture_mm", "100000000", "aperture_mm: the aperture spans"}, /* no int overflow */
         {"profile", "{\"type\": \"cubic\", \"focal_mm\": 10, \"design_nm\": 550}", "profile.type"},
         {"psf_size", "255", "psf_size: the PSF window"},
         {"sensor_pitch_um", "\"8\"", "sensor_pitch_um: must be a positive"},
