@@ -1,6 +1,7 @@
 /* cmd_info.c — `lumosaic info`: a model's layer table (name, output shape, parameters,
  * multiply-adds) from a dry-run forward that executes no kernel, the list of presets, or a
- * system description's summary. What it is not: a benchmark (bench/bench_train). */
+ * system description's or a DOE description's (QDO baseline optics) summary.
+ * What it is not: a benchmark (bench/bench_train). */
 #include <stdio.h>
 #include <string.h>
 #include "cli/cli_util.h"
@@ -8,13 +9,15 @@
 #include "data/spectra.h"
 #include "models/profile.h"
 #include "data/mosaic.h"
+#include "data/doe.h"
 #include "data/system.h"
 
 static void help(void)
 {
     printf("usage: lumosaic info --model NAME [--batch B] [--height H] [--width W] [--csv]\n"
            "       lumosaic info --list\n"
-           "       lumosaic info --system FILE\n\n"
+           "       lumosaic info --system FILE\n"
+           "       lumosaic info --doe FILE|default\n\n"
            "Describe a model: every conv / transposed conv / linear layer with its output shape,\n"
            "parameters and multiply-accumulates (MACs) for a B x 1 x H x W coded input, and the\n"
            "totals. Nothing is computed: the forward runs on a dry-run backend.\n"
@@ -25,13 +28,15 @@ static void help(void)
            "  --height H     input rows, a multiple of the tile rows (default 66)\n"
            "  --width W      input columns, a multiple of the tile columns (default 64)\n"
            "  --system FILE  system description (default: bundled); alone: print its summary\n"
+           "  --doe FILE     a DOE description (QDO baseline optics; 'default' = bundled): its\n"
+           "                 summary and PSF figures at 400..700 nm\n"
            "  --csv          machine-readable table (layer,kind,shape,params,macs)\n"
            "  --list         list the model presets\n"
            "  --help         this text\n");
 }
 
 typedef struct info_args {
-    const char *model, *system;
+    const char *model, *system, *doe;
     long long batch, height, width;
     int csv, list;
 } info_args;
@@ -47,6 +52,7 @@ static int parse(lm_cli *c, info_args *a)
         }
         if ((r = lm_cli_value(c, "--model", &a->model)) ||
             (r = lm_cli_value(c, "--system", &a->system)) ||
+            (r = lm_cli_value(c, "--doe", &a->doe)) ||
             (r = lm_cli_int(c, "--batch", 1, 1 << 20, &a->batch)) ||
             (r = lm_cli_int(c, "--height", 1, 1 << 16, &a->height)) ||
             (r = lm_cli_int(c, "--width", 1, 1 << 16, &a->width)) ||
@@ -56,8 +62,8 @@ static int parse(lm_cli *c, info_args *a)
         }
         return lm_cli_unknown(c);
     }
-    if (!a->model && !a->list && !a->system)
-        return lm_cli_error(c, "--model, --list or --system is required (see 'lumosaic info "
+    if (!a->model && !a->list && !a->system && !a->doe)
+        return lm_cli_error(c, "--model, --list, --system or --doe is required (see 'lumosaic info "
                             "--help')");
     return 1;
 }
@@ -107,6 +113,18 @@ static int load_system(lm_cli *c, const char *path, lm_system *sys)
     return 0;
 }
 
+static int describe_doe(lm_cli *c, const char *path)
+{
+    lm_err e = {0};
+    lm_doe d;
+    lm_status st = strcmp(path, "default") ? lm_doe_load(path, &d, &e) : lm_doe_default(&d, &e);
+    if (!st) st = lm_doe_describe(&d, stdout, &e);
+    lm_doe_free(&d);
+    if (!st) return 0;
+    lm_cli_error(c, "%s", e.msg);
+    return lm_cli_exit_status(st);
+}
+
 int lm_cmd_info(int argc, char **argv)
 {
     lm_cli c;
@@ -114,6 +132,7 @@ int lm_cmd_info(int argc, char **argv)
     lm_cli_init(&c, "lumosaic info", argc, argv);
     int r = parse(&c, &a);
     if (r != 1) return r;
+    if (a.doe) return describe_doe(&c, a.doe);
     if (a.list) {
         for (const char *const *p = lm_model_presets(); *p; p++) printf("%s\n", *p);
         if (!a.model) return 0;

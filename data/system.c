@@ -24,12 +24,11 @@ static lm_status fail(loader *ld, lm_status s, const char *field, const char *fm
     __attribute__((format(printf, 4, 5)));
 static lm_status fail(loader *ld, lm_status s, const char *field, const char *fmt, ...)
 {
-    char msg[400];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(msg, sizeof msg, fmt, ap);
+    lm_status r = lm_err_fieldv(ld->err, s, "system file", ld->label, field, fmt, ap);
     va_end(ap);
-    return lm_err_set(ld->err, s, "system file %s: %s: %s", ld->label, field, msg);
+    return r;
 }
 
 /* ---- small JSON getters ------------------------------------------------------------------ */

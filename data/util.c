@@ -1,4 +1,5 @@
-/* util.c — FNV-1a, is-a-folder and mkdir -p (see util.h). What it is not: a file reader. */
+/* util.c — FNV-1a, is-a-folder, mkdir -p and field errors (see util.h).
+ * What it is not: a file reader. */
 #include "data/util.h"
 #include <errno.h>
 #include <stdio.h>
@@ -46,4 +47,22 @@ int lm_make_dirs(const char *path, char *top, size_t tn, char *failed, size_t fn
     free(buf);
     errno = e;
     return rc;
+}
+
+lm_status lm_err_fieldv(lm_err *e, lm_status s, const char *kind, const char *label,
+                        const char *field, const char *fmt, va_list ap)
+{
+    char msg[400];
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    return lm_err_set(e, s, "%s %s: %s: %s", kind, label, field, msg);
+}
+
+lm_status lm_err_field(lm_err *e, lm_status s, const char *kind, const char *label,
+                       const char *field, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    lm_status r = lm_err_fieldv(e, s, kind, label, field, fmt, ap);
+    va_end(ap);
+    return r;
 }

@@ -1,10 +1,13 @@
 /* util.h — small utilities shared by data/ and the layers above it, written once: the FNV-1a
- * hash (of strings, bytes and whole files), "is this a folder" and mkdir -p.
+ * hash (of strings, bytes and whole files), "is this a folder", mkdir -p, and the one-line
+ * error of a configuration file's field.
  * What it is not: file formats (cube_io.h) or dataset logic (dataset.h). */
 #ifndef LM_DATA_UTIL_H
 #define LM_DATA_UTIL_H
 #include <stddef.h>
+#include <stdarg.h>
 #include <stdint.h>
+#include "tensor/status.h"
 
 /* FNV-1a, 64-bit: start from a basis, feed bytes with lm_fnv1a (chainable). Two bases are in
  * use and must stay as they are (the values are stored or seed the numbers):
@@ -24,5 +27,12 @@ int lm_is_dir(const char *path);
  * made in failed[fn]. When top is non-NULL, top[tn] receives the first (outermost) folder this
  * call created ("" when all existed), for undoing it. */
 int lm_make_dirs(const char *path, char *top, size_t tn, char *failed, size_t fn);
+
+/* "<kind> <label>: <field>: <message>" into e (e.g. "doe file x.json: grid: too small"). */
+lm_status lm_err_field(lm_err *e, lm_status s, const char *kind, const char *label,
+                       const char *field, const char *fmt, ...)
+    __attribute__((format(printf, 6, 7)));
+lm_status lm_err_fieldv(lm_err *e, lm_status s, const char *kind, const char *label,
+                        const char *field, const char *fmt, va_list ap);
 
 #endif

@@ -22,6 +22,18 @@ static lm_status simulate(const lm_infer_model *im, const lm_cube *truth,
     if (truth->bands != 31)
         return lm_err_set(err, LM_ERR_SHAPE, "eval: the cube needs 31 bands at 400..700 nm "
                           "(has %d bands)", truth->bands);
+    if (is_rgb(im) && lm_model_has(im->model, LM_CAP_QDO_OPTICS)) {
+        lm_qdocam *q = im->qdo;
+        lm_noise_opts none = {0};
+        lm_status st = q ? LM_OK : lm_infer_qdocam(&q, err); /* (a model not from a file) */
+        if (!st) st = lm_qdocam_simulate(q, truth->data, truth->height, truth->width,
+                                         noise ? noise : &none, rng, frame, nthreads, err);
+        if (q && q != im->qdo) {
+            lm_qdocam_free(q);
+            free(q);
+        }
+        return st;
+    }
     if (is_rgb(im)) {
         lm_rgbcam cam;
         if (lm_rgbcam_load(&cam, NULL, LM_RGBCAM_D65, err)) return err->status;

@@ -102,7 +102,25 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
         return st;
     }
     lm_params_set_requires_grad(&im->model->params, 0);
-    return LM_OK;
+    if (lm_model_has(im->model, LM_CAP_QDO_OPTICS)) st = lm_infer_qdocam(&im->qdo, err);
+    if (st) lm_infer_model_free(im);
+    return st;
+}
+
+lm_status lm_infer_qdocam(lm_qdocam **out, lm_err *err)
+{
+    lm_doe doe;
+    lm_qdocam *q = calloc(1, sizeof *q);
+    *out = NULL;
+    if (!q) return lm_err_set(err, LM_ERR_NOMEM, "qdo camera: out of memory");
+    lm_status st = lm_doe_default(&doe, err);
+    if (!st) {
+        st = lm_qdocam_init(q, &doe, LM_RGBCAM_D65, err);
+        lm_doe_free(&doe);
+    }
+    if (st) free(q);
+    else *out = q;
+    return st;
 }
 
 void lm_infer_set_noise(lm_model *m, const float *frame, int height, int width)
@@ -123,5 +141,7 @@ void lm_infer_model_free(lm_infer_model *im)
 {
     lm_model_free(im->model);
     lm_system_free(&im->sys);
+    if (im->qdo) lm_qdocam_free(im->qdo);
+    free(im->qdo);
     memset(im, 0, sizeof *im);
 }

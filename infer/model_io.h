@@ -3,10 +3,13 @@
  * What it is: read the metadata "preset" (required) and "system" / "system_hash" (the system
  * description the model was trained for; "" = the bundled default), load that system (or an
  * override), derive the network front (lm_mosaic_from_system), create the model and load its
- * weights (shapes must match), trainable parameters switched to no-grad.
+ * weights (shapes must match), trainable parameters switched to no-grad. A QDO-baseline model
+ * (LM_CAP_QDO_OPTICS) also gets its camera (the bundled DOE's PSFs, computed once here) for
+ * eval's simulations.
  * What it is not: checkpoint resume (train/checkpoint.c) or the inference loop (infer/tile.h). */
 #ifndef LM_MODEL_IO_H
 #define LM_MODEL_IO_H
+#include "data/qdocam.h"
 #include "data/system.h"
 #include "models/model.h"
 
@@ -18,6 +21,7 @@ typedef struct lm_infer_model {
     int noise_oracle;     /* eval only: give noise-reading models the simulated level */
     int sensor_clip, sensor_bits; /* eval only: simulated frames clipped to [0, 1] / quantised
                                    * after the noise, as a 16-bit PNG holds them */
+    lm_qdocam *qdo;       /* LM_CAP_QDO_OPTICS models: the camera (NULL: eval builds one) */
 } lm_infer_model;
 
 /* Load path (a folder holding model.safetensors, or a .safetensors file). system_override
@@ -30,6 +34,9 @@ typedef struct lm_infer_model {
 lm_status lm_infer_model_load(const char *path, const char *system_override, lm_infer_model *im,
                               lm_err *err);
 void lm_infer_model_free(lm_infer_model *im);
+/* The QDO baseline's camera with the bundled DOE (data/systems/qdo_default.json), D65;
+ * *out freed with lm_qdocam_free + free. */
+lm_status lm_infer_qdocam(lm_qdocam **out, lm_err *err);
 
 /* For a model that reads its input's noise level (m->noise_input): set m->noise_sigma for this
  * frame (height x width raw mosaic), from m->noise_given (k x the frame's maximum) when >= 0,

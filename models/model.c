@@ -49,6 +49,7 @@ static lm_status build_rt(lm_model *m, const preset *ps, lm_err *err)
 #define FIT LM_CAP_CLOSED_FORM
 #define RGB LM_CAP_RGB_INPUT
 #define WHOLE LM_CAP_WHOLE_FRAME
+#define QDO LM_CAP_QDO_OPTICS
 static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rfD]" its flags */
     {"linear", build_linear, CL, {0, 0, 0, 0}, 0},
     {"lmmse", build_lmmse, CL | FIT, {0, 0, 0, 0}, 0},
@@ -64,6 +65,7 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     {"mst-tiny", build_mst, RGB | WHOLE, {0, 0, 0, 0}, 1},
     {"mst", build_mst, RGB | WHOLE, {0, 0, 0, 0}, 3},
     {"mst-coded", build_mst, WHOLE, {0, 0, 0, 0}, 3},
+    {"qdo-mst", build_mst, RGB | WHOLE | QDO, {0, 0, 0, 0}, 1}, /* MST++-tiny behind a DOE */
     {"rt-8", build_rt, CL, {0, 0, 0, 0}, 8},
     {"rt-16", build_rt, CL, {0, 0, 0, 0}, 16},
 };
@@ -71,6 +73,7 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
 #undef FIT
 #undef RGB
 #undef WHOLE
+#undef QDO
 #define NPRESETS (int)(sizeof presets / sizeof presets[0])
 
 const char *const *lm_model_presets(void)

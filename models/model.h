@@ -17,6 +17,8 @@ typedef enum lm_model_cap {
                                    * (lm_mst_reconstruct), never in windows or strips */
     LM_CAP_OPENCL = 1u << 2,      /* may run on an OpenCL device (--device opencl) */
     LM_CAP_CLOSED_FORM = 1u << 3, /* fitted in closed form (train/fit_lmmse.h) */
+    LM_CAP_QDO_OPTICS = 1u << 4,  /* with LM_CAP_RGB_INPUT: the RGB image is seen through the
+                                   * QDO baseline's DOE (data/qdocam.h), not a plain lens */
 } lm_model_cap;
 
 typedef struct lm_model lm_model;

@@ -236,9 +236,14 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         st = fit_closed(cfg, m, d, &opts, res, err);
     } else if (!st && lm_model_has(m, LM_CAP_RGB_INPUT)) {
         /* the passive RGB baseline (MST++): same samples, seen through an RGB camera */
+        /* (qdo-* presets: the same camera behind the bundled DOE) */
         lm_train_source src;
-        st = lm_train_source_rgb_open(&src, d, NULL, LM_RGBCAM_D65, NULL, cfg->patch_h,
-                                      cfg->patch_w, cfg->seed, err);
+        if (lm_model_has(m, LM_CAP_QDO_OPTICS))
+            st = lm_train_source_qdo_open(&src, d, NULL, NULL, cfg->patch_h, cfg->patch_w,
+                                          cfg->seed, err);
+        else
+            st = lm_train_source_rgb_open(&src, d, NULL, LM_RGBCAM_D65, NULL, cfg->patch_h,
+                                          cfg->patch_w, cfg->seed, err);
         if (!st) st = lm_train_run(cfg, m, &src, &opts, res, err);
         if (src.user) lm_train_source_rgb_close(&src);
     } else if (!st) {

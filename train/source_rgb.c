@@ -8,9 +8,13 @@
  * = k x the largest clean RGB value of the patch); the other noise options (Poisson, clipping,
  * quantisation) are this source's own. Deterministic: batch `index` is a pure function of
  * (seed, index), like the dataset's.
- * What it is not: the dataset (data/dataset.h) or the camera model (data/rgbcam.h). */
+ * The QDO baseline (lm_train_source_qdo_open) is the same source with the RGB camera behind a
+ * DOE (data/qdocam.h: each band convolved with its PSF before the RGB integration).
+ * What it is not: the dataset (data/dataset.h) or the camera models (data/rgbcam.h,
+ * data/qdocam.h). */
 #include "train/train.h"
 #include "data/dataset.h"
+#include "data/qdocam.h"
 #include "data/rgbcam.h"
 #include "data/spectra.h"
 #include <stdlib.h>
@@ -19,6 +23,7 @@
 typedef struct rgb_src {
     lm_dataset *d;
     lm_rgbcam cam;
+    lm_qdocam *qdo;        /* NULL: the plain RGB camera */
     lm_noise_opts noise;
     int ph, pw;
     uint64_t seed;
@@ -38,6 +43,8 @@ static lm_status to_rgb(rgb_src *s, lm_data_split split, long i, const float *ta
     lm_rng_seed(&base, s->seed ^ 0x5267622d63616dULL); /* "Rgb-cam" */
     r = lm_rng_split(&base, (uint64_t)split << 48 ^ (uint64_t)i);
     size_t plane = (size_t)s->ph * s->pw;
+    if (s->qdo) return lm_qdocam_simulate(s->qdo, target + plane, s->ph, s->pw, &no, &r, rgb, 1,
+                                          err);
     return lm_rgbcam_simulate(&s->cam, target + plane, s->ph, s->pw, &no, &r, rgb, 1, err);
 }
 
@@ -91,10 +98,34 @@ lm_status lm_train_source_rgb_open(lm_train_source *src, lm_dataset *d, const ch
     return LM_OK;
 }
 
+lm_status lm_train_source_qdo_open(lm_train_source *src, lm_dataset *d, const char *doe_path,
+                                   const lm_noise_opts *noise, int patch_h, int patch_w,
+                                   uint64_t seed, lm_err *err)
+{
+    lm_status st = lm_train_source_rgb_open(src, d, NULL, LM_RGBCAM_D65, noise, patch_h, patch_w,
+                                            seed, err);
+    if (st) return st;
+    rgb_src *s = src->user;
+    lm_doe doe;
+    s->qdo = calloc(1, sizeof *s->qdo);
+    if (!s->qdo) st = lm_err_set(err, LM_ERR_NOMEM, "qdo source: out of memory");
+    if (!st) st = doe_path ? lm_doe_load(doe_path, &doe, err) : lm_doe_default(&doe, err);
+    if (!st) {
+        st = lm_qdocam_init(s->qdo, &doe, LM_RGBCAM_D65, err);
+        lm_doe_free(&doe);
+    }
+    if (st) lm_train_source_rgb_close(src);
+    return st;
+}
+
 void lm_train_source_rgb_close(lm_train_source *src)
 {
     rgb_src *s = src ? src->user : NULL;
-    if (s) free(s->coded);
+    if (s) {
+        free(s->coded);
+        if (s->qdo) lm_qdocam_free(s->qdo);
+        free(s->qdo);
+    }
     free(s);
     if (src) memset(src, 0, sizeof *src);
 }

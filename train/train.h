@@ -137,6 +137,12 @@ lm_status lm_train_source_rgb_open(lm_train_source *src, lm_dataset *d, const ch
                                    int illum, const lm_noise_opts *noise, int patch_h,
                                    int patch_w, uint64_t seed, lm_err *err);
 void lm_train_source_rgb_close(lm_train_source *src);
+/* The QDO baseline: the same source with the RGB camera behind a DOE (data/qdocam.h; doe_path
+ * NULL = the bundled data/systems/qdo_default.json), D65. Computes the 31 PSFs once (seconds).
+ * Close with lm_train_source_rgb_close. */
+lm_status lm_train_source_qdo_open(lm_train_source *src, lm_dataset *d, const char *doe_path,
+                                   const lm_noise_opts *noise, int patch_h, int patch_w,
+                                   uint64_t seed, lm_err *err);
 
 /* ---- the loop --------------------------------------------------------------------------- */
 typedef struct lm_train_opts {

@@ -14,6 +14,8 @@
 # input: conv_in 31 x 3 x 3 x 3) evaluated with --noise 0,10 --motion 0,120 --rainbow 66: the
 # same eval.json / eval.csv / eval_motion.csv fields, finite values, aligned = unaligned, the
 # still motion row = its static reference; --device opencl is refused for MST++ (or no OpenCL).
+# The QDO baseline: a 2-iteration qdo-mst run evaluated with --noise 0,10 --rainbow 66;
+# `info --doe` on the bundled DOE and on a file missing a field (exit 2, one line).
 # usage: eval.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 
@@ -170,6 +172,25 @@ check "mst on opencl refused (exit 2)" [ $? -eq 2 ]
 check "mst on opencl: one line" [ "$(wc -l < "$T/oerr")" -eq 1 ]
 check "mst on opencl: message" grep -qE "CPU only|device" "$T/oerr"
 check "mst on opencl: no output" no_output "$T/evo"
+
+# ---- the QDO baseline (MST++-tiny behind the bundled DOE): train briefly, evaluate ---------
+RQ=$T/run_qdo
+"$LM" train --model qdo-mst --data "$CAVE" --iterations 2 --batch 2 --accum-steps 1 \
+  --synth-fraction 0 --noise 0,0 --val-patches 1 --output "$RQ" --quiet > "$T/qlog" 2>&1
+check "train qdo-mst: $(cat "$T/qlog")" [ -s "$RQ/model.safetensors" ]
+"$LM" eval --model "$RQ" "$CAVE" --split all --noise 0,10 --rainbow 66 --output "$T/evq" \
+  > "$T/qtable" 2> "$T/qerr"
+check "eval qdo-mst: $(cat "$T/qerr")" [ $? -eq 0 ]
+check "qdo table has a row per noise level" \
+  [ "$(grep -cE '^ +(0|10) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/qtable")" -eq 2 ]
+check "qdo csv rows" [ "$(grep -cE '^(balloons_crop100|mean),(0|10),' "$T/evq/eval.csv")" -eq 4 ]
+"$LM" info --doe default > "$T/doe_info" 2>&1
+check "info --doe default: $(cat "$T/doe_info")" grep -qE '^ +550 +0\.[0-9]+ ' "$T/doe_info"
+echo '{"version": 1, "aperture_mm": 0.5}' > "$T/bad_doe.json"
+"$LM" info --doe "$T/bad_doe.json" > /dev/null 2> "$T/doe_err"
+check "bad DOE file: exit 2" [ $? -eq 2 ]
+check "bad DOE file: one line" [ "$(wc -l < "$T/doe_err")" -eq 1 ]
+check "bad DOE file: names the file and field" grep -q 'bad_doe.json: doe_pitch_um: missing' "$T/doe_err"
 
 # ---- bad input ---------------------------------------------------------------------------
 expect_error "missing model" 2 "no such model" "$T/e1" -- "$LM" eval --model "$T/nope" "$CAVE" --output "$T/e1"
