@@ -54,8 +54,9 @@ static double band_mean(double c, double lo, double hi)
 }
 
 /* Worst |read - expected| over the cube (expected: band means x gain, x scale). */
-static double worst_error(const lm_cube *c, double lo, double hi, double scale)
+static double worst_error(const lm_cube *c, double scale)
 {
+    double lo = span_lo, hi = span_hi;
     double worst = 0.0;
     for (int b = 0; b < c->bands; b++)
         for (int y = 0; y < H; y++)
@@ -72,6 +73,25 @@ static int on_grid31(const lm_cube *c)
     if (c->bands != 31 || c->height != H || c->width != W) return 0;
     for (int b = 0; b < 31; b++)
         if (c->wavelength[b] != 400.0f + 10.0f * b) return 0;
+    return 1;
+}
+
+/* Read path onto the grid (o NULL: the defaults) and compare it with the band means of the
+ * current span x scale: prints the worst error, checks it against tol. 1 if the cube is on the
+ * grid (*c then holds it, to free), else 0 (nothing to free). */
+static int read_close(const char *path, const lm_cube_read_opts *o, double scale, double tol,
+                      const char *label, lm_cube *c)
+{
+    lm_err e = {0};
+    CHECK_MSG(lm_cube_read_with(path, o, c, &e) == LM_OK, "%s: %s", label, e.msg);
+    if (!on_grid31(c)) {
+        CHECK_MSG(0, "%s: not read onto 31 bands 400-700 nm", label);
+        lm_cube_free(c);
+        return 0;
+    }
+    double err = worst_error(c, scale);
+    printf("  %s: worst error %.2e\n", label, err);
+    CHECK_MSG(err < tol, "%s: worst error %.2e, over %.1e", label, err, tol);
     return 1;
 }
 
@@ -144,20 +164,26 @@ static void write_exr(const char *path, const double *wl, int B)
     lm_cube_free(&c);
 }
 
+/* A .mat of B bands start + i * step (`wl_key` holding them, if not NULL; counts: KAUST's
+ * 12-bit) at tmpdir/file (into p), read back with read_close. */
+static int mat_case(char *p, const char *file, const char *key, int B, double start,
+                    double step, int counts, const char *wl_key, double tol, lm_cube *c)
+{
+    double wl[LM_RESAMPLE_MAX_BANDS];
+    grid(wl, B, start, step);
+    write_mat(tpath(p, file), key, wl, B, counts, wl_key, wl, B);
+    char label[128];
+    snprintf(label, sizeof label, "%s '%s' %d bands %g-%g nm%s", file, key, B, wl[0],
+             wl[B - 1], counts ? ", 12-bit counts" : "");
+    return read_close(p, NULL, 1.0, tol, label, c);
+}
+
 static void test_kaust(void)
 {
     char p[1024];
-    double wl[34];
-    grid(wl, 34, 400.0, 10.0);
-    write_mat(tpath(p, "kaust.mat"), "hsi", wl, 34, 1, NULL, NULL, 0);
     lm_cube c, n;
     lm_err e = {0};
-    CHECK_MSG(lm_cube_read(p, &c, &e) == LM_OK, "%s", e.msg);
-    CHECK(on_grid31(&c));
-    if (!on_grid31(&c)) return;
-    double err = worst_error(&c, 400.0, 730.0, 1.0);
-    printf("  KAUST 34 bands 400-730 nm, 12-bit: worst error %.2e\n", err);
-    CHECK(err < TOL);
+    if (!mat_case(p, "kaust.mat", "hsi", 34, 400.0, 10.0, 1, NULL, TOL, &c)) return;
     /* the first 31 bands of the file, bit for bit */
     CHECK_MSG(lm_cube_read_mat(p, &n, &e) == LM_OK, "%s", e.msg);
     CHECK(n.bands == 34 && n.wavelength[33] == 730.0f);
@@ -169,17 +195,8 @@ static void test_kaust(void)
 static void test_harvard(void)
 {
     char p[1024];
-    double wl[31];
-    grid(wl, 31, 420.0, 10.0);
-    write_mat(tpath(p, "harvard.mat"), "ref", wl, 31, 0, NULL, NULL, 0);
     lm_cube c;
-    lm_err e = {0};
-    CHECK_MSG(lm_cube_read(p, &c, &e) == LM_OK, "%s", e.msg);
-    CHECK(on_grid31(&c));
-    if (!on_grid31(&c)) return;
-    double err = worst_error(&c, 420.0, 720.0, 1.0);
-    printf("  Harvard 31 bands 420-720 nm: worst error %.2e\n", err);
-    CHECK(err < TOL);
+    if (!mat_case(p, "harvard.mat", "ref", 31, 420.0, 10.0, 0, NULL, TOL, &c)) return;
     /* mirrored edge: 400 <- 440, 410 <- 430 (copies); 420..700 are the file's bands */
     size_t np = (size_t)H * W;
     CHECK(memcmp(lm_cube_band(&c, 0), lm_cube_band(&c, 4), np * sizeof(float)) == 0);
@@ -190,38 +207,30 @@ static void test_harvard(void)
 static void test_icvl_519(void)
 {
     char p[1024];
-    double wl[519];
-    grid(wl, 519, 400.0, 600.0 / 518.0);
-    write_mat(tpath(p, "icvl.mat"), "rad", wl, 519, 0, "bands", wl, 519);
     lm_cube c;
     lm_err e = {0};
-    CHECK_MSG(lm_cube_read(p, &c, &e) == LM_OK, "%s", e.msg);
-    CHECK(on_grid31(&c));
-    if (!on_grid31(&c)) return;
-    double err = worst_error(&c, 400.0, 1000.0, 1.0);
-    printf("  ICVL-like 519 bands 400-1000 nm: worst error %.2e\n", err);
-    CHECK(err < 1e-4);
-    lm_cube_free(&c);
+    if (mat_case(p, "icvl.mat", "rad", 519, 400.0, 600.0 / 518.0, 0, "bands", 1e-4, &c))
+        lm_cube_free(&c);
     /* too many bands for a cube kept as read */
     CHECK(lm_cube_read_mat(p, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
     CHECK_ERR(e, LM_ERR_FORMAT, "icvl.mat", "519 bands");
 }
 
+/* An EXR of B bands start + i * step at tmpdir/file (its path into p). */
+static const char *exr_grid(char *p, const char *file, int B, double start, double step)
+{
+    double wl[LM_CUBE_MAX_BANDS];
+    grid(wl, B, start, step);
+    write_exr(tpath(p, file), wl, B);
+    return p;
+}
+
 static void test_exr_5nm(void)
 {
     char p[1024];
-    double wl[61];
-    grid(wl, 61, 400.0, 5.0);
-    write_exr(tpath(p, "five.exr"), wl, 61);
+    exr_grid(p, "five.exr", 61, 400.0, 5.0);
     lm_cube c;
-    lm_err e = {0};
-    CHECK_MSG(lm_cube_read(p, &c, &e) == LM_OK, "%s", e.msg);
-    CHECK(on_grid31(&c));
-    if (!on_grid31(&c)) return;
-    double err = worst_error(&c, 400.0, 700.0, 1.0);
-    printf("  EXR 61 bands 400-700 nm at 5 nm: worst error %.2e\n", err);
-    CHECK(err < TOL);
-    lm_cube_free(&c);
+    if (read_close(p, NULL, 1.0, TOL, "EXR 61 bands 400-700 nm at 5 nm", &c)) lm_cube_free(&c);
 }
 
 static void test_sidecars(void)
@@ -240,12 +249,8 @@ static void test_sidecars(void)
         snprintf(text + strlen(text), sizeof text - strlen(text), "%g%s", wl[i],
                  i % 5 == 4 ? "\n" : ", ");
     write_text(tpath(q, "side.mat.wavelengths.txt"), text);
-    CHECK_MSG(lm_cube_read(p, &c, &e) == LM_OK, "%s", e.msg);
-    CHECK(on_grid31(&c));
-    double err = on_grid31(&c) ? worst_error(&c, 395.0, 707.5, 1.0) : INFINITY;
-    printf("  sidecar .txt, 26 bands 395-707.5 nm: worst error %.2e\n", err);
-    CHECK(err < TOL_COARSE);
-    lm_cube_free(&c);
+    if (read_close(p, NULL, 1.0, TOL_COARSE, "sidecar .txt, 26 bands 395-707.5 nm", &c))
+        lm_cube_free(&c);
     /* a JSON sidecar on an EXR replaces the channel wavelengths (here: the same list) */
     double w5[61];
     grid(w5, 61, 400.0, 5.0);
@@ -255,11 +260,7 @@ static void test_sidecars(void)
         snprintf(js + strlen(js), sizeof js - strlen(js), "%s%g", i ? ", " : "", w5[i]);
     strcat(js, "]}");
     write_text(tpath(q, "side.exr.wavelengths.json"), js);
-    CHECK_MSG(lm_cube_read(p, &c, &e) == LM_OK, "%s", e.msg);
-    err = on_grid31(&c) ? worst_error(&c, 400.0, 700.0, 1.0) : INFINITY;
-    printf("  sidecar .json on a 5 nm EXR: worst error %.2e\n", err);
-    CHECK(err < TOL);
-    lm_cube_free(&c);
+    if (read_close(p, NULL, 1.0, TOL, "sidecar .json on a 5 nm EXR", &c)) lm_cube_free(&c);
 }
 
 /* 31 bands 400-700 nm (EXR, .mat without a list) and the 41 bins 380-780 nm: bit for bit. */
@@ -290,7 +291,7 @@ static void test_on_grid_unchanged(void)
     CHECK(on_grid31(&a) && on_grid31(&b));
     if (on_grid31(&a) && on_grid31(&b))
         CHECK(!memcmp(a.data, b.data, sizeof(float) * 31 * H * W));
-    double err = on_grid31(&a) ? worst_error(&a, 400.0, 700.0, 1.0) : INFINITY;
+    double err = on_grid31(&a) ? worst_error(&a, 1.0) : INFINITY;
     printf("  31 bands 400-700 nm (point samples vs band means): worst error %.2e\n", err);
     lm_cube_free(&a);
     lm_cube_free(&b);
@@ -299,9 +300,7 @@ static void test_on_grid_unchanged(void)
 static void test_narrow_refused(void)
 {
     char p[1024];
-    double wl[27];
-    grid(wl, 27, 430.0, 10.0);
-    write_exr(tpath(p, "narrow.exr"), wl, 27);
+    exr_grid(p, "narrow.exr", 27, 430.0, 10.0);
     lm_cube c;
     lm_err e = {0};
     CHECK(lm_cube_read(p, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
@@ -329,13 +328,9 @@ static void test_mat_key(void)
     lm_err e = {0};
     lm_cube_read_opts o;
     lm_cube_read_opts_default(&o);
-    CHECK_MSG(lm_cube_read_with(p, &o, &c, &e) == LM_OK, "%s", e.msg); /* auto: cube */
-    CHECK(on_grid31(&c) && worst_error(&c, 400.0, 700.0, 1.0) < TOL);
-    lm_cube_free(&c);
+    if (read_close(p, &o, 1.0, TOL, "--mat-key automatic: 'cube'", &c)) lm_cube_free(&c);
     o.mat_key = "half";
-    CHECK_MSG(lm_cube_read_with(p, &o, &c, &e) == LM_OK, "%s", e.msg);
-    CHECK(on_grid31(&c) && worst_error(&c, 400.0, 700.0, 0.5) < TOL);
-    lm_cube_free(&c);
+    if (read_close(p, &o, 0.5, TOL, "--mat-key half", &c)) lm_cube_free(&c);
     o.mat_key = "nope";
     CHECK(lm_cube_read_with(p, &o, &c, &e) == LM_ERR_FORMAT && c.data == NULL);
     CHECK_ERR(e, LM_ERR_FORMAT, "no variable 'nope'", "the file holds: cube, half");
