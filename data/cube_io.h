@@ -30,7 +30,8 @@
  * of the forward model, which simulate takes as they are).
  * Every reader checks the claimed size against data/limits.h before allocating the cube.
  * Every cube read is validated: each value must be finite and >= 0, else LM_ERR_NUMERIC
- * naming the file, the band and the pixel. Readers and the writer may run concurrently on
+ * naming the file, the band and the pixel (a .mat band the grid does not use, such as KAUST's
+ * 710-730 nm, is neither kept nor checked). Readers and the writer may run concurrently on
  * different files.
  * What it is not: normalisation (cubes are returned in the file's units, KAUST's counts
  * aside), or a cache (see the dataset code). */

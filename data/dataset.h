@@ -71,7 +71,9 @@ void lm_dataset_default_cfg(lm_dataset_cfg *cfg);
 /* Scenes are divided by their own maximum when read (system.md §10), so training targets,
  * validation and `lumosaic eval` share one scale.
  * Lists and checks the scenes (reads headers, not pixels: CAVE band 01 and EXR headers; a .mat
- * file is read whole, matio offering no cheap header read). A folder is a CAVE scene if it
+ * file, an EXR off the 31-band grid and a scene with a wavelength sidecar are read whole, onto
+ * 31 bands 400-700 nm as lm_cube_read_with does, cfg->mat_key choosing the .mat variable;
+ * matio offers no cheap header read). A folder is a CAVE scene if it
  * holds band images (or its single sub-folder does, scene/scene/); otherwise it is a folder of
  * scenes: its .mat/.exr files and CAVE scene folders, in name order. Scenes smaller than the
  * patch are left out of the lists (they still count in the split rule below). Errors name the

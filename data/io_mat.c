@@ -12,7 +12,8 @@
  * checks the variable's header against data/limits.h before reading it and sends the raw values
  * through a pipe; the parent checks the reply and converts it. A fault, a hang or an
  * allocation over the child's limits is an error naming the file.
- * What it is not: a writer, or a reader of other keys / struct or cell variables. */
+ * What it is not: a writer, a reader of struct or cell variables, or the resampling method
+ * (resample.c). */
 #include "data/cube_io.h"
 #include "data/isolate.h"
 #include "data/limits.h"
