@@ -3,7 +3,8 @@
 # resample"): a KAUST-like .mat (34 bands of 12-bit counts), a 61-band 5 nm EXR and a .mat with
 # two cube variables go through `simulate` and `render`; --mat-key picks a variable, a wrong key
 # lists the file's variables, a cube narrower than 420-680 nm and a bad sidecar are refused
-# (exit 2, one line, nothing written); train and eval document --mat-key.
+# (exit 2, one line, nothing written); train reads them as scenes, and train and eval document
+# --mat-key.
 # usage: readers.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 
@@ -18,6 +19,14 @@ check "simulate 5 nm EXR: $(cat "$T/log")" [ -s "$T/sim_five/frames/frame_0000.p
 "$LM" render --input "$T/two.mat" --mat-key alt --output "$T/alt.png" > "$T/log" 2>&1
 check "render --mat-key alt: $(cat "$T/log")" [ -s "$T/alt.png" ]
 check_not "--mat-key alt reads the other variable" cmp -s "$T/cube.png" "$T/alt.png"
+# train: a .mat variable chosen by --mat-key and a 5 nm EXR as scenes (at least one patch)
+"$MK" "$T/two66.mat" twokeys 66 64 && "$MK" "$T/five66.exr" fivenm 66 64 || fail "fixtures (train)"
+"$LM" train --data "$T/two66.mat" --data "$T/five66.exr" --mat-key alt --model linear \
+  --iterations 1 --val-interval 0 --val-patches 2 --threads 1 --output "$T/run" > "$T/log" 2>&1
+check "train on resampled scenes: $(tail -1 "$T/log")" [ -s "$T/run/model.safetensors" ]
+check "config.json records mat_key" grep -q '"mat_key": "alt"' "$T/run/config.json"
+expect_error "wrong key (train)" 2 "two66.mat: no variable 'nope'; the file holds: cube, alt" "$T/run2" \
+  -- "$LM" train --data "$T/two66.mat" --mat-key nope --model linear --iterations 1 --output "$T/run2"
 for c in simulate render eval train; do
   check "$c --help documents --mat-key" grep -q -- '--mat-key' <("$LM" $c --help)
 done
