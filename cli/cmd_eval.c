@@ -35,7 +35,7 @@ static void help(void)
            "                     [--noise 0,5,10,15,20] [--output DIR] [--seed S]\n"
            "                     [--threads T] [--rainbow SIZE] [--batch N] [--system FILE]\n"
            "                     [--motion 0,60,120,240] [--align confident|plain]\n"
-           "                     [--device cpu|opencl]\n\n"
+           "                     [--device cpu|opencl] [--mat-key NAME]\n\n"
            "Score a trained model (system.md §10): each scene is cropped to the mosaic tile,\n"
            "divided by its own maximum, simulated at each noise level and reconstructed\n"
            "patch-wise; PSNR (peak 1), SSIM, MAE and SAM (degrees) on the 31 bands 400-700 nm.\n"
@@ -44,7 +44,9 @@ static void help(void)
            "Then the rainbow scene: per row, the recovered peak wavelength (parabolic fit\n"
            "around the largest band of the row's mean spectrum) against the true one.\n\n"
            "  --model RUN      a training run folder or a .safetensors written by 'lumosaic train'\n"
-           "  DATA...          scenes (CAVE folders, .mat, spectral .exr) or folders of scenes\n"
+           "  DATA...          scenes (CAVE folders, .mat, spectral .exr) or folders of scenes;\n"
+           "                   bands other than 31 at 400-700 nm are resampled (see README)\n"
+           "  --mat-key NAME   the .mat variable holding each cube (default: automatic)\n"
            "  --split S        test (default), val, train (the dataset's split, as in training:\n"
            "                   scene groups ranked by hash, 10%% test, 10%% val) or all\n"
            "  --noise LIST     Gaussian noise levels in %% of the largest clean value\n"
@@ -81,7 +83,7 @@ static void help(void)
 }
 
 typedef struct eval_opts {
-    const char *model, *output, *system;
+    const char *model, *output, *system, *mat_key;
     lm_cli_common com; /* --threads, --device, --seed */
     const char **data;
     int ndata, split; /* split: 0 test, 1 val, 2 train, 3 all */
@@ -140,6 +142,7 @@ static int parse_opt(lm_cli *c, eval_opts *o)
     if ((r = lm_cli_value(c, "--model", &o->model)) ||
         (r = lm_cli_value(c, "--output", &o->output)) ||
         (r = lm_cli_value(c, "--system", &o->system)) ||
+        (r = lm_cli_value(c, "--mat-key", &o->mat_key)) ||
         (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE | LM_CLI_SEED,
                                (long long)1 << 62, &o->com)) ||
         (r = lm_cli_choice(c, "--split", split_names, &o->split)) ||
@@ -222,8 +225,8 @@ static int list_scenes(eval_run *r, lm_err *e)
 {
     lm_dataset_scene *ls;
     int nls;
-    if (lm_dataset_list_scenes((const char *const *)r->o->data, r->o->ndata, &r->im.sys, -1, &ls,
-                               &nls, e))
+    if (lm_dataset_list_scenes((const char *const *)r->o->data, r->o->ndata, &r->im.sys,
+                               r->o->mat_key, -1, &ls, &nls, e))
         return fail(r->c, e);
     r->sc = calloc((size_t)nls + 1, sizeof *r->sc);
     if (!r->sc) {
@@ -299,7 +302,11 @@ static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
         scene_res *s = &r->sc[i];
         double t0 = omp_get_wtime();
         lm_cube cube;
-        if (lm_cube_read(s->path, &cube, e)) return fail(r->c, e);
+        lm_cube_read_opts ro; /* onto 31 bands 400-700 nm, as the dataset reads scenes */
+        lm_cube_read_opts_default(&ro);
+        ro.keep.count = 0;
+        ro.mat_key = r->o->mat_key;
+        if (lm_cube_read_with(s->path, &ro, &cube, e)) return fail(r->c, e);
         lm_status st = lm_eval_prepare(&cube, r->im.model->mosaic.ty, r->im.model->mosaic.tx, e);
         lm_rng rs = lm_rng_split(&base, lm_fnv1a_str(LM_FNV1A_BASIS_SHORT, s->name));
         if (!st) st = lm_eval_scene(&r->ctx, &r->im, &cube, r->o->k, r->o->nnoise, to, &rs,

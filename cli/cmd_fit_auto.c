@@ -215,8 +215,8 @@ static int list_scenes(cal_run *r, lm_err *e)
     for (int k = 0; k < nsplits; k++) {
         lm_dataset_scene *sc = NULL;
         int n = 0;
-        if (lm_dataset_list_scenes(r->o->data, r->o->ndata, &r->im[0].sys, splits[k], &sc, &n,
-                                   e))
+        if (lm_dataset_list_scenes(r->o->data, r->o->ndata, &r->im[0].sys, NULL, splits[k], &sc,
+                                   &n, e))
             return lm_cli_error(r->c, "%s", e->msg);
         char (*grown)[1024] = realloc(r->scenes, ((size_t)total + n + 1) * sizeof *r->scenes);
         if (!grown) {

@@ -12,11 +12,15 @@
 
 static void help(void)
 {
-    printf("usage: lumosaic render --input CUBE --output PNG [--exposure X] [--threads T]\n\n"
+    printf("usage: lumosaic render --input CUBE --output PNG [--exposure X] [--threads T]\n"
+           "                       [--mat-key NAME]\n\n"
            "Render a spectral cube as an sRGB image: illuminant D65, CIE 1931 2-degree observer,\n"
            "sRGB primaries and transfer curve, 8-bit PNG. Values are reflectances (1 = white).\n\n"
-           "  --input CUBE     a CAVE folder (31 band PNGs), a .mat (ARAD 'cube' / KAUST 'hsi')\n"
-           "                   or a spectral OpenEXR (.exr); bands within 360-830 nm\n"
+           "  --input CUBE     a CAVE folder (31 band PNGs), a .mat (ARAD 'cube', KAUST 'hsi',\n"
+           "                   ICVL 'rad', Harvard 'ref', ...) or a spectral OpenEXR (.exr);\n"
+           "                   31 bands 400-700 nm or 41 bins 380-780 nm as they are, other\n"
+           "                   grids covering 420-680 nm resampled to 400-700 nm (see README)\n"
+           "  --mat-key NAME   the .mat variable holding the cube (default: automatic)\n"
            "  --output PNG     the image to write (.png); written atomically\n"
            "  --exposure X     multiply the cube by X before rendering (0 < X <= 1e6; default 1)\n"
            "  --threads T      OpenMP threads (1..1024; default: all cores)\n"
@@ -24,7 +28,7 @@ static void help(void)
 }
 
 typedef struct render_opts {
-    const char *input, *output;
+    const char *input, *output, *mat_key;
     double exposure;
     lm_cli_common com; /* --threads */
 } render_opts;
@@ -40,6 +44,7 @@ static int parse(lm_cli *c, render_opts *o)
             return 0;
         }
         if ((r = lm_cli_value(c, "--input", &o->input)) ||
+            (r = lm_cli_value(c, "--mat-key", &o->mat_key)) ||
             (r = lm_cli_value(c, "--output", &o->output)) ||
             (r = lm_cli_real(c, "--exposure", 1e-12, 1e6, &o->exposure)) ||
             (r = lm_cli_common_opt(c, LM_CLI_THREADS, 0, &o->com))) {
@@ -66,7 +71,10 @@ int lm_cmd_render(int argc, char **argv)
     lm_cube cube;
     lm_err e;
     lm_err_clear(&e);
-    if (lm_cube_read(o.input, &cube, &e) != LM_OK)
+    lm_cube_read_opts ro;
+    lm_cube_read_opts_default(&ro);
+    ro.mat_key = o.mat_key;
+    if (lm_cube_read_with(o.input, &ro, &cube, &e) != LM_OK)
         return lm_cli_error(&c, "%s", e.msg), lm_cli_exit_status(e.status);
     float *rgb = malloc(sizeof(float) * 3 * (size_t)cube.height * cube.width);
     int status = 0;

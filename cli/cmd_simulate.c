@@ -35,8 +35,13 @@ static void help(void)
         "usage: lumosaic simulate --input CUBE --output DIR [options]\n\n"
         "Simulate coded-exposure frames of a spectral cube with the imaging system's forward\n"
         "model (static, or a video of a moving scene) and write them with their ground truth.\n\n"
-        "  --input CUBE        CAVE folder, .mat (ARAD/KAUST) or spectral .exr; 31 bands\n"
-        "                      400-700 nm (mirrored to 41 bins 380-780 nm) or the system's grid\n"
+        "  --input CUBE        CAVE folder, .mat (ARAD/KAUST/ICVL/Harvard) or spectral .exr;\n"
+        "                      31 bands 400-700 nm (mirrored to 41 bins 380-780 nm), the\n"
+        "                      system's grid, or any bands covering 420-680 nm (resampled to\n"
+        "                      400-700 nm; wavelengths from the file or a sidecar\n"
+        "                      CUBE.wavelengths.txt, see README)\n"
+        "  --mat-key NAME      the .mat variable holding the cube (default: the first of cube,\n"
+        "                      hsi, rad, ref, ...)\n"
         "  --output DIR        output folder (must not exist, or be empty): frames/, bucket0/,\n"
         "                      gt/ (spectral EXR + sRGB PNG per frame), simulate.json\n"
         "  --system FILE       system description JSON (default: the bundled prototype)\n"
@@ -72,7 +77,7 @@ static void help(void)
 }
 
 typedef struct sim_opts {
-    const char *input, *output, *system;
+    const char *input, *output, *system, *mat_key;
     int crop, clip, bucket0, video, format;
     double noise, photons, read_noise;
     long long bits, frames, samples;
@@ -142,6 +147,7 @@ static int parse_one(lm_cli *c, sim_opts *o)
     const char *s;
     int r;
     if ((r = lm_cli_value(c, "--input", &o->input)) ||
+        (r = lm_cli_value(c, "--mat-key", &o->mat_key)) ||
         (r = lm_cli_value(c, "--output", &o->output)) ||
         (r = lm_cli_value(c, "--system", &o->system)) || (r = lm_cli_flag(c, "--crop", &o->crop)) ||
         (r = lm_cli_flag(c, "--clip", &o->clip)) ||
@@ -448,7 +454,11 @@ int lm_cmd_simulate(int argc, char **argv)
         lm_system_free(&sys);
         return lm_cli_error(&c, "%s", e.msg);
     }
-    if (lm_cube_read(o.input, &in, &e) != LM_OK) {
+    lm_cube_read_opts ro; /* other grids resampled to 31 bands; the system's kept */
+    lm_cube_read_opts_default(&ro);
+    ro.mat_key = o.mat_key;
+    ro.keep = (lm_grid){sys.nbins, sys.grid_start, sys.grid_step};
+    if (lm_cube_read_with(o.input, &ro, &in, &e) != LM_OK) {
         lm_system_free(&sys);
         return lm_cli_error(&c, "%s", e.msg), lm_cli_exit_status(e.status);
     }

@@ -197,15 +197,33 @@ static int exr_bands_ok(const lm_image *im, int *ok)
     return nb;
 }
 
-/* Sizes from headers (CAVE band 01, EXR); a .mat is read whole (matio has no cheap
- * thread-safe header path here). */
-static lm_status probe_scene(scene *s, lm_err *err)
+/* How scenes are read: onto 31 bands 400-700 nm (no other grid kept), the .mat key. */
+void lm_dataset_read_opts(const lm_dataset *d, lm_cube_read_opts *o)
+{
+    lm_cube_read_opts_default(o);
+    o->keep.count = 0;
+    o->mat_key = d->mat_key;
+}
+
+/* 1 if a sidecar wavelength list goes with the scene (its bands are then resampled). */
+static int has_sidecar(const char *path)
+{
+    double wl[LM_RESAMPLE_MAX_BANDS];
+    int n = 0;
+    return lm_wavelengths_sidecar(path, wl, &n, NULL) != LM_OK || n > 0;
+}
+
+/* Sizes from headers (CAVE band 01, EXR); a .mat, an EXR off the 31-band grid and a scene
+ * with a wavelength sidecar are read whole (resampled, or refused with the reason). */
+static lm_status probe_scene(const lm_dataset *d, scene *s, lm_err *err)
 {
     lm_cube_format f = lm_cube_detect(s->path);
     char hdr[DS_PATH_MAX] = "";
-    if (f == LM_CUBE_FMT_MAT) {
+    if (f == LM_CUBE_FMT_MAT || has_sidecar(s->path)) {
         lm_cube c;
-        lm_status st = lm_cube_read(s->path, &c, err);
+        lm_cube_read_opts o;
+        lm_dataset_read_opts(d, &o);
+        lm_status st = lm_cube_read_with(s->path, &o, &c, err);
         s->height = c.height;
         s->width = c.width;
         lm_cube_free(&c);
@@ -218,13 +236,20 @@ static lm_status probe_scene(scene *s, lm_err *err)
                           LM_CAVE_BANDS);
     lm_image im;
     lm_status st = lm_image_info(f == LM_CUBE_FMT_CAVE ? hdr : s->path, NULL, &im, err);
-    int ok = 1, nb = st == LM_OK && f == LM_CUBE_FMT_EXR ? exr_bands_ok(&im, &ok) : 0;
+    int ok = 1;
+    if (st == LM_OK && f == LM_CUBE_FMT_EXR) exr_bands_ok(&im, &ok);
     s->height = im.height;
     s->width = im.width;
     lm_image_free(&im);
-    if (st == LM_OK && !ok)
-        st = lm_err_set(err, LM_ERR_FORMAT, "%s: dataset scenes need 31 bands at 400..700 nm "
-                        "(10 nm); the file has %d spectral channels", s->path, nb);
+    if (st == LM_OK && !ok) {
+        lm_cube c;
+        lm_cube_read_opts o;
+        lm_dataset_read_opts(d, &o);
+        st = lm_cube_read_with(s->path, &o, &c, err); /* resampled, or the reason it cannot be */
+        s->height = c.height;
+        s->width = c.width;
+        lm_cube_free(&c);
+    }
     return st;
 }
 
@@ -474,7 +499,8 @@ static int listed(const lm_dataset_scene *s, int n, const char *path)
 }
 
 lm_status lm_dataset_list_scenes(const char *const *paths, int npaths, const lm_system *sys,
-                                 int split, lm_dataset_scene **out, int *n, lm_err *err)
+                                 const char *mat_key, int split, lm_dataset_scene **out, int *n,
+                                 lm_err *err)
 {
     *out = NULL;
     *n = 0;
@@ -485,6 +511,7 @@ lm_status lm_dataset_list_scenes(const char *const *paths, int npaths, const lm_
     cfg.sys = sys;
     cfg.workers = 0;
     cfg.synth_fraction = 0.0f;
+    cfg.mat_key = mat_key;
     lm_dataset *d = lm_dataset_open(&cfg, err);
     if (!d) return err->status;
     int total = 0;
@@ -581,6 +608,9 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
         c->val_patches < 0 || c->npaths < 0 || (c->npaths > 0 && !c->paths))
         return lm_err_set(err, LM_ERR_ARG, "dataset: need 0 <= workers <= %d, cache_scenes >= 0, "
                           "val_patches >= 0 and a path list", DS_MAX_WORKERS);
+    if (c->mat_key && strlen(c->mat_key) >= LM_DATASET_KEY_LEN)
+        return lm_err_set(err, LM_ERR_ARG, "dataset: .mat key longer than %d characters",
+                          LM_DATASET_KEY_LEN - 1);
     if (c->npaths == 0 && c->synth_fraction + c->procedural_fraction < 1.0f)
         return lm_err_set(err, LM_ERR_ARG, "dataset: no scene paths given (only a fully "
                           "synthetic dataset, synth_fraction + procedural_fraction = 1, needs "
@@ -592,7 +622,7 @@ static lm_status open_scenes(lm_dataset *d, lm_err *err)
 {
     lm_status st = LM_OK;
     for (int p = 0; p < d->cfg.npaths && st == LM_OK; p++) st = add_path(d, d->cfg.paths[p], err);
-    for (int i = 0; i < d->nscenes && st == LM_OK; i++) st = probe_scene(&d->scenes[i], err);
+    for (int i = 0; i < d->nscenes && st == LM_OK; i++) st = probe_scene(d, &d->scenes[i], err);
     if (st == LM_OK) st = build_splits(d, err);
     return st != LM_OK ? st : lm_ds_cache_init(d, err);
 }
@@ -603,6 +633,8 @@ lm_dataset *lm_dataset_open(const lm_dataset_cfg *cfg, lm_err *err)
     lm_dataset *d = calloc(1, sizeof *d);
     if (!d) return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory"), NULL;
     d->cfg = *cfg;
+    snprintf(d->mat_key, sizeof d->mat_key, "%s", cfg->mat_key ? cfg->mat_key : "");
+    d->cfg.mat_key = NULL; /* copied */
     pthread_mutex_init(&d->mu, NULL);
     pthread_cond_init(&d->work_cv, NULL);
     pthread_cond_init(&d->done_cv, NULL);

@@ -58,7 +58,11 @@ typedef struct lm_dataset_cfg {
     int batch_stride;           /* the caller asks for batch index + stride after index (data-
                                  * parallel ranks take every stride-th batch): what the workers
                                  * prepare ahead (0 or 1 = the next one) */
+    const char *mat_key;        /* .mat cube variable (NULL or "": automatic, cube_io.h);
+                                 * copied by lm_dataset_open */
 } lm_dataset_cfg;
+
+#define LM_DATASET_KEY_LEN 64
 
 typedef struct lm_dataset lm_dataset;
 
@@ -67,7 +71,9 @@ void lm_dataset_default_cfg(lm_dataset_cfg *cfg);
 /* Scenes are divided by their own maximum when read (system.md §10), so training targets,
  * validation and `lumosaic eval` share one scale.
  * Lists and checks the scenes (reads headers, not pixels: CAVE band 01 and EXR headers; a .mat
- * file is read whole, matio offering no cheap header read). A folder is a CAVE scene if it
+ * file, an EXR off the 31-band grid and a scene with a wavelength sidecar are read whole, onto
+ * 31 bands 400-700 nm as lm_cube_read_with does, cfg->mat_key choosing the .mat variable;
+ * matio offers no cheap header read). A folder is a CAVE scene if it
  * holds band images (or its single sub-folder does, scene/scene/); otherwise it is a folder of
  * scenes: its .mat/.exr files and CAVE scene folders, in name order. Scenes smaller than the
  * patch are left out of the lists (they still count in the split rule below). Errors name the
@@ -125,10 +131,11 @@ typedef struct lm_dataset_scene {
 /* The scenes the DATA paths name, split as lm_dataset_open splits them (opened with no workers
  * and no synthetic samples, then closed): the list of `split`, or of every split for split < 0
  * (train, val, test, in that order), each in list order; borrowed lists are skipped and each
- * path comes once. *out (free() it) holds *n scenes (possibly none). Errors: those of
+ * path comes once; mat_key as lm_dataset_cfg's. *out (free() it) holds *n scenes (possibly none). Errors: those of
  * lm_dataset_open; LM_ERR_NOMEM ("out of memory"). */
 lm_status lm_dataset_list_scenes(const char *const *paths, int npaths, const lm_system *sys,
-                                 int split, lm_dataset_scene **out, int *n, lm_err *err);
+                                 const char *mat_key, int split, lm_dataset_scene **out, int *n,
+                                 lm_err *err);
 
 typedef enum lm_sample_kind {
     LM_SAMPLE_SCENE = 0,       /* a patch of a real scene */

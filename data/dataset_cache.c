@@ -36,7 +36,9 @@ static int cache_victim(lm_dataset *d)
 static lm_status load_checked(const lm_dataset *d, int s, lm_cube *c, lm_err *err)
 {
     const scene *sc = &d->scenes[s];
-    lm_status st = lm_cube_read(sc->path, c, err);
+    lm_cube_read_opts o;
+    lm_dataset_read_opts(d, &o);
+    lm_status st = lm_cube_read_with(sc->path, &o, c, err);
     if (st != LM_OK) return st;
     int grid = c->bands == LM_GRID31_COUNT && fabsf(c->wavelength[0] - 400.0f) < 0.5f &&
                fabsf(c->wavelength[30] - 700.0f) < 0.5f;

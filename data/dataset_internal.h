@@ -3,6 +3,7 @@
  * those three files. What it is not: an API (data/dataset.h is one); nothing else includes it. */
 #ifndef LM_DATA_DATASET_INTERNAL_H
 #define LM_DATA_DATASET_INTERNAL_H
+#include "data/cube_io.h"
 #include "data/dataset.h"
 #include "data/synth.h"
 #include <pthread.h>
@@ -39,6 +40,7 @@ typedef struct batch_slot {
 
 struct lm_dataset {
     lm_dataset_cfg cfg;
+    char mat_key[LM_DATASET_KEY_LEN]; /* cfg.mat_key, copied ("" = automatic) */
     scene *scenes;
     int nscenes;
     int *list[3], count[3], borrowed[3];
@@ -57,6 +59,10 @@ struct lm_dataset {
     batch_slot slot[2];
     batch_slot *wanted;
 };
+
+/* How scenes are read (dataset.c): onto 31 bands 400-700 nm (no other grid kept), with the
+ * dataset's .mat key. */
+void lm_dataset_read_opts(const lm_dataset *d, lm_cube_read_opts *o);
 
 /* ---- the cube cache (dataset_cache.c): lazy, LRU, pinned while a sample uses a scene ---- */
 /* A scene in use by one sample. */

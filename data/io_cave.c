@@ -176,6 +176,7 @@ lm_status lm_cube_read_cave(const char *dir, lm_cube *cube, lm_err *e)
     if (s == LM_OK && cb.nfound == 0) s = scan_nested(dir, &cb, e);
     if (s == LM_OK) s = check_complete(dir, &cb, e);
     if (s == LM_OK) s = read_bands(&cb, cube, e);
+    if (s == LM_OK) s = lm_cube_apply_sidecar(dir, cube, e);
     if (s == LM_OK) s = lm_cube_check_values(cube, dir, e);
     cave_bands_free(&cb);
     if (s != LM_OK) lm_cube_free(cube);

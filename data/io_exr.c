@@ -269,6 +269,7 @@ lm_status lm_cube_read_exr(const char *path, lm_cube *cube, lm_err *e)
     else
         s = read_part0(ctx, path, cube, e);
     if (ctx) exr_finish(&ctx);
+    if (s == LM_OK) s = lm_cube_apply_sidecar(path, cube, e);
     if (s == LM_OK) s = lm_cube_check_values(cube, path, e);
     if (s != LM_OK) lm_cube_free(cube);
     return s;

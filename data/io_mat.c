@@ -1,15 +1,19 @@
-/* io_mat.c — the MATLAB .mat cube reader (matio): ARAD `cube` (v7.3) and KAUST `hsi` (v5).
+/* io_mat.c — the MATLAB .mat cube reader (matio): ARAD `cube` (v7.3), KAUST `hsi` (v5), ICVL
+ * `rad`, Harvard `ref` and the other keys of LM_MAT_CUBE_KEYS, or a key the caller names.
  * What it is: read the cube variable H x W x B (MATLAB column-major: element (y, x, b) at
- * y + H*(x + W*b); an HDF5 tool shows the same data as B x W x H), convert it to the band-major
- * lm_cube without transposing the image, apply the dataset's scaling (KAUST counts / 4095) and
- * band selection, and validate the values. See cube_io.h for the exact rules.
+ * y + H*(x + W*b); an HDF5 tool shows the same data as B x W x H) and its wavelengths (a
+ * variable of LM_MAT_WL_KEYS, a sidecar, or the key's default), convert it to the band-major
+ * lm_cube without transposing the image, apply the dataset's scaling (KAUST counts / 4095),
+ * and validate the values; each band is resampled (resample.h) as it arrives, so a 519-band
+ * cube is never held whole in the parent. See cube_io.h for the exact rules.
  * How: the file's structure is checked first (mat_check.c: truncation, v5 variables whose data
  * do not cover their dimensions); then matio runs in a child process (isolate.h), because
  * libmatio/libhdf5 read out of bounds or allocate gigabytes on some corrupt files: the child
  * checks the variable's header against data/limits.h before reading it and sends the raw values
  * through a pipe; the parent checks the reply and converts it. A fault, a hang or an
  * allocation over the child's limits is an error naming the file.
- * What it is not: a writer, or a reader of other keys / struct or cell variables. */
+ * What it is not: a writer, a reader of struct or cell variables, or the resampling method
+ * (resample.c). */
 #include "data/cube_io.h"
 #include "data/isolate.h"
 #include "data/limits.h"
@@ -27,21 +31,25 @@
 #define CHILD_CPU_BASE 30           /* seconds, plus one per 4 MB of file */
 #define CHUNK_VALUES 65536
 
-static const char *const mat_keys[] = {"cube", "hsi", NULL};
+static const char *const mat_keys[] = {LM_MAT_CUBE_KEYS, NULL};
+static const char *const wl_keys[] = {LM_MAT_WL_KEYS, NULL};
+#define KEY_LEN 64
 
 /* ---- the child: matio ------------------------------------------------------------------ */
 
 typedef struct mat_job {
     const char *path;
+    const char *key; /* the caller's, or NULL: the first of mat_keys */
     lm_mat_kind kind;
     long long file_bytes;
 } mat_job;
 
 /* The reply's fixed part; nbytes of raw values (class_type's C type, column-major) and nbands
- * doubles (ARAD `bands`) follow when status is LM_OK. */
+ * doubles (the wavelength variable wl_key, if any) follow when status is LM_OK. */
 typedef struct mat_reply {
-    int32_t status, arad, class_type, rank, nbands;
+    int32_t status, class_type, rank, nbands;
     uint64_t dims[3], nbytes;
+    char key[KEY_LEN], wl_key[KEY_LEN];
     char msg[480];
 } mat_reply;
 
@@ -71,21 +79,20 @@ static size_t var_count(const matvar_t *v)
     return n;
 }
 
-/* Shape rules: ARAD exactly 31 bands; KAUST at least 31 (first 31 kept); the image within
+/* Shape rules: H x W x B with 1 <= B <= LM_RESAMPLE_MAX_BANDS, the image within
  * LM_MAX_IMAGE_SIDE and the variable within LM_MAX_CUBE_VALUES. */
-static lm_status check_shape(int rank, const uint64_t *dims, const char *path, int arad,
+static lm_status check_shape(int rank, const uint64_t *dims, const char *path, const char *key,
                              lm_err *e)
 {
-    const char *key = arad ? "cube" : "hsi";
     if (rank != 3)
         return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' has %d dimensions, expected H x W x bands",
                           path, key, rank);
     uint64_t B = dims[2];
-    if ((arad && B != LM_CAVE_BANDS) || (!arad && B < LM_CAVE_BANDS))
+    if (B < 1 || B > LM_RESAMPLE_MAX_BANDS)
         return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' is %llu x %llu x %llu: wrong band count, "
-                          "expected %s31 bands", path, key, (unsigned long long)dims[0],
+                          "expected 1 to %d bands", path, key, (unsigned long long)dims[0],
                           (unsigned long long)dims[1], (unsigned long long)B,
-                          arad ? "" : "at least ");
+                          LM_RESAMPLE_MAX_BANDS);
     if (dims[0] == 0 || dims[1] == 0 || dims[0] > LM_MAX_IMAGE_SIDE ||
         dims[1] > LM_MAX_IMAGE_SIDE)
         return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' has an invalid image size %llu x %llu",
@@ -99,15 +106,15 @@ static lm_status check_shape(int rank, const uint64_t *dims, const char *path, i
 
 /* The variable's header, before its values are read: numeric, the shape rules, and no more
  * bytes than the file can hold. */
-static lm_status child_check_info(const mat_job *j, const matvar_t *v, int arad, lm_err *e)
+static lm_status child_check_info(const mat_job *j, const matvar_t *v, const char *key,
+                                  lm_err *e)
 {
-    const char *key = arad ? "cube" : "hsi";
     if (!is_real_numeric(v))
         return lm_err_set(e, LM_ERR_FORMAT, "%s: variable '%s' is not a real numeric array",
                           j->path, key);
     uint64_t dims[3] = {0, 0, 0};
     for (int d = 0; d < v->rank && d < 3; d++) dims[d] = v->dims[d];
-    lm_status s = check_shape(v->rank, dims, j->path, arad, e);
+    lm_status s = check_shape(v->rank, dims, j->path, key, e);
     if (s != LM_OK) return s;
     int plain = j->kind == LM_MAT_V5 && v->compression == MAT_COMPRESSION_NONE;
     char what[96];
@@ -143,45 +150,50 @@ static lm_status child_check_hdf5(const mat_job *j, const char *key, double need
     return LM_OK;
 }
 
-/* Which dataset: `cube` (ARAD) wins over `hsi` (KAUST). 1 ARAD, 0 KAUST, -1 neither. */
-static int find_key(mat_t *m)
+/* The first of keys the file holds, or NULL. */
+static const char *first_key(mat_t *m, const char *const *keys)
 {
-    for (int k = 0; k < 2; k++) {
-        matvar_t *v = Mat_VarReadInfo(m, mat_keys[k]);
+    for (int k = 0; keys[k]; k++) {
+        matvar_t *v = Mat_VarReadInfo(m, keys[k]);
         if (v) {
             Mat_VarFree(v);
-            return k == 0;
+            return keys[k];
         }
     }
-    return -1;
+    return NULL;
 }
 
-/* The error when neither key exists: list what the file holds. */
-static lm_status no_key(mat_t *m, const char *path, lm_err *e)
+/* The error when the key is missing: list what the file holds. */
+static lm_status no_key(mat_t *m, const mat_job *j, lm_err *e)
 {
     size_t n = 0;
     char **dir = Mat_GetDir(m, &n); /* owned by m */
     if (!dir || n == 0)
         return lm_err_set(e, LM_ERR_FORMAT, "%s: no readable variable (truncated or corrupt "
-                          "file?): %s", path, mat_why());
+                          "file?): %s", j->path, mat_why());
     char list[200] = "";
     for (size_t i = 0; i < n && strlen(list) < sizeof list - 40; i++)
         if (dir[i]) snprintf(list + strlen(list), sizeof list - strlen(list), "%s%.32s",
                              i ? ", " : "", dir[i]);
-    return lm_err_set(e, LM_ERR_FORMAT, "%s: no variable 'cube' (ARAD) or 'hsi' (KAUST); the "
-                      "file holds: %s", path, list);
+    if (j->key)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: no variable '%.64s'; the file holds: %s",
+                          j->path, j->key, list);
+    return lm_err_set(e, LM_ERR_FORMAT, "%s: no cube variable (cube, hsi, rad, ref, ...: "
+                      "choose one with --mat-key); the file holds: %s", j->path, list);
 }
 
-/* A real numeric variable's values as doubles (ARAD `bands`), at most LM_CUBE_MAX_BANDS. */
-static lm_status child_bands(mat_t *m, const char *path, double *wl, int *n, lm_err *e)
+/* The wavelength variable (the first of wl_keys) as doubles, at most LM_RESAMPLE_MAX_BANDS. */
+static lm_status child_bands(mat_t *m, const char *path, double *wl, mat_reply *r, lm_err *e)
 {
-    *n = 0;
-    matvar_t *v = Mat_VarReadInfo(m, "bands");
-    if (!v) return LM_OK;
-    size_t k = var_count(v);
-    int ok = is_real_numeric(v) && k <= LM_CUBE_MAX_BANDS;
-    Mat_VarFree(v);
-    v = ok ? Mat_VarRead(m, "bands") : NULL;
+    r->nbands = 0;
+    const char *key = first_key(m, wl_keys);
+    if (!key) return LM_OK;
+    snprintf(r->wl_key, sizeof r->wl_key, "%s", key);
+    matvar_t *v = Mat_VarReadInfo(m, key);
+    size_t k = v ? var_count(v) : 0;
+    int ok = v && is_real_numeric(v) && k <= LM_RESAMPLE_MAX_BANDS;
+    if (v) Mat_VarFree(v);
+    v = ok ? Mat_VarRead(m, key) : NULL;
     ok = v && v->data && var_count(v) == k && (size_t)v->nbytes >= k * Mat_SizeOfClass(v->class_type);
 #define TO_DOUBLE(T) for (size_t i = 0; i < k; i++) wl[i] = (double)((const T *)v->data)[i]; break
     if (ok) switch (v->class_type) {
@@ -199,9 +211,9 @@ static lm_status child_bands(mat_t *m, const char *path, double *wl, int *n, lm_
         }
 #undef TO_DOUBLE
     if (v) Mat_VarFree(v);
-    if (!ok) return lm_err_set(e, LM_ERR_FORMAT, "%s: 'bands' is not a real numeric array of "
-                               "at most %d values", path, LM_CUBE_MAX_BANDS);
-    *n = (int)k;
+    if (!ok) return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' is not a real numeric array of "
+                               "at most %d wavelengths", path, key, LM_RESAMPLE_MAX_BANDS);
+    r->nbands = (int)k;
     return LM_OK;
 }
 
@@ -215,18 +227,18 @@ static lm_status child_read(const mat_job *j, mat_t **m, matvar_t **v, mat_reply
     if (!(*m = Mat_Open(j->path, MAT_ACC_RDONLY)))
         return lm_err_set(e, LM_ERR_FORMAT, "%s: not a readable MATLAB .mat file (corrupt or "
                           "truncated?): %s", j->path, mat_why());
-    int arad = find_key(*m);
-    if (arad < 0) return no_key(*m, j->path, e);
-    const char *key = mat_keys[arad ? 0 : 1];
+    const char *one[2] = {j->key, NULL};
+    const char *key = first_key(*m, j->key ? one : mat_keys);
+    if (!key) return no_key(*m, j, e);
     matvar_t *info = Mat_VarReadInfo(*m, key);
     if (!info) return lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read variable '%s'", j->path, key);
-    lm_status s = child_check_info(j, info, arad, e);
+    lm_status s = child_check_info(j, info, key, e);
     Mat_VarFree(info);
     if (s != LM_OK) return s;
     if (!(*v = Mat_VarRead(*m, key)))
         return lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read variable '%s' (truncated or "
                           "corrupt file?): %s", j->path, key, mat_why());
-    if ((s = child_check_info(j, *v, arad, e)) != LM_OK) return s; /* may disagree with info */
+    if ((s = child_check_info(j, *v, key, e)) != LM_OK) return s; /* may disagree with info */
     size_t bytes = var_count(*v) * Mat_SizeOfClass((*v)->class_type);
     if (!(*v)->data || (*v)->data_size != (int)Mat_SizeOfClass((*v)->class_type) ||
         (size_t)(*v)->nbytes < bytes)
@@ -234,12 +246,12 @@ static lm_status child_read(const mat_job *j, mat_t **m, matvar_t **v, mat_reply
                           key);
     if (j->kind == LM_MAT_V73 && (s = child_check_hdf5(j, key, (double)bytes, e)) != LM_OK)
         return s;
-    r->arad = arad;
+    snprintf(r->key, sizeof r->key, "%s", key);
     r->class_type = (*v)->class_type;
     r->rank = (*v)->rank;
     for (int d = 0; d < 3; d++) r->dims[d] = (*v)->dims[d];
     r->nbytes = bytes;
-    return arad ? child_bands(*m, j->path, wl, &r->nbands, e) : LM_OK;
+    return child_bands(*m, j->path, wl, r, e);
 }
 
 static void mat_child(int fd, void *arg)
@@ -252,12 +264,12 @@ static void mat_child(int fd, void *arg)
     lm_err e = {LM_OK, ""};
     mat_t *m = NULL;
     matvar_t *v = NULL;
-    double wl[LM_CUBE_MAX_BANDS];
+    double wl[LM_RESAMPLE_MAX_BANDS];
     r.status = child_read(j, &m, &v, &r, wl, &e);
     snprintf(r.msg, sizeof r.msg, "%s", e.msg);
     if (lm_isolate_write(fd, &r, sizeof r) == 0 && r.status == LM_OK &&
-        lm_isolate_write(fd, v->data, (size_t)r.nbytes) == 0)
-        lm_isolate_write(fd, wl, sizeof(double) * (size_t)r.nbands);
+        lm_isolate_write(fd, wl, sizeof(double) * (size_t)r.nbands) == 0)
+        lm_isolate_write(fd, v->data, (size_t)r.nbytes);
     if (v) Mat_VarFree(v);
     if (m) Mat_Close(m);
 }
@@ -286,106 +298,169 @@ static int to_float(const void *src, int class_type, size_t n, float div, float 
 #undef CONVERT
 }
 
-/* The reply's values, column-major H x W x B, into the band-major cube (bands [0, 31)), a
- * chunk at a time. 1 if the reply ended early. */
-static int receive_values(lm_isolate *c, const mat_reply *r, size_t csize, lm_cube *cube)
+/* The parent's side of one read: the options, the reply, the map to the output bands. */
+typedef struct mat_recv {
+    const char *path;
+    const lm_cube_read_opts *o;
+    int resample;
+    mat_reply r;
+    size_t csize;
+    lm_resample map;
+    double wl[LM_RESAMPLE_MAX_BANDS];
+} mat_recv;
+
+/* Source band b's plane (already in the output's row-major layout): checked if it is used,
+ * then resampled into the cube. */
+static lm_status take_plane(const mat_recv *q, int b, const float *plane, lm_cube *cube,
+                            lm_err *e)
 {
-    unsigned char *raw = malloc(CHUNK_VALUES * 8);
-    float *val = malloc(CHUNK_VALUES * sizeof(float));
+    if (!lm_resample_uses(&q->map, b)) return LM_OK;
+    lm_status s = lm_cube_check_plane(plane, cube->width, cube->height, b + 1, (float)q->wl[b],
+                                      q->path, e);
+    if (s == LM_OK) lm_resample_band(&q->map, b, plane, cube);
+    return s;
+}
+
+/* The reply's values, column-major H x W x B, a chunk at a time, into one band's plane at a
+ * time, each resampled into the cube. 1 if the reply ended early (or out of memory: *s). */
+static int receive_values(lm_isolate *c, const mat_recv *q, lm_cube *cube, lm_err *e,
+                          lm_status *s)
+{
+    const mat_reply *r = &q->r;
     size_t H = r->dims[0], W = r->dims[1], n = H * W * r->dims[2], y = 0, x = 0, b = 0;
-    float div = r->arad ? 1.0f : (float)KAUST_SCALE;
-    int early = !raw || !val;
-    for (size_t i = 0; !early && i < n; i += CHUNK_VALUES) {
+    unsigned char *raw = malloc(CHUNK_VALUES * 8);
+    float *val = malloc(CHUNK_VALUES * sizeof(float)), *plane = malloc(H * W * sizeof(float));
+    float div = strcmp(r->key, "hsi") == 0 ? (float)KAUST_SCALE : 1.0f;
+    int early = 0;
+    if (!raw || !val || !plane)
+        *s = lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", q->path);
+    for (size_t i = 0; *s == LM_OK && i < n; i += CHUNK_VALUES) {
         size_t k = n - i < CHUNK_VALUES ? n - i : CHUNK_VALUES;
-        if ((early = lm_isolate_read(c, raw, k * csize) != 0)) break;
+        if ((early = lm_isolate_read(c, raw, k * q->csize) != 0)) break;
         to_float(raw, r->class_type, k, div, val);
-        for (size_t t = 0; t < k; t++) {
-            if (b < LM_CAVE_BANDS) lm_cube_band(cube, (int)b)[y * W + x] = val[t];
+        for (size_t t = 0; t < k && *s == LM_OK; t++) {
+            plane[y * W + x] = val[t];
             if (++y < H) continue;
             y = 0;
-            if (++x == W) x = 0, b++;
+            if (++x < W) continue;
+            x = 0;
+            *s = take_plane(q, (int)b++, plane, cube, e);
         }
     }
     free(raw);
     free(val);
+    free(plane);
     return early;
 }
 
-/* Optional ARAD `bands`: B wavelengths in nm, strictly increasing. */
-static lm_status take_bands(const double *wl, int n, const char *path, lm_cube *cube, lm_err *e)
+/* The cube's wavelengths: the sidecar, else the file's variable, else the key's default
+ * (cube_io.h). Into q->wl. */
+static lm_status wavelengths(mat_recv *q, int nfile, lm_err *e)
 {
-    if (n == 0) return LM_OK;
-    if (n != cube->bands)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: 'bands' has %d entries but the cube has %d "
-                          "bands", path, n, cube->bands);
-    for (int b = 0; b < n; b++) {
-        float w = (float)wl[b];
-        if (!(w > 0.0f) || (b > 0 && !(w > cube->wavelength[b - 1])))
-            return lm_err_set(e, LM_ERR_FORMAT, "%s: 'bands' must be positive and increasing "
-                              "(entry %d is %g)", path, b + 1, w);
-        cube->wavelength[b] = w;
-    }
+    int B = (int)q->r.dims[2], n = 0;
+    const char *key = q->r.key;
+    lm_status s = lm_wavelengths_sidecar(q->path, q->wl, &n, e);
+    if (s != LM_OK) return s;
+    if (n > 0 && n != B)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: its wavelength sidecar lists %d wavelengths "
+                          "but '%s' has %d bands", q->path, n, key, B);
+    if (n > 0) return LM_OK;
+    if (nfile > 0 && nfile != B)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' has %d entries but '%s' has %d bands",
+                          q->path, q->r.wl_key, nfile, key, B);
+    if (nfile > 0) return lm_wavelengths_check(q->wl, B, q->path, e);
+    int kaust = strcmp(key, "hsi") == 0, harvard = strcmp(key, "ref") == 0 && B == 31;
+    if (!kaust && B != LM_CAVE_BANDS)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' has %d bands and no wavelength list (a "
+                          "variable 'bands' in nm, or a sidecar %s.wavelengths.txt); only a "
+                          "31-band cube is taken as 400-700 nm", q->path, key, B, q->path);
+    for (int b = 0; b < B; b++) q->wl[b] = (harvard ? 420.0 : 400.0) + 10.0 * b;
+    return LM_OK;
+}
+/* The reply's header: what was checked, and names that are strings. */
+static lm_status check_reply(mat_recv *q, lm_err *e)
+{
+    mat_reply *r = &q->r;
+    r->key[KEY_LEN - 1] = r->wl_key[KEY_LEN - 1] = 0;
+    q->csize = r->class_type >= MAT_C_DOUBLE && r->class_type <= MAT_C_UINT64
+                   ? Mat_SizeOfClass(r->class_type)
+                   : 0;
+    lm_status s = check_shape(r->rank, r->dims, q->path, r->key, e);
+    if (s != LM_OK) return s;
+    if (q->csize == 0 || !r->key[0] || r->nbands < 0 || r->nbands > LM_RESAMPLE_MAX_BANDS ||
+        r->nbytes != r->dims[0] * r->dims[1] * r->dims[2] * q->csize)
+        return lm_err_set(e, LM_ERR_FORMAT, "%s: the .mat reader sent an inconsistent reply",
+                          q->path);
     return LM_OK;
 }
 
-/* The reply: status, then a header that must describe what was checked, then the values.
- * 1 if the reply ended early (the child's end says why), else the status. */
-static int receive(lm_isolate *c, const char *path, lm_cube *cube, lm_err *e, lm_status *s)
+/* The reply: status, then a header that must describe what was checked, the wavelengths,
+ * then the values. 1 if the reply ended early (the child's end says why), else the status. */
+static int receive(lm_isolate *c, mat_recv *q, lm_cube *cube, lm_err *e, lm_status *s)
 {
-    mat_reply r;
-    if (lm_isolate_read(c, &r, sizeof r) != 0) return 1;
-    r.msg[sizeof r.msg - 1] = 0;
-    if (r.status != LM_OK) {
-        lm_status st = r.status >= LM_ERR_UNSUPPORTED && r.status < 0 ? (lm_status)r.status
-                                                                       : LM_ERR_FORMAT;
-        *s = lm_err_set(e, st, "%s", r.msg[0] ? r.msg : "unreadable .mat file");
+    mat_reply *r = &q->r;
+    if (lm_isolate_read(c, r, sizeof *r) != 0) return 1;
+    r->msg[sizeof r->msg - 1] = 0;
+    if (r->status != LM_OK) {
+        lm_status st = r->status >= LM_ERR_UNSUPPORTED && r->status < 0 ? (lm_status)r->status
+                                                                         : LM_ERR_FORMAT;
+        *s = lm_err_set(e, st, "%s", r->msg[0] ? r->msg : "unreadable .mat file");
         return 0;
     }
-    size_t csize = r.class_type >= MAT_C_DOUBLE && r.class_type <= MAT_C_UINT64
-                       ? Mat_SizeOfClass(r.class_type)
-                       : 0;
-    if ((*s = check_shape(r.rank, r.dims, path, r.arad == 1, e)) != LM_OK) return 0;
-    if (csize == 0 || (r.arad != 0 && r.arad != 1) || r.nbands < 0 ||
-        r.nbands > LM_CUBE_MAX_BANDS || r.nbytes != r.dims[0] * r.dims[1] * r.dims[2] * csize) {
-        *s = lm_err_set(e, LM_ERR_FORMAT, "%s: the .mat reader sent an inconsistent reply", path);
-        return 0;
-    }
-    *s = lm_cube_alloc(cube, LM_CAVE_BANDS, (int)r.dims[0], (int)r.dims[1], 400.0f, 10.0f);
+    if ((*s = check_reply(q, e)) != LM_OK) return 0;
+    if (lm_isolate_read(c, q->wl, sizeof(double) * (size_t)r->nbands) != 0) return 1;
+    if ((*s = wavelengths(q, r->nbands, e)) != LM_OK) return 0;
+    *s = lm_resample_init(&q->map, q->wl, (int)r->dims[2], !q->resample, q->o->keep, q->path, e);
+    if (*s != LM_OK) return 0;
+    *s = lm_cube_alloc(cube, q->map.nout, (int)r->dims[0], (int)r->dims[1], 0.0f, 0.0f);
     if (*s != LM_OK) {
-        *s = lm_err_set(e, *s, "%s: cannot allocate a %d x %llu x %llu cube", path,
-                        LM_CAVE_BANDS, (unsigned long long)r.dims[0],
-                        (unsigned long long)r.dims[1]);
+        *s = lm_err_set(e, *s, "%s: cannot allocate a %d x %llu x %llu cube", q->path,
+                        q->map.nout, (unsigned long long)r->dims[0],
+                        (unsigned long long)r->dims[1]);
         return 0;
     }
-    double wl[LM_CUBE_MAX_BANDS];
-    if (receive_values(c, &r, csize, cube) ||
-        lm_isolate_read(c, wl, sizeof(double) * (size_t)r.nbands) != 0)
-        return 1;
-    *s = r.arad ? take_bands(wl, r.nbands, path, cube, e) : LM_OK;
-    return 0;
+    memcpy(cube->wavelength, q->map.wavelength, sizeof(float) * (size_t)q->map.nout);
+    return receive_values(c, q, cube, e, s);
 }
 
 lm_status lm_cube_read_mat(const char *path, lm_cube *cube, lm_err *e)
+{
+    return lm_cube_read_mat_with(path, NULL, 0, cube, e);
+}
+
+lm_status lm_cube_read_mat_with(const char *path, const lm_cube_read_opts *o, int resample,
+                                lm_cube *cube, lm_err *e)
 {
     memset(cube, 0, sizeof *cube);
     struct stat st;
     if (stat(path, &st) != 0) return lm_err_set(e, LM_ERR_IO, "%s: no such file", path);
     if (S_ISDIR(st.st_mode))
         return lm_err_set(e, LM_ERR_IO, "%s: is a directory, expected a .mat file", path);
-    mat_job j = {path, LM_MAT_UNKNOWN, 0};
-    lm_status s = lm_mat_check(path, mat_keys, &j.kind, &j.file_bytes, e);
+    lm_cube_read_opts def;
+    if (!o) lm_cube_read_opts_default(&def), o = &def;
+    const char *key = o->mat_key && o->mat_key[0] ? o->mat_key : NULL;
+    if (key && strlen(key) >= KEY_LEN)
+        return lm_err_set(e, LM_ERR_ARG, "%s: .mat key '%.64s...' is too long", path, key);
+    mat_job j = {path, key, LM_MAT_UNKNOWN, 0};
+    const char *one[2] = {key, NULL};
+    lm_status s = lm_mat_check(path, key ? one : mat_keys, &j.kind, &j.file_bytes, e);
     if (s != LM_OK) return s;
     double most = (double)j.file_bytes * LM_RATIO_DEFLATE;
     if (most > (double)LM_MAX_CUBE_VALUES * 8) most = (double)LM_MAX_CUBE_VALUES * 8;
     lm_isolate_limits lim = {CHILD_MEM_BASE + (size_t)(2 * most),
                              CHILD_CPU_BASE + (int)(j.file_bytes >> 22)};
+    mat_recv *q = calloc(1, sizeof *q);
+    if (!q) return lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", path);
+    q->path = path, q->o = o, q->resample = resample;
     lm_isolate c;
-    if ((s = lm_isolate_start(&c, mat_child, &j, &lim, path, e)) != LM_OK) return s;
-    int early = receive(&c, path, cube, e, &s);
+    if ((s = lm_isolate_start(&c, mat_child, &j, &lim, path, e)) != LM_OK) return free(q), s;
+    int early = receive(&c, q, cube, e, &s);
     lm_status end = lm_isolate_finish(&c, path, "reading the .mat file", early ? e : NULL);
     if (early) s = end != LM_OK ? end : lm_err_set(e, LM_ERR_FORMAT, "%s: the .mat reader's "
                                                    "reply ended early", path);
     if (s == LM_OK) s = lm_cube_check_values(cube, path, e);
+    lm_resample_free(&q->map);
+    free(q);
     if (s != LM_OK) lm_cube_free(cube);
     return s;
 }

@@ -241,8 +241,8 @@ static lm_status check_var(const mat_file *m, long long at, const mat_tag *t,
     memset(&v, 0, sizeof v);
     if (parse_matrix(r.head, r.hn, m->be, &v) != 0) return LM_OK;
     int k = 0;
-    while (keys[k] && strcmp(keys[k], v.name) != 0) k++;
-    if (!keys[k] || seen[k]) return LM_OK;
+    while (k < LM_MAT_CHECK_MAX_KEYS && keys[k] && strcmp(keys[k], v.name) != 0) k++;
+    if (k == LM_MAT_CHECK_MAX_KEYS || !keys[k] || seen[k]) return LM_OK;
     seen[k] = 1;
     if (zip) {
         uint64_t declared = r.content;
@@ -257,7 +257,7 @@ static lm_status check_var(const mat_file *m, long long at, const mat_tag *t,
 
 static lm_status check_v5(const mat_file *m, const char *const *keys, lm_err *e)
 {
-    int seen[8] = {0};
+    int seen[LM_MAT_CHECK_MAX_KEYS] = {0};
     long long at = MAT_HEADER_BYTES;
     for (int n = 0; n < MAT_MAX_VARS && at + 8 <= m->size; n++) {
         unsigned char b[8];

@@ -18,6 +18,8 @@ typedef enum lm_mat_kind {
     LM_MAT_V73          /* HDF5 after a 512-byte MATLAB header */
 } lm_mat_kind;
 
+#define LM_MAT_CHECK_MAX_KEYS 32 /* keys beyond these are not checked */
+
 /* Check path (keys: NULL-terminated variable names to check in a v5 file). Sets *kind and
  * *file_bytes. LM_OK, LM_ERR_IO (cannot open) or LM_ERR_FORMAT "<path>: truncated ..." /
  * "<path>: corrupt ...", one line. */

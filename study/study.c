@@ -60,8 +60,8 @@ static lm_status list_test_scenes(const lm_study_cfg *cfg, held *h, lm_err *err)
     for (int i = 0; i < cfg->train.ndata; i++) paths[i] = cfg->train.data[i];
     lm_dataset_scene *ls = NULL;
     int total = 0;
-    lm_status st = lm_dataset_list_scenes(paths, cfg->train.ndata, &sys, LM_SPLIT_TEST, &ls,
-                                          &total, err);
+    lm_status st = lm_dataset_list_scenes(paths, cfg->train.ndata, &sys, cfg->train.mat_key,
+                                          LM_SPLIT_TEST, &ls, &total, err);
     if (st == LM_ERR_NOMEM) lm_err_set(err, st, "study: out of memory");
     h->name = calloc((size_t)total + 1, sizeof *h->name);
     h->path = calloc((size_t)total + 1, sizeof *h->path);
@@ -135,11 +135,15 @@ static lm_status eval_held(lm_ctx *c, const lm_infer_model *im, const lm_study_c
     lm_metrics_acc acc[LM_EVAL_MAX_NOISE];
     memset(acc, 0, sizeof acc);
     lm_metrics m[LM_EVAL_MAX_NOISE];
+    lm_cube_read_opts ro; /* onto 31 bands, the training data's .mat key */
+    lm_cube_read_opts_default(&ro);
+    ro.keep.count = 0;
+    ro.mat_key = cfg->train.mat_key;
     for (int i = 0; i < h->n; i++) {
         lm_cube cube;
         lm_status st = h->procedural
             ? lm_synth_scene(h->seed[i], cfg->eval_h, cfg->eval_w, &h->pal, &cube, err)
-            : lm_cube_read(h->path[i], &cube, err);
+            : lm_cube_read_with(h->path[i], &ro, &cube, err);
         if (st) return st;
         st = lm_eval_prepare(&cube, im->model->mosaic.ty, im->model->mosaic.tx, err);
         lm_rng rs = lm_rng_split(&base, h->procedural ? h->seed[i] : lm_fnv1a_str(LM_FNV1A_BASIS_SHORT, h->name[i]));

@@ -41,6 +41,8 @@ static const field fields[] = {
     FLD("model", F_STR, model, "NAME", "model preset (lumosaic info --list)", 0, 0),
     FLD("system", F_STR, system, "FILE", "system description (default: bundled)", 0, 0),
     FLD("data", F_LIST, data, "PATH", "scene file or folder (repeatable)", 0, 0),
+    FLD("mat_key", F_STR, mat_key, "NAME", ".mat scenes: the cube variable (default: the first "
+        "of cube, hsi, rad, ref, ...)", 0, 0),
     FLD("synth_fraction", F_FLOAT, synth_fraction, "F", "share of the paper's synthetic samples "
         "(textureless narrowband spectra)", 0, 1),
     FLD("procedural_fraction", F_FLOAT, procedural_fraction, "F", "share of procedural scenes "
@@ -502,6 +504,7 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
                                "snapshots", c->snapshots, "sensor_clip", c->sensor_clip,
                                "sensor_bits", c->sensor_bits, "clock", c->clock,
                                "procedural_fraction", (double)c->procedural_fraction));
+    if (root) json_object_set_new(root, "mat_key", json_string(c->mat_key));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

@@ -53,6 +53,7 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.sensor_clip = cfg->sensor_clip;
     dc.sensor_bits = cfg->sensor_bits;
     dc.batch_stride = dp ? lm_dist_size() : 1; /* rank r takes every N-th batch (train.c) */
+    dc.mat_key = cfg->mat_key;
     if (clean) { /* the fit adds noise, clipping and quantisation itself */
         dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
         dc.sensor_clip = dc.sensor_bits = 0;

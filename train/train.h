@@ -26,6 +26,7 @@
 #include "models/model.h"
 #include "train/adam.h"
 #include "data/metrics.h"
+#include "data/dataset.h"
 #include "data/forward.h"
 
 #define LM_TRAIN_CFG_VERSION 1
@@ -84,6 +85,8 @@ typedef struct lm_train_cfg {
      * (elapsed time, the default) or "cpu" (CPU time of the process, every thread: a budget a
      * busy machine does not shrink; the study runs presets side by side on it) */
     char clock[8];
+    char mat_key[LM_DATASET_KEY_LEN]; /* .mat cube variable of the data ("" = automatic:
+                                        * cube, hsi, rad, ref, ...; data/cube_io.h) */
 } lm_train_cfg;
 
 /* The default share of procedural scenes, chosen on the real validation split (README). */

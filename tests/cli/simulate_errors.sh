@@ -26,7 +26,7 @@ expect_error truncated 2 "ms_05.png: truncated" "$B" -- $S --input "$T/trunc" --
 expect_error corrupt 2 "ms_07.png: cannot read image" "$B" -- $S --input "$T/corrupt" --crop
 expect_error corrupt-exr 2 "garbage.exr: not a readable OpenEXR" "$B" -- $S --input "$T/garbage.exr"
 expect_error "band count (CAVE)" 2 "found 30 of 31 bands" "$B" -- $S --input "$T/bands30" --crop
-expect_error "band count (EXR)" 2 "b20.exr: 20 bands from 400 to 590 nm" "$B" -- $S --input "$T/b20.exr"
+expect_error "band count (EXR)" 2 "b20.exr: covers 400-590 nm; resampling to 400-700 nm needs at least 420-680 nm" "$B" -- $S --input "$T/b20.exr"
 expect_error nan 2 "nan.exr: band 4 (430.0 nm) has NaN" "$B" -- $S --input "$T/nan.exr"
 expect_error negative 2 "neg.exr: band 6 (450.0 nm) has a negative value" "$B" -- $S --input "$T/neg.exr"
 expect_error "unknown input format" 2 "cube.xyz: unknown cube format" "$B" -- $S --input "$T/cube.xyz"
