@@ -1,7 +1,9 @@
 /* main.c — the `lumosaic` program: subcommand dispatch and top-level help.
  * Each subcommand is one cli/cmd_*.c file registered in the table below. */
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 #include "cli/commands.h"
 
 static const lm_command commands[] = {
@@ -30,8 +32,33 @@ static void usage(FILE *f)
     fprintf(f, "\nRun 'lumosaic <command> --help' for a command's options.\n");
 }
 
+/* How OpenMP threads wait (issue 16, item 9). libgomp's default spins ~300,000 times at each
+ * barrier before it sleeps: on a machine where another process holds a core, the spinning
+ * threads take turns with the one that does the work, and a training step of han-tiny / mcan /
+ * srnet on 2 threads took 2.6-3.7x its quiet time (median; passive waiting: 1.8-1.9x). Spinning
+ * 1,000 times, then sleeping, costs 5-12 % when the machine is quiet and keeps the busy case
+ * within 3-9 % of passive waiting (bench_train, README "Benchmarks"). libgomp reads the setting
+ * when it loads, before main, so for the commands that compute (train, infer, eval, study,
+ * simulate, fit-auto) the program sets GOMP_SPINCOUNT=1000 and runs itself again once (~0.2 s
+ * of start-up), unless the user chose a policy (OMP_WAIT_POLICY or GOMP_SPINCOUNT set) or
+ * LM_KEEP_OMP_WAIT=1. */
+static void omp_wait_policy(int argc, char **argv)
+{
+    static const char *const heavy[] = {"train", "infer", "eval", "study", "simulate", "fit-auto",
+                                        NULL}; /* the commands whose work is parallel */
+    int compute = 0;
+    for (int i = 0; argc > 1 && heavy[i]; i++) compute |= !strcmp(argv[1], heavy[i]);
+    if (!compute || getenv("OMP_WAIT_POLICY") || getenv("GOMP_SPINCOUNT") ||
+        getenv("LM_KEEP_OMP_WAIT"))
+        return;
+    if (setenv("GOMP_SPINCOUNT", "1000", 1) != 0) return;
+    execv("/proc/self/exe", argv); /* returns only on failure: go on with the default */
+    unsetenv("GOMP_SPINCOUNT");
+}
+
 int main(int argc, char **argv)
 {
+    omp_wait_policy(argc, argv);
     if (argc < 2) {
         usage(stderr);
         return 2;
