@@ -347,14 +347,18 @@ typedef struct mix {
 } mix;
 
 /* Model m on windows idx[0..k) of raw (nb x 1 x h x w floats, host), its outputs into y
- * (nb x oc x h x w floats, host). The group goes in and out through lm_tensor_from /
- * lm_tensor_read, so the ctx may run on a device. */
+ * (nb x oc x h x w floats, host). On the CPU the group is gathered straight into the input
+ * tensor and scattered straight from the output; on a device (gin, gout: host scratch) it goes
+ * in and out through lm_tensor_from / lm_tensor_read. */
 static int run_group(lm_ctx *c, lm_model *m, const float *raw, int h, int w, const int *idx,
                      int k, int oc, float *y, float *gin, float *gout)
 {
     const size_t win = (size_t)h * w;
-    for (int i = 0; i < k; i++) memcpy(gin + i * win, raw + idx[i] * win, sizeof(float) * win);
-    lm_tensor *in = lm_tensor_from(c, 4, (int[]){k, 1, h, w}, gin);
+    lm_tensor *in = gin ? NULL : lm_tensor_new(c, 4, (int[]){k, 1, h, w});
+    float *dst = gin ? gin : in ? in->data : NULL;
+    if (!dst) return -1;
+    for (int i = 0; i < k; i++) memcpy(dst + i * win, raw + idx[i] * win, sizeof(float) * win);
+    if (gin) in = lm_tensor_from(c, 4, (int[]){k, 1, h, w}, gin);
     lm_tensor *o = in ? lm_model_forward(c, m, in) : NULL;
     if (!o || lm_ctx_status(c)) return -1;
     if (o->ndim != 4 || o->shape[0] != k || o->shape[1] != oc || o->shape[2] != h ||
@@ -363,23 +367,25 @@ static int run_group(lm_ctx *c, lm_model *m, const float *raw, int h, int w, con
         return -1;
     }
     lm_tensor *oc_ = lm_contiguous(c, o);
-    if (!oc_ || lm_tensor_read(c, oc_, gout)) return -1;
+    if (!oc_ || (gout && lm_tensor_read(c, oc_, gout))) return -1;
+    const float *src = gout ? gout : oc_->data;
     for (int i = 0; i < k; i++)
-        memcpy(y + (size_t)idx[i] * oc * win, gout + (size_t)i * oc * win,
+        memcpy(y + (size_t)idx[i] * oc * win, src + (size_t)i * oc * win,
                sizeof(float) * oc * win);
     return 0;
 }
 
-/* One fold batch: the windows of each model in groups of at most x->batch. raw may live on a
- * device (fold_batch made it with lm_tensor_from): it is read to the host first, and the
- * result goes back as a tensor of the ctx. */
+/* One fold batch: the windows of each model in groups of at most x->batch. On a device, raw
+ * (made by fold_batch with lm_tensor_from) is read to host scratch first and the result goes
+ * back as a tensor of the ctx; on the CPU both are used in place. */
 static lm_tensor *mix_fn(lm_ctx *c, lm_tensor *raw, void *user)
 {
     mix *x = user;
     const int nb = raw->shape[0], h = raw->shape[2], w = raw->shape[3];
     int oc = x->models[0]->out_channels;
     const size_t win = (size_t)h * w;
-    if (!x->host || x->cap < (size_t)nb * win) {
+    int dev = raw->device != LM_DEVICE_CPU;
+    if (dev && (!x->host || x->cap < (size_t)nb * win)) {
         free(x->host);
         x->cap = (size_t)nb * win;
         x->host = malloc(x->cap * sizeof(float) * (2 + 2 * (size_t)oc));
@@ -388,8 +394,12 @@ static lm_tensor *mix_fn(lm_ctx *c, lm_tensor *raw, void *user)
             return NULL;
         }
     }
-    float *hraw = x->host, *gin = hraw + x->cap, *hy = gin + x->cap, *gout = hy + x->cap * oc;
-    if (lm_tensor_read(c, lm_contiguous(c, raw), hraw)) return NULL;
+    lm_tensor *y = dev ? NULL : lm_tensor_new(c, 4, (int[]){nb, oc, h, w});
+    lm_tensor *rc = dev ? lm_contiguous(c, raw) : raw;
+    if ((!dev && !y) || !rc) return NULL;
+    float *hraw = dev ? x->host : raw->data, *gin = dev ? hraw + x->cap : NULL;
+    float *hy = dev ? gin + x->cap : y->data, *gout = dev ? hy + x->cap * oc : NULL;
+    if (dev && lm_tensor_read(c, rc, hraw)) return NULL;
     for (int m = 0; m < x->nmodels; m++) {
         int k = 0;
         for (int b = 0; b < nb; b++)
@@ -402,7 +412,7 @@ static lm_tensor *mix_fn(lm_ctx *c, lm_tensor *raw, void *user)
         if (x->windows) x->windows[m] += k;
     }
     x->next += nb;
-    return lm_tensor_from(c, 4, (int[]){nb, oc, h, w}, hy);
+    return dev ? lm_tensor_from(c, 4, (int[]){nb, oc, h, w}, hy) : y;
 }
 
 lm_status lm_auto_fold(lm_ctx *c, lm_model *const *models, int nmodels, const int *win_model,
