@@ -144,7 +144,8 @@ static void test_pure_noise_sizes(void)
             CHECK_MSG(fabs(s1 / 0.02 - 1) < tol[s], "tile %dx%d, %dx%d: sigma %g, want 0.02", th,
                       tw, h, w, s1);
             CHECK(s1 == s2);
-            /* the caller's scratch, dirty from another frame, gives the same number */
+            /* the caller's scratch, dirty from another frame, gives the same number (and that
+             * path runs on one thread, the other on the OpenMP default: the same bits) */
             size_t nb = lm_noise_scratch_bytes(w);
             unsigned char *scr = malloc(nb);
             memset(scr, 0xA5, nb);
