@@ -97,6 +97,11 @@ lm_status lm_whole_forward(lm_ctx *c, lm_model *m, const float *frame, int heigh
     S = (S + ty - 1) / ty * ty;
     lm_infer_set_noise(m, frame, height, width);
     int grad = lm_ctx_set_grad(c, 0);
+    if (m->frame_forward && (!c->backend || c->backend == lm_backend_cpu())) {
+        st = m->frame_forward(c, m, frame, height, width, ch0, nch, out, err);
+        lm_ctx_set_grad(c, grad);
+        return st;
+    }
     float *buf = NULL; /* a device's strip, read back */
     size_t cap = 0;
     for (int y0 = 0; y0 < height && !st; y0 += S) {

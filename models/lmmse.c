@@ -35,6 +35,8 @@ typedef struct lmmse_net {
     lm_tensor *rw;             /* D > 0: readout L x P x 33 x D */
     int K, P, D;
     int lo_y, hi_y, lo_x, hi_x; /* tile offsets the windows reach (lo <= 0 <= hi) */
+    float *scratch;            /* whole-frame host path: packed filters and padded frame */
+    size_t scratch_cap;        /* floats */
 } lmmse_net;
 
 static int floor_div(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
@@ -128,13 +130,16 @@ static lm_tensor *feature_branch(lm_ctx *c, const lm_model *m, const lmmse_net *
 /* ---- inference without gradients: the filters applied directly ------------------------- */
 /* The tile-unit conv above multiplies (kh ty) x (kw tx) taps per output (2-2.5x the K x K
  * window's, the rest zeros) and is what gradients flow through. When nothing needs a gradient
- * (inference; a frozen base under a training net) the K x K filters are applied directly: per
- * phase, the 33 outputs of a pixel accumulate in vector registers, two pixels of the phase at a
- * time, over the K x K window of a padded copy of the frame. Padding as the tile path's: the
- * phase planes reflected (a tile row / column mirrored about the edge tile; zeros when a plane
- * is smaller than the pad). Equal to the tile path up to float rounding (test_lmmse). */
-#define OV 40 /* 33 outputs in 5 vectors of 8 */
+ * (inference; a frozen base under a training net) the K x K filters are applied directly over
+ * the K x K window of a padded copy of the frame: per phase, the outputs of a pixel accumulate
+ * in vector registers, several pixels of the phase at a time sharing each tap's weight loads.
+ * Up to 32 channels (a whole-frame call for the 31 bands): two 16-lane vectors, 6 pixels;
+ * 33 (a tensor forward): five 8-lane vectors, 2 pixels. Padding as the tile path's: the phase
+ * planes reflected (a tile row / column mirrored about the edge tile; zeros when a plane is
+ * smaller than the pad). Equal to the tile path up to float rounding (test_lmmse). */
 typedef float v8 __attribute__((vector_size(32)));
+#define NP32 3 /* pixels per step: up to 32 channels */
+#define NP40 2 /* up to 40 */
 
 static inline v8 v8_load(const float *p) { v8 v; memcpy(&v, p, sizeof v); return v; }
 
@@ -148,18 +153,17 @@ static int pad_index(int y, int t, int n, int reflect)
     return q * t + i;
 }
 
-/* out (33 x H x W) = the level-blended filters on one H x W frame. */
-static void direct_frame(const lm_model *m, const lmmse_net *n, const float *wt, const float *raw,
-                         int H, int W, float *pad, float *out, int nthreads)
+/* pad ((H + 2r) x (W + 2r)) = the frame with its phase planes reflected by r pixels. */
+static void build_pad(const lm_model *m, const lmmse_net *n, const float *raw, int H, int W,
+                      float *pad)
 {
-    const int ty = m->mosaic.ty, tx = m->mosaic.tx, K = n->K, r = K / 2, O = LM_MODEL_OUT_CHANNELS;
-    const int PW = W + 2 * r, PH = H + 2 * r;
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, r = n->K / 2, PW = W + 2 * r;
     const int reflect = H / ty > n->hi_y && H / ty > -n->lo_y && W / tx > n->hi_x &&
                         W / tx > -n->lo_x;
     int lx[64], rx[64]; /* the r columns each side (K <= 31) */
     for (int x = 0; x < r; x++)
         lx[x] = pad_index(x - r, tx, W, reflect), rx[x] = pad_index(W + x, tx, W, reflect);
-    for (int y = 0; y < PH; y++) {
+    for (int y = 0; y < H + 2 * r; y++) {
         const int sy = pad_index(y - r, ty, H, reflect);
         float *d = pad + (size_t)y * PW;
         if (sy < 0) {
@@ -173,77 +177,167 @@ static void direct_frame(const lm_model *m, const lmmse_net *n, const float *wt,
             d[r + W + x] = rx[x] < 0 ? 0.0f : src[rx[x]];
         }
     }
+}
+
+/* Packed filters of one phase: K x K taps of `lanes` floats (channels, zero beyond nch), then
+ * the bias. */
+static size_t packed_floats(int K, int lanes) { return (size_t)(K * K + 1) * lanes; }
+
+/* wt = the filters of channels [ch0, ch0 + nch) at noise sd s, every phase, `lanes` wide. */
+static void pack_filters(const lmmse_net *n, float s, int ch0, int nch, int lanes, float *wt)
+{
+    const int O = LM_MODEL_OUT_CHANNELS, K = n->K, P = n->P;
+    int li;
+    float t;
+    level_pair(s, &li, &t);
+    memset(wt, 0, sizeof(float) * (size_t)P * packed_floats(K, lanes));
+    for (int p = 0; p < P; p++)
+        for (int c = 0; c < nch; c++) {
+            const int ch = ch0 + c;
+            const size_t w0 = (((size_t)li * P + p) * O + ch) * K * K, w1 = w0 + (size_t)P * O * K * K;
+            const size_t b0 = ((size_t)li * P + p) * O + ch, b1 = b0 + (size_t)P * O;
+            float *T = wt + (size_t)p * packed_floats(K, lanes);
+            for (int k = 0; k < K * K; k++)
+                T[k * lanes + c] = t == 0.0f ? n->w->data[w0 + k] : t == 1.0f ? n->w->data[w1 + k]
+                                   : n->w->data[w0 + k] * (1.0f - t) + n->w->data[w1 + k] * t;
+            T[K * K * lanes + c] = t == 0.0f ? n->b->data[b0] : t == 1.0f ? n->b->data[b1]
+                                   : n->b->data[b0] * (1.0f - t) + n->b->data[b1] * t;
+        }
+}
+
+/* Row y, phase column j: pixels x = j, j + tx, ... of the phase, NP at a time (the last step
+ * repeats its last pixel to fill the registers, stored once), NV 8-lane vectors of channels
+ * (NV x 8 = the packing's lanes). NV and NP are constants at each call (always inlined), so
+ * the accumulators stay in registers. */
+static inline __attribute__((always_inline)) void
+row_phase(const float *T, const float *pad, int PW, int K, int y, int j, int W, int tx,
+          float *out, size_t plane, int nch, const int NV, const int NP)
+{
+    const int L = NV * 8;
+    const float *B = T + (size_t)K * K * L;
+    for (int x = j; x < W; x += NP * tx) {
+        int np = (W - x + tx - 1) / tx;
+        np = np < NP ? np : NP;
+        int off[8];
+#pragma GCC unroll 8
+        for (int q = 0; q < NP; q++) off[q] = (q < np ? q : np - 1) * tx;
+        v8 a[8][5];
+#pragma GCC unroll 8
+        for (int q = 0; q < NP; q++)
+#pragma GCC unroll 5
+            for (int g = 0; g < NV; g++) a[q][g] = v8_load(B + 8 * g);
+        for (int u = 0; u < K; u++) {
+            const float *row = pad + (size_t)(y + u) * PW + x;
+            const float *Tu = T + (size_t)u * K * L;
+            for (int v = 0; v < K; v++, Tu += L) {
+                v8 t[5];
+#pragma GCC unroll 5
+                for (int g = 0; g < NV; g++) t[g] = v8_load(Tu + 8 * g);
+#pragma GCC unroll 8
+                for (int q = 0; q < NP; q++) {
+                    const float sv = row[v + off[q]];
+#pragma GCC unroll 5
+                    for (int g = 0; g < NV; g++) a[q][g] += sv * t[g];
+                }
+            }
+        }
+        for (int q = 0; q < np; q++) {
+            float o[40];
+            for (int g = 0; g < NV; g++) memcpy(o + 8 * g, &a[q][g], sizeof(v8));
+            float *d = out + (size_t)y * W + x + (size_t)q * tx;
+            for (int c = 0; c < nch; c++) d[c * plane] = o[c];
+        }
+    }
+}
+
+/* up to 32 channels (the 31 bands of a whole frame) and up to 40 (a tensor forward's 33) */
+static void row_phase32(const float *T, const float *pad, int PW, int K, int y, int j, int W,
+                        int tx, float *out, size_t plane, int nch)
+{
+    row_phase(T, pad, PW, K, y, j, W, tx, out, plane, nch, 4, NP32);
+}
+
+static void row_phase40(const float *T, const float *pad, int PW, int K, int y, int j, int W,
+                        int tx, float *out, size_t plane, int nch)
+{
+    row_phase(T, pad, PW, K, y, j, W, tx, out, plane, nch, 5, NP40);
+}
+
+/* out (nch planes of H x W) = channels [ch0, ch0 + nch) of the filters at noise sd s on one
+ * H x W frame. scratch: direct_scratch_floats(...) floats. */
+static size_t direct_scratch_floats(const lmmse_net *n, int H, int W)
+{
+    const int r = n->K / 2;
+    return (size_t)n->P * packed_floats(n->K, 40) + (size_t)(H + 2 * r) * (W + 2 * r);
+}
+
+static void direct_frame(const lm_model *m, const lmmse_net *n, float s, const float *raw, int H,
+                         int W, int ch0, int nch, float *out, float *scratch, int nthreads)
+{
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, K = n->K, PW = W + 2 * (K / 2);
+    const int lanes = nch <= 32 ? 32 : 40;
+    float *wt = scratch, *pad = scratch + (size_t)n->P * packed_floats(K, 40);
+    pack_filters(n, s, ch0, nch, lanes, wt);
+    build_pad(m, n, raw, H, W, pad);
     const size_t plane = (size_t)H * W;
     #pragma omp parallel for schedule(static) num_threads(nthreads)
     for (int y = 0; y < H; y++) {
         const int i = y % ty;
         for (int j = 0; j < tx; j++) {
-            const float *T = wt + (size_t)(i * tx + j) * (K * K + 1) * OV; /* taps, then bias */
-            for (int x = j; x < W; x += 2 * tx) {
-                const int two = x + tx < W, x1 = two ? x + tx : x; /* the last one alone */
-                const float *B = T + K * K * OV;
-                v8 a0 = v8_load(B), a1 = v8_load(B + 8), a2 = v8_load(B + 16);
-                v8 a3 = v8_load(B + 24), a4 = v8_load(B + 32);
-                v8 b0 = a0, b1 = a1, b2 = a2, b3 = a3, b4 = a4;
-                for (int u = 0; u < K; u++) {
-                    const float *p0 = pad + (size_t)(y + u) * PW + x;
-                    const float *p1 = pad + (size_t)(y + u) * PW + x1;
-                    const float *Tu = T + (size_t)u * K * OV;
-                    for (int v = 0; v < K; v++, Tu += OV) {
-                        const float s0 = p0[v], s1 = p1[v];
-                        v8 t0 = v8_load(Tu), t1 = v8_load(Tu + 8), t2 = v8_load(Tu + 16);
-                        v8 t3 = v8_load(Tu + 24), t4 = v8_load(Tu + 32);
-                        a0 += s0 * t0, a1 += s0 * t1, a2 += s0 * t2, a3 += s0 * t3, a4 += s0 * t4;
-                        b0 += s1 * t0, b1 += s1 * t1, b2 += s1 * t2, b3 += s1 * t3, b4 += s1 * t4;
-                    }
-                }
-                float o0[OV], o1[OV];
-                memcpy(o0, &a0, 32), memcpy(o0 + 8, &a1, 32), memcpy(o0 + 16, &a2, 32);
-                memcpy(o0 + 24, &a3, 32), memcpy(o0 + 32, &a4, 32);
-                memcpy(o1, &b0, 32), memcpy(o1 + 8, &b1, 32), memcpy(o1 + 16, &b2, 32);
-                memcpy(o1 + 24, &b3, 32), memcpy(o1 + 32, &b4, 32);
-                float *dst = out + (size_t)y * W + x;
-                for (int ch = 0; ch < O; ch++) dst[ch * plane] = o0[ch];
-                if (two)
-                    for (int ch = 0; ch < O; ch++) dst[ch * plane + tx] = o1[ch];
-            }
+            const float *T = wt + (size_t)(i * tx + j) * packed_floats(K, lanes);
+            if (lanes == 32) row_phase32(T, pad, PW, K, y, j, W, tx, out, plane, nch);
+            else row_phase40(T, pad, PW, K, y, j, W, tx, out, plane, nch);
         }
     }
+}
+
+/* Can the direct path run? (no gradients needed, no device, no features, host parameters) */
+static int direct_ok(const lm_ctx *c, const lmmse_net *n, const lm_tensor *raw)
+{
+    return !n->D &&
+           !(c->grad_enabled && ((raw && lm_requires_grad(raw)) || lm_requires_grad(n->w) ||
+                                 lm_requires_grad(n->b))) &&
+           !(c->backend && c->backend != lm_backend_cpu()) && (!raw || raw->data) && n->w->data;
 }
 
 /* The fast path, or NULL when it does not apply (gradients needed, a device, features). */
 static lm_tensor *run_direct(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw, float s)
 {
-    if (n->D || (c->grad_enabled && (lm_requires_grad(raw) || lm_requires_grad(n->w) ||
-                                      lm_requires_grad(n->b))) ||
-        (c->backend && c->backend != lm_backend_cpu()) || !raw->data || !n->w->data)
-        return NULL;
-    const int B = raw->shape[0], H = raw->shape[2], W = raw->shape[3], K = n->K, P = n->P;
-    const int O = LM_MODEL_OUT_CHANNELS, r = K / 2;
+    if (!direct_ok(c, n, raw)) return NULL;
+    const int B = raw->shape[0], H = raw->shape[2], W = raw->shape[3];
+    const int O = LM_MODEL_OUT_CHANNELS;
     lm_tensor *x = lm_contiguous(c, raw);
     lm_tensor *y = x ? lm_tensor_new4(c, B, O, H, W) : NULL;
-    float *wt = y ? lm_ctx_alloc(c, sizeof(float) * (size_t)P * (K * K + 1) * OV) : NULL;
-    float *pad = wt ? lm_ctx_alloc(c, sizeof(float) * (size_t)(H + 2 * r) * (W + 2 * r)) : NULL;
-    if (!pad) return NULL; /* the ctx has the error */
-    int li;
-    float t;
-    level_pair(s, &li, &t);
-    memset(wt, 0, sizeof(float) * (size_t)P * (K * K + 1) * OV);
-    for (int p = 0; p < P; p++)
-        for (int ch = 0; ch < O; ch++) {
-            const size_t w0 = (((size_t)li * P + p) * O + ch) * K * K, w1 = w0 + (size_t)P * O * K * K;
-            const size_t b0 = ((size_t)li * P + p) * O + ch, b1 = b0 + (size_t)P * O;
-            float *T = wt + (size_t)p * (K * K + 1) * OV;
-            for (int k = 0; k < K * K; k++)
-                T[k * OV + ch] = t == 0.0f ? n->w->data[w0 + k] : t == 1.0f ? n->w->data[w1 + k]
-                                 : n->w->data[w0 + k] * (1.0f - t) + n->w->data[w1 + k] * t;
-            T[K * K * OV + ch] = t == 0.0f ? n->b->data[b0] : t == 1.0f ? n->b->data[b1]
-                                 : n->b->data[b0] * (1.0f - t) + n->b->data[b1] * t;
-        }
+    float *scratch = y ? lm_ctx_alloc(c, sizeof(float) * direct_scratch_floats(n, H, W)) : NULL;
+    if (!scratch) return NULL; /* the ctx has the error */
     for (int b = 0; b < B; b++)
-        direct_frame(m, n, wt, x->data + (size_t)b * H * W, H, W, pad,
-                     y->data + (size_t)b * O * H * W, lm_nthreads(c));
+        direct_frame(m, n, s, x->data + (size_t)b * H * W, H, W, 0, O,
+                     y->data + (size_t)b * O * H * W, scratch, lm_nthreads(c));
     return y;
+}
+
+/* Whole-frame host path (lm_model.frame_forward): no tensors, no strips. */
+static lm_status lmmse_frame_forward(lm_ctx *c, lm_model *m, const float *frame, int H, int W,
+                                     int ch0, int nch, float *out, lm_err *err)
+{
+    lmmse_net *n = m->impl;
+    if (!direct_ok(c, n, NULL))
+        return lm_err_set(err, LM_ERR_ARG, "%s: the whole-frame host path needs host "
+                          "parameters, no features and no gradients", m->preset);
+    if (!(m->noise_sigma >= 0.0f))
+        return lm_err_set(err, LM_ERR_ARG, "%s: the input's noise level is not set", m->preset);
+    if (ch0 < 0 || nch < 1 || ch0 + nch > LM_MODEL_OUT_CHANNELS)
+        return lm_err_set(err, LM_ERR_ARG, "%s: channels [%d, %d) outside [0, %d)", m->preset,
+                          ch0, ch0 + nch, LM_MODEL_OUT_CHANNELS);
+    const size_t need = direct_scratch_floats(n, H, W);
+    if (need > n->scratch_cap) {
+        float *p = realloc(n->scratch, need * sizeof *p);
+        if (!p) return lm_err_set(err, LM_ERR_NOMEM, "%s: out of memory (%zu floats)",
+                                  m->preset, need);
+        n->scratch = p, n->scratch_cap = need;
+    }
+    direct_frame(m, n, m->noise_sigma, frame, H, W, ch0, nch, out, n->scratch, lm_nthreads(c));
+    return LM_OK;
 }
 
 /* Items [b0, b0 + nb) of raw with one noise level. */
@@ -315,6 +409,7 @@ static void lmmse_init(lm_model *m, lm_rng *r)
 
 static void lmmse_free(lm_model *m)
 {
+    if (m->impl) free(((lmmse_net *)m->impl)->scratch);
     free(m->impl);
     m->impl = NULL;
 }
@@ -349,6 +444,7 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
                   !(n->rw = lm_params_add(&m->params, "readout.weight", 4, rws, 1, err))))
         return err->status;
     m->forward = lmmse_forward;
+    m->frame_forward = D ? NULL : lmmse_frame_forward;
     m->init = lmmse_init;
     m->conv_rows = ty * (n->hi_y > -n->lo_y ? n->hi_y : -n->lo_y);
     m->noise_input = 1;

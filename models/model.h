@@ -31,6 +31,12 @@ struct lm_model {
     int in_channels;               /* channels of the input tensor: 1 = raw coded mosaic
                                     * (default); 3 = RGB image (MST++ baseline) */
     lm_tensor *(*forward)(lm_ctx *c, lm_model *m, lm_tensor *raw);
+    /* Optional whole-frame host path (no tensors, no gradients, no device): channels
+     * [ch0, ch0 + nch) of the output for one H x W raw frame written straight into out (nch
+     * planes of H x W), the noise level as forward reads it. infer/whole.c uses it on a host
+     * context; NULL = none (the strips of forward). */
+    lm_status (*frame_forward)(lm_ctx *c, lm_model *m, const float *frame, int H, int W,
+                               int ch0, int nch, float *out, lm_err *err);
     void (*init)(lm_model *m, lm_rng *r);   /* default initialisation, declaration order */
     void (*free_impl)(lm_model *m);
     void *impl;

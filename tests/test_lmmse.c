@@ -10,6 +10,7 @@
 #include "tests/model_fixture.h"
 #include "train/fit_lmmse.h"
 #include "data/mosaic.h"
+#include "infer/whole.h"
 #include <stdlib.h>
 
 #define O LM_MODEL_OUT_CHANNELS
@@ -122,6 +123,41 @@ static void test_direct_matches_tile_path(void)
         lm_ctx_free(&c);
         lm_model_free(m);
     }
+}
+
+/* The whole-frame host path (frame_forward, through lm_whole_forward: channel ranges of up to
+ * 32 in 16-lane vectors, 33 in 8-lane ones; rows whose phase count is not a multiple of the
+ * pixel block) against the tile-unit conv, at the noise level lm_whole_forward estimated. */
+static void test_whole_frame_path(void)
+{
+    const int sizes[4][2] = {{24, 32}, {6, 8}, {30, 20}, {48, 100}};
+    const int ranges[3][2] = {{1, 31}, {0, 33}, {5, 7}};
+    for (int k = 0; k < 4; k++)
+        for (int q = 0; q < 3; q++) {
+            const int H = sizes[k][0], W = sizes[k][1], ch0 = ranges[q][0], nch = ranges[q][1];
+            lm_err e = {0};
+            lm_model *m = lm_model_create("lmmse", NULL, 11, &e);
+            CHECK_MSG(m && m->frame_forward, "%s", e.msg);
+            if (!m) return;
+            lm_ctx c;
+            lm_ctx_init(&c, 2);
+            lm_rng r;
+            lm_rng_seed(&r, 17 + k);
+            lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){1, 1, H, W}, &r, 0.0f, 1.0f);
+            float *out = calloc((size_t)nch * H * W, sizeof *out);
+            m->noise_given = k == 3 ? -1.0f : 0.03f; /* estimated on the largest frame */
+            lm_status st = lm_whole_forward(&c, m, x->data, H, W, NULL, ch0, nch, out, &e);
+            CHECK_MSG(st == LM_OK, "%s", e.msg);
+            lm_ctx_set_grad(&c, 1); /* the tile-unit conv, at the level the whole path used */
+            lm_tensor *yt = lm_contiguous(&c, lm_model_forward(&c, m, x));
+            CHECK_MSG(yt != NULL, "%s", c.msg);
+            if (yt && !st)
+                CHECK_ARRAY_CLOSE(out, yt->data + (size_t)ch0 * H * W, (long)nch * H * W, 1e-5,
+                                  1e-5);
+            free(out);
+            lm_ctx_free(&c);
+            lm_model_free(m);
+        }
 }
 
 static void test_forward_matches_direct_loop(void)
@@ -341,6 +377,7 @@ int main(void)
 {
     RUN(test_forward_matches_direct_loop);
     RUN(test_direct_matches_tile_path);
+    RUN(test_whole_frame_path);
     RUN(test_counts_and_capabilities);
     RUN(test_gradients);
     RUN(test_residual_starts_at_base);
