@@ -7,14 +7,9 @@
 #include <fftw3.h>
 #include <jansson.h>
 #include <math.h>
-#include <pthread.h>
 #include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
-
-static pthread_mutex_t fftw_mu = PTHREAD_MUTEX_INITIALIZER;
-void lm_fftw_lock(void) { pthread_mutex_lock(&fftw_mu); }
-void lm_fftw_unlock(void) { pthread_mutex_unlock(&fftw_mu); }
 
 /* ---- parsing ----------------------------------------------------------------------------- */
 typedef struct parser {

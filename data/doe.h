@@ -50,6 +50,7 @@
 #ifndef LM_DOE_H
 #define LM_DOE_H
 #include <stdio.h>
+#include "tensor/ops.h"
 #include "tensor/status.h"
 
 #define LM_DOE_VERSION 1
@@ -110,9 +111,7 @@ lm_status lm_doe_psfs(const lm_doe *doe, double start_nm, double step_nm, int nb
  * and the radius (px) holding half its energy (computes 7 PSFs). */
 lm_status lm_doe_describe(const lm_doe *doe, FILE *f, lm_err *err);
 
-/* FFTW's planner is not thread-safe: every plan made or destroyed in this project goes through
- * these (the dataset's workers simulate in parallel). */
-void lm_fftw_lock(void);
-void lm_fftw_unlock(void);
+/* lm_fftw_lock / lm_fftw_unlock (tensor/ops.h) guard every FFTW plan (the dataset's workers
+ * simulate in parallel). */
 
 #endif

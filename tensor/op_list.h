@@ -36,7 +36,10 @@
     /* ops/conv2d.c, conv_transpose2d.c, conv3d.c */                                          \
     X(conv2d_fwd) X(conv2d_bwd_x) X(conv2d_bwd_w) X(conv2d_bwd_bias)                          \
     X(conv_transpose2d_fwd) X(conv_transpose2d_bwd_x) X(conv_transpose2d_bwd_w)               \
-    X(conv_transpose2d_bwd_b) X(conv3d_fwd) X(conv3d_bwd_x) X(conv3d_bwd_w) X(conv3d_bwd_b)
+    X(conv_transpose2d_bwd_b) X(conv3d_fwd) X(conv3d_bwd_x) X(conv3d_bwd_w) X(conv3d_bwd_b)    \
+    /* ops/fft2.c, complex.c, area_sample.c */                                                \
+    X(fft2_fwd) X(fft2_bwd) X(polar_fwd) X(polar_bwd) X(abs2_fwd) X(abs2_bwd) X(cmul_fwd)       \
+    X(cmul_bwd) X(area_sample_fwd) X(area_sample_bwd)
 
 /* LM_OP_ID_<name>: the kernel's index in the list; LM_OP_COUNT kernels. */
 #define LM_OP_ID_ENTRY(name) LM_OP_ID_##name,

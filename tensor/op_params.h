@@ -119,4 +119,15 @@ typedef struct lm_conv3d_params {
     int has_bias;
 } lm_conv3d_params;
 
+/* ---- complex tensors (fft2.c, complex.c, area_sample.c): a last dim of 2 (re, im) ------- */
+/* B transforms of H x W: y = scale sum x exp(sign 2 pi i (k n / H + l m / W)); sign -1 is the
+ * forward transform (scale 1), +1 the inverse (scale 1 / (H W)). The backward applies the
+ * opposite sign with the same scale (the adjoint) and adds. */
+typedef struct lm_fft2_params { int B, H, W, sign; float scale; } lm_fft2_params;
+/* na, nb: complex elements of a and b (b repeated na / nb times); which: the gradient (0 a, 1 b) */
+typedef struct lm_cmul_params { long na, nb; int which; } lm_cmul_params;
+#define LM_AREA_MAX_B 64
+/* B images N x N -> B x S x S cells of K x K samples; ratio[b]: input samples per cell */
+typedef struct lm_area_params { int B, N, S, K; double ratio[LM_AREA_MAX_B]; } lm_area_params;
+
 #endif

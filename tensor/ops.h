@@ -127,4 +127,26 @@ lm_tensor *lm_l2_normalize(lm_ctx *c, lm_tensor *x, int axis, float eps);
 lm_tensor *lm_l1_loss(lm_ctx *c, lm_tensor *pred, lm_tensor *target);
 lm_tensor *lm_mse_loss(lm_ctx *c, lm_tensor *pred, lm_tensor *target);
 
+/* ---- complex tensors (tensor/ops/fft2.c, complex.c, area_sample.c) ------------------ */
+/* A complex tensor is a float tensor whose last dim is 2 (real, imaginary). */
+/* 2-D DFT over dims [-3, -2] of x [..., H, W, 2]: forward (inverse 0) is unnormalised with
+ * exp(-2 pi i ...), inverse (1) carries 1 / (H W) and exp(+2 pi i ...) (numpy's fft2/ifft2).
+ * CPU: FFTW; OpenCL: a direct DFT (exact, O((HW)^2): for small transforms). */
+lm_tensor *lm_fft2(lm_ctx *c, lm_tensor *x, int inverse);
+/* amp e^{i phase}: amp and phase of one shape [...] -> [..., 2]. */
+lm_tensor *lm_polar(lm_ctx *c, lm_tensor *amp, lm_tensor *phase);
+/* |z|^2: [..., 2] -> [...]. */
+lm_tensor *lm_abs2(lm_ctx *c, lm_tensor *z);
+/* Complex product a b; b's shape is the trailing dims of a's (b repeated over a's leading
+ * dims), both ending in 2. */
+lm_tensor *lm_cmul(lm_ctx *c, lm_tensor *a, lm_tensor *b);
+/* x: B x N x N (B <= 64) in FFT order (index 0 on the axis) -> B x S x S: cell (i, j) sums K x K
+ * bilinear samples at u = ratio[b] (i - S/2 + (k + 0.5) / K - 0.5) (and v likewise), samples
+ * whose taps fall outside -N/2 .. N - N/2 - 1 count 0 (see area_sample.c). */
+lm_tensor *lm_area_sample(lm_ctx *c, lm_tensor *x, int S, int K, const double *ratio);
+/* FFTW's planner is not thread-safe: every FFTW plan made or destroyed in this project is
+ * made between these (fft2.c; data/doe.c, data/qdocam.c). */
+void lm_fftw_lock(void);
+void lm_fftw_unlock(void);
+
 #endif
