@@ -5,8 +5,8 @@
  * map it defines (quantised to a number of levels), and height map -> PSF on the sensor grid by
  * scalar Fresnel propagation (FFTW).
  * What it is not: the camera (data/qdocam.h convolves a cube with these PSFs and integrates RGB),
- * anything differentiable (end-to-end optimisation of the height map is a later step), or a
- * model of a lens other than the thin DOE itself.
+ * or a model of a lens other than the thin DOE itself. The differentiable twin of the PSF
+ * (tensor ops, gradients to the height map) is lm_doe_psf_t (data/doe_psf.c).
  *
  * Bundled default (data/systems/qdo_default.json): a Fresnel lens of focal length 10 mm designed
  * for 550 nm, aperture 0.64 mm (f/15.6), fused silica, 8 height levels, DOE pitch 2 um, sensor at
@@ -50,7 +50,7 @@
 #ifndef LM_DOE_H
 #define LM_DOE_H
 #include <stdio.h>
-#include "tensor/ops.h"
+#include "tensor/op_params.h"
 #include "tensor/status.h"
 
 #define LM_DOE_VERSION 1
@@ -106,6 +106,17 @@ lm_status lm_doe_psf(const lm_doe *doe, double lambda_m, float *psf, lm_err *err
 /* PSFs for nb wavelengths start_nm + i step_nm (e.g. 400, 10, 31): nb x psf_size^2. */
 lm_status lm_doe_psfs(const lm_doe *doe, double start_nm, double step_nm, int nb, float *psfs,
                       lm_err *err);
+
+/* ---- differentiable PSF (data/doe_psf.c) ---- */
+/* The PSFs at nb wavelengths (metres; 1..64) as a tensor nb x psf_size x psf_size (each unit
+ * sum), from the height map t (m x m, heights as fractions of max_height_m, 0 outside the
+ * aperture: the mask applies anyway) by tensor ops, so gradients reach t. Same optics as
+ * lm_doe_psf (which uses doe->height instead of t); sets the ctx error and returns NULL on a
+ * bad shape. Memory: about 12 nb N^2 floats on the tape (N = grid). */
+lm_tensor *lm_doe_psf_t(lm_ctx *c, const lm_doe *doe, lm_tensor *t, const double *lambda_m,
+                        int nb);
+/* doe->height as fractions of max_height_m: a new m x m tensor (no gradient). */
+lm_tensor *lm_doe_height_t(lm_ctx *c, const lm_doe *doe);
 
 /* Print the description and, at 400..700 nm every 50 nm, the PSF's peak, its centroid offset
  * and the radius (px) holding half its energy (computes 7 PSFs). */
