@@ -3,6 +3,7 @@
  * What it is not: the camera convolution (qdocam.c) or any gradient of the PSF. */
 #include "data/doe.h"
 #include "data/spectra.h"
+#include "data/image.h"
 #include "data/util.h"
 #include <fftw3.h>
 #include <jansson.h>
@@ -10,11 +11,13 @@
 #include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 /* ---- parsing ----------------------------------------------------------------------------- */
 typedef struct parser {
     const char *label;
     lm_err *err;
+    int dir; /* 1: label is a file path (a height map's file is relative to its folder) */
 } parser;
 
 /* "doe file <label>: <field>: <message>" */
@@ -116,14 +119,32 @@ static lm_status parse_material(parser *p, json_t *root, lm_doe *d)
 static lm_status parse_profile(parser *p, json_t *root, lm_doe *d)
 {
     static const char *const keys[] = {"type", "focal_mm", "design_nm", NULL};
+    static const char *const hkeys[] = {"type", "file", NULL};
     json_t *pr = json_object_get(root, "profile");
     if (!json_is_object(pr))
         return bad(p, "profile", "must be {\"type\": \"fresnel_lens\", \"focal_mm\", "
-                   "\"design_nm\"}");
-    lm_status st = known_keys(p, pr, "profile.", keys);
+                   "\"design_nm\"} or {\"type\": \"height_map\", \"file\"}");
     const char *type = json_string_value(json_object_get(pr, "type"));
+    if (type && strcmp(type, "height_map") == 0) {
+        lm_status st = known_keys(p, pr, "profile.", hkeys);
+        const char *f = json_string_value(json_object_get(pr, "file"));
+        if (!st && (!f || !f[0]))
+            st = bad(p, "profile.file", "must be the name of a 16-bit PNG");
+        if (st) return st;
+        const char *slash = strrchr(p->label, '/');
+        int n = f[0] == '/' || !p->dir || !slash
+                    ? snprintf(d->height_file, sizeof d->height_file, "%s", f)
+                    : snprintf(d->height_file, sizeof d->height_file, "%.*s/%s",
+                               (int)(slash - p->label), p->label, f);
+        if (n < 0 || (size_t)n >= sizeof d->height_file)
+            return bad(p, "profile.file", "path too long");
+        d->height_map = 1;
+        d->design_m = 550e-9; /* the wavelength of the default max_height */
+        return LM_OK;
+    }
+    lm_status st = known_keys(p, pr, "profile.", keys);
     if (!st && (!type || strcmp(type, "fresnel_lens") != 0))
-        st = bad(p, "profile.type", "must be \"fresnel_lens\" (the only profile of version 1)");
+        st = bad(p, "profile.type", "must be \"fresnel_lens\" or \"height_map\"");
     if (!st) st = positive(p, pr, "focal_mm", "profile.focal_mm", 1e-3, &d->focal_m);
     if (!st) st = positive(p, pr, "design_nm", "profile.design_nm", 1e-9, &d->design_m);
     if (!st && !(d->design_m >= 200e-9 && d->design_m <= 2000e-9))
@@ -210,7 +231,7 @@ static lm_status finish(parser *p, json_t *root, lm_doe *d)
 lm_status lm_doe_parse(const char *json_text, const char *label, lm_doe *doe, lm_err *err)
 {
     memset(doe, 0, sizeof *doe);
-    parser p = {label ? label : "(text)", err};
+    parser p = {label ? label : "(text)", err, 0};
     json_error_t je;
     json_t *root = json_loads(json_text, JSON_REJECT_DUPLICATES, &je);
     if (!root)
@@ -222,7 +243,7 @@ lm_status lm_doe_parse(const char *json_text, const char *label, lm_doe *doe, lm
 lm_status lm_doe_load(const char *path, lm_doe *doe, lm_err *err)
 {
     memset(doe, 0, sizeof *doe);
-    parser p = {path, err};
+    parser p = {path, err, 1};
     json_error_t je;
     json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &je);
     if (!root && json_error_code(&je) == json_error_cannot_open_file)
@@ -259,6 +280,96 @@ double lm_doe_index(const lm_doe *d, double lambda_m)
     return n2 > 0 ? sqrt(n2) : NAN;
 }
 
+/* The height_map profile: the PNG read, checked (one channel, m x m, finite values in [0, 1]),
+ * quantised to the levels and masked. */
+static lm_status load_height_map(lm_doe *d, double r2max, lm_err *err)
+{
+    int m = d->m;
+    lm_image img;
+    lm_image_want want = {1, 8192LL * 8192};
+    lm_err ie = {0};
+    if (lm_image_read(d->height_file, &want, &img, &ie))
+        return lm_err_set(err, ie.status, "doe height map %s", ie.msg);
+    lm_status st = LM_OK;
+    if (img.width != m || img.height != m || img.channels != 1)
+        st = lm_err_set(err, LM_ERR_FORMAT, "doe height map %s: %d x %d x %d; this DOE needs "
+                        "%d x %d x 1 (samples across the aperture)", d->height_file, img.width,
+                        img.height, img.channels, m, m);
+    for (int i = 0; !st && i < m; i++)
+        for (int j = 0; j < m; j++) {
+            size_t k = (size_t)i * m + j;
+            double frac = img.data[k];
+            if (!(frac >= 0 && frac <= 1)) {
+                st = lm_err_set(err, LM_ERR_FORMAT, "doe height map %s: value %g at (%d, %d) "
+                                "outside [0, 1]", d->height_file, frac, i, j);
+                break;
+            }
+            if (d->levels > 0) frac = fmod(floor(frac * d->levels + 0.5), d->levels) / d->levels;
+            else if (frac >= 1) frac = 0;
+            double y = (i - m / 2) * d->pitch_m, x = (j - m / 2) * d->pitch_m;
+            d->mask[k] = x * x + y * y <= r2max;
+            d->height[k] = d->mask[k] ? (float)(frac * d->max_height_m) : 0.0f;
+        }
+    lm_image_free(&img);
+    return st;
+}
+
+lm_status lm_doe_save(const lm_doe *d, const char *json_path, const char *png_name, lm_err *err)
+{
+    int m = d->m;
+    char png[1200];
+    const char *slash = strrchr(json_path, '/');
+    if (strchr(png_name, '/'))
+        return lm_err_set(err, LM_ERR_ARG, "doe: height map name %s must be a file name",
+                          png_name);
+    snprintf(png, sizeof png, "%.*s%s%s", slash ? (int)(slash - json_path) : 0, json_path,
+             slash ? "/" : "", png_name);
+    float *v = malloc((size_t)m * m * sizeof(float));
+    if (!v) return lm_err_set(err, LM_ERR_NOMEM, "doe: out of memory");
+    for (size_t k = 0; k < (size_t)m * m; k++) v[k] = (float)(d->height[k] / d->max_height_m);
+    lm_status st = lm_image_write_gray16(png, m, m, v, err);
+    free(v);
+    if (st) return st;
+    json_t *root = json_object(), *mat = json_object(), *prof = json_object();
+    json_object_set_new(root, "version", json_integer(LM_DOE_VERSION));
+    if (d->name[0]) json_object_set_new(root, "name", json_string(d->name));
+    json_object_set_new(root, "aperture_mm", json_real(d->aperture_m * 1e3));
+    json_object_set_new(root, "doe_pitch_um", json_real(d->pitch_m * 1e6));
+    json_object_set_new(root, "grid", json_integer(d->grid));
+    json_object_set_new(root, "levels", json_integer(d->levels));
+    json_object_set_new(root, "max_height_um", json_real(d->max_height_m * 1e6));
+    if (d->material == LM_DOE_CAUCHY) {
+        json_object_set_new(mat, "model", json_string("cauchy"));
+        json_object_set_new(mat, "A", json_real(d->coef[0]));
+        json_object_set_new(mat, "B_um2", json_real(d->coef[1]));
+    } else {
+        json_t *b = json_array(), *c = json_array();
+        for (int i = 0; i < 3; i++) {
+            json_array_append_new(b, json_real(d->coef[i]));
+            json_array_append_new(c, json_real(d->coef[3 + i]));
+        }
+        json_object_set_new(mat, "model", json_string("sellmeier"));
+        json_object_set_new(mat, "B", b);
+        json_object_set_new(mat, "C_um2", c);
+    }
+    json_object_set_new(root, "material", mat);
+    json_object_set_new(prof, "type", json_string("height_map"));
+    json_object_set_new(prof, "file", json_string(png_name));
+    json_object_set_new(root, "profile", prof);
+    json_object_set_new(root, "sensor_distance_mm", json_real(d->distance_m * 1e3));
+    json_object_set_new(root, "sensor_pitch_um", json_real(d->sensor_pitch_m * 1e6));
+    json_object_set_new(root, "psf_size", json_integer(d->psf_size));
+    char tmp[1200];
+    snprintf(tmp, sizeof tmp, "%s.tmp.%ld", json_path, (long)getpid());
+    int bad_write = json_dump_file(root, tmp, JSON_INDENT(2) | JSON_REAL_PRECISION(17)) != 0;
+    json_decref(root);
+    if (bad_write || rename(tmp, json_path) != 0) {
+        remove(tmp);
+        return lm_err_set(err, LM_ERR_WRITE, "doe file %s: cannot write", json_path);
+    }
+    return LM_OK;
+}
+
 lm_status lm_doe_build_height(lm_doe *d, lm_err *err)
 {
     double across = 2 * ceil(d->aperture_m / (2 * d->pitch_m)) + 1;
@@ -272,6 +383,7 @@ lm_status lm_doe_build_height(lm_doe *d, lm_err *err)
     d->mask = malloc((size_t)m * m);
     if (!d->height || !d->mask) return lm_err_set(err, LM_ERR_NOMEM, "doe: out of memory");
     double r2max = 0.25 * d->aperture_m * d->aperture_m;
+    if (d->height_map) return load_height_map(d, r2max, err);
     for (int i = 0; i < m; i++)
         for (int j = 0; j < m; j++) {
             double y = (i - m / 2) * d->pitch_m, x = (j - m / 2) * d->pitch_m, r2 = x * x + y * y;
@@ -418,9 +530,13 @@ lm_status lm_doe_describe(const lm_doe *d, FILE *f, lm_err *err)
     char lv[32];
     if (d->levels) snprintf(lv, sizeof lv, "%d levels", d->levels);
     else snprintf(lv, sizeof lv, "continuous");
-    fprintf(f, "doe %s: Fresnel lens f = %g mm at %g nm, aperture %g mm, DOE pitch %g um, grid "
+    char prof[1100];
+    if (d->height_map) snprintf(prof, sizeof prof, "height map %s", d->height_file);
+    else snprintf(prof, sizeof prof, "Fresnel lens f = %g mm at %g nm", d->focal_m * 1e3,
+                  d->design_m * 1e9);
+    fprintf(f, "doe %s: %s, aperture %g mm, DOE pitch %g um, grid "
             "%d (%d samples across), %s, max height %.4g um, %s n(%g nm) = %.5f\n", d->name,
-            d->focal_m * 1e3, d->design_m * 1e9, d->aperture_m * 1e3, d->pitch_m * 1e6, d->grid,
+            prof, d->aperture_m * 1e3, d->pitch_m * 1e6, d->grid,
             d->m, lv, d->max_height_m * 1e6,
             d->material == LM_DOE_CAUCHY ? "Cauchy" : "Sellmeier", d->design_m * 1e9,
             lm_doe_index(d, d->design_m));

@@ -32,6 +32,12 @@
  *             | {"model": "cauchy", "A": a, "B_um2": b}         n = A + B / l^2 (l in um)
  *             | "fused_silica"  (Malitson 1965 Sellmeier)
  *   "profile": {"type": "fresnel_lens", "focal_mm": f, "design_nm": lambda0}   the height map
+ *            | {"type": "height_map", "file": "heights.png"}   a given map: a single-channel
+ *              16-bit PNG of m x m samples (m = 2 ceil(D / (2 dx)) + 1, the samples across the
+ *              aperture; sample (m/2, m/2) on the axis), value v in [0, 1] = height v hmax,
+ *              quantised to `levels` (nearest level, hmax wraps to 0) and zeroed outside the
+ *              aperture; the path is relative to the JSON file's folder. An optimised DOE is
+ *              written this way (lm_doe_save, `lumosaic train --optimise-doe`).
  *   "sensor_distance_mm": > 0                      DOE-to-sensor distance z
  *   "sensor_pitch_um": > 0                         sensor pixel pitch p
  *   "psf_size": odd integer 3..255                 PSF window in sensor pixels
@@ -71,7 +77,10 @@ typedef struct lm_doe {
     double max_height_m;            /* hmax: heights lie in [0, hmax) */
     lm_doe_material material;
     double coef[6];                 /* Sellmeier B1..B3, C1..C3 (um^2); Cauchy A, B (um^2) */
+    int height_map;                 /* profile: 0 = Fresnel lens (focal_m, design_m), 1 = the
+                                     * map of height_file */
     double focal_m, design_m;       /* the profile: Fresnel lens f at lambda0 */
+    char height_file[1024];         /* height_map: the PNG's path (resolved) */
     double distance_m;              /* z */
     double sensor_pitch_m;          /* p */
     int psf_size;                   /* odd */
@@ -88,6 +97,11 @@ lm_status lm_doe_parse(const char *json_text, const char *label, lm_doe *doe, lm
 /* The bundled default (data/systems/qdo_default.json). */
 lm_status lm_doe_default(lm_doe *doe, lm_err *err);
 void lm_doe_free(lm_doe *doe);
+
+/* Write doe (any profile) as a description with a height_map profile: json_path and the PNG
+ * png_name (a file name, written into json_path's folder) from doe->height. Atomic writes. */
+lm_status lm_doe_save(const lm_doe *doe, const char *json_path, const char *png_name,
+                      lm_err *err);
 
 /* Refractive index of the material at a wavelength in metres. */
 double lm_doe_index(const lm_doe *doe, double lambda_m);

@@ -4,6 +4,8 @@
  * chromatic focal shift of a diffractive lens, the bundled default, and bad fields.
  * Not here: the camera convolution (test_qdocam.c). */
 #include "data/doe.h"
+#include "data/image.h"
+#include <unistd.h>
 #include "tests/check.h"
 #include <math.h>
 #include <stdlib.h>
@@ -238,6 +240,58 @@ static void test_bad_fields(void)
     CHECK(lm_doe_parse("{\"version\": 1,", "trunc.json", &d, &e) == LM_ERR_FORMAT);
 }
 
+/* A DOE written as a height map (lm_doe_save) reads back with the same heights and PSFs; a
+ * map of the wrong size, a missing or non-PNG file, and bad profile fields fail with one line. */
+static void test_height_map_round_trip(void)
+{
+    lm_doe d, r;
+    if (!load_lens(&d, 8)) return;
+    char dir[] = "/tmp/lm_doe_hm_XXXXXX", js[256], png[256];
+    CHECK(mkdtemp(dir) != NULL);
+    snprintf(js, sizeof js, "%s/learned.json", dir);
+    snprintf(png, sizeof png, "%s/learned_heights.png", dir);
+    lm_err e = {0};
+    CHECK_MSG(lm_doe_save(&d, js, "learned_heights.png", &e) == LM_OK, "%s", e.msg);
+    CHECK_MSG(lm_doe_load(js, &r, &e) == LM_OK, "%s", e.msg);
+    if (r.height) {
+        CHECK(r.height_map == 1 && r.m == d.m && r.levels == 8);
+        CHECK_CLOSE(r.max_height_m, d.max_height_m, 0, 1e-12);
+        CHECK_ARRAY_CLOSE(r.height, d.height, (long)d.m * d.m, 1e-12, 1e-6);
+        int S = d.psf_size;
+        float *a = malloc((size_t)S * S * sizeof(float)), *b = malloc((size_t)S * S * sizeof(float));
+        CHECK(lm_doe_psf(&d, 470e-9, a, &e) == LM_OK && lm_doe_psf(&r, 470e-9, b, &e) == LM_OK);
+        CHECK_ARRAY_CLOSE(b, a, S * S, 1e-6, 1e-4);
+        free(a), free(b);
+        lm_doe_free(&r);
+    }
+    /* a map of the wrong size */
+    float v[9] = {0, 0.5f, 0.25f, 0, 0, 0, 0, 0, 1};
+    CHECK(lm_image_write_gray16(png, 3, 3, v, &e) == LM_OK);
+    e = (lm_err){0};
+    CHECK(lm_doe_load(js, &r, &e) == LM_ERR_FORMAT);
+    CHECK_MSG(strstr(e.msg, "3 x 3 x 1; this DOE needs 203 x 203") != NULL, "%s", e.msg);
+    CHECK(!strchr(e.msg, '\n'));
+    remove(png);
+    e = (lm_err){0};
+    CHECK(lm_doe_load(js, &r, &e) != LM_OK && strstr(e.msg, "learned_heights.png"));
+    /* profile fields */
+    char txt[2048];
+    make_json(txt, sizeof txt, "profile", "{\"type\": \"height_map\"}");
+    e = (lm_err){0};
+    CHECK(lm_doe_parse(txt, "t", &r, &e) == LM_ERR_FORMAT);
+    CHECK_MSG(strstr(e.msg, "profile.file"), "%s", e.msg);
+    make_json(txt, sizeof txt, "profile", "{\"type\": \"height_map\", \"file\": \"a.png\", "
+              "\"focal_mm\": 3}");
+    e = (lm_err){0};
+    CHECK(lm_doe_parse(txt, "t", &r, &e) == LM_ERR_FORMAT && strstr(e.msg, "profile.focal_mm"));
+    make_json(txt, sizeof txt, "profile", "{\"type\": \"zone_plate\"}");
+    e = (lm_err){0};
+    CHECK(lm_doe_parse(txt, "t", &r, &e) == LM_ERR_FORMAT && strstr(e.msg, "profile.type"));
+    remove(js);
+    rmdir(dir);
+    lm_doe_free(&d);
+}
+
 int main(void)
 {
     RUN(test_parseval);
@@ -246,5 +300,6 @@ int main(void)
     RUN(test_chromatic_focus);
     RUN(test_default);
     RUN(test_bad_fields);
+    RUN(test_height_map_round_trip);
     return check_summary();
 }
