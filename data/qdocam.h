@@ -17,6 +17,7 @@
 #define LM_QDOCAM_H
 #include "data/doe.h"
 #include "data/rgbcam.h"
+#include "tensor/ops.h"
 
 typedef struct lm_qdocam {
     lm_rgbcam cam;
@@ -39,5 +40,13 @@ lm_status lm_qdocam_render(const lm_qdocam *q, const float *cube, int H, int W, 
 lm_status lm_qdocam_simulate(const lm_qdocam *q, const float *cube, int H, int W,
                              const lm_noise_opts *noise, lm_rng *rng, float *rgb, int nthreads,
                              lm_err *err);
+
+/* The differentiable twin of lm_qdocam_render (data/qdocam_t.c): cube = B x 31 x Hp x Wp host
+ * floats (band-major per item), padded by r = S/2 pixels of real scene on every side; psf = a
+ * 31 x S x S tensor (e.g. lm_doe_psf_t, with gradients). Returns the clean RGB B x 3 x
+ * (Hp - 2r) x (Wp - 2r), equal to lm_qdocam_render's pixels at least r from the border of
+ * the same padded cube. CPU contexts. */
+lm_tensor *lm_qdocam_render_t(lm_ctx *c, const lm_rgbcam *cam, lm_tensor *psf,
+                              const float *cube, int B, int Hp, int Wp);
 
 #endif

@@ -161,10 +161,83 @@ static void test_default_doe(void)
     free(q);
 }
 
+/* The tensor twin (lm_qdocam_render_t) equals lm_qdocam_render at every pixel R or more from
+ * the border of the padded cube, for two items; and its gradient w.r.t. the PSFs checks. */
+static void test_render_t_matches(void)
+{
+    lm_qdocam q;
+    float psf[NB * S * S];
+    if (!init_random(&q, psf)) return;
+    int B = 2, n = NB * PL;
+    float *cube = malloc((size_t)B * n * sizeof(float)), *ref = malloc(3 * PL * sizeof(float));
+    lm_rng r;
+    lm_rng_seed(&r, 12);
+    lm_rng_fill_uniform(&r, cube, (long)B * n, 0, 1);
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_tensor *P = lm_tensor_from(&c, 3, (int[]){NB, S, S}, psf);
+    lm_tensor *y = lm_qdocam_render_t(&c, &q.cam, P, cube, B, H, W);
+    CHECK_CTX_OK(&c);
+    lm_err e = {0};
+    int h = H - 2 * R, w = W - 2 * R;
+    CHECK(y && y->shape[0] == B && y->shape[1] == 3 && y->shape[2] == h && y->shape[3] == w);
+    for (int b = 0; y && b < B; b++) {
+        CHECK(lm_qdocam_render(&q, cube + (size_t)b * n, H, W, ref, &e) == LM_OK);
+        long bad = 0;
+        for (int k = 0; k < 3; k++)
+            for (int i = 0; i < h; i++)
+                for (int j = 0; j < w; j++) {
+                    float a = y->data[(((size_t)b * 3 + k) * h + i) * w + j];
+                    float x = ref[(size_t)k * PL + (size_t)(i + R) * W + j + R];
+                    bad += !(fabsf(a - x) <= 1e-5f);
+                }
+        CHECK_MSG(bad == 0, "item %d: %ld pixels differ", b, bad);
+    }
+    lm_ctx_free(&c);
+    lm_qdocam_free(&q);
+    free(cube);
+    free(ref);
+}
+
+typedef struct cam_user { const lm_rgbcam *cam; const float *cube; } cam_user;
+static lm_tensor *fn_cam(lm_ctx *c, lm_tensor *const *in, int nin, void *u)
+{
+    (void)nin;
+    const cam_user *cu = u;
+    return lm_qdocam_render_t(c, cu->cam, in[0], cu->cube, 1, 7, 8);
+}
+
+static void test_render_t_gradcheck(void)
+{
+    lm_rgbcam cam;
+    lm_err e = {0};
+    CHECK(lm_rgbcam_load(&cam, NULL, LM_RGBCAM_D65, &e) == LM_OK);
+    float cube[NB * 7 * 8];
+    lm_rng r;
+    lm_rng_seed(&r, 2);
+    lm_rng_fill_uniform(&r, cube, NB * 56, 0, 1);
+    lm_ctx c;
+    lm_ctx_init(&c, 1);
+    lm_tensor *P = lm_tensor_uniform(&c, 3, (int[]){NB, 3, 3}, &r, 0, 1);
+    lm_tensor_set_requires_grad(P, 1);
+    lm_gradcheck_opts o;
+    lm_gradcheck_default_opts(&o);
+    o.eps = 1e-2;
+    o.atol = 1e-3;
+    o.rtol = 1e-2;
+    cam_user u = {&cam, cube};
+    CHECK_GRAD(&c, fn_cam, &P, 1, &u, &o);
+    CHECK(lm_qdocam_render_t(&c, &cam, P, cube, 1, 2, 8) == NULL &&
+          strstr(c.msg, "qdocam_render"));
+    lm_ctx_free(&c);
+}
+
 int main(void)
 {
     RUN(test_point_source);
     RUN(test_direct_and_linear);
     RUN(test_default_doe);
+    RUN(test_render_t_matches);
+    RUN(test_render_t_gradcheck);
     return check_summary();
 }
