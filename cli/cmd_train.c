@@ -69,6 +69,11 @@ static int second_pass(lm_cli *c, train_args *a, lm_train_cfg *cfg)
             continue;
         }
         const char *arg = c->argv[c->i];
+        if (!strcmp(arg, "--optimise-doe")) { /* = --doe-optimise 1 */
+            cfg->doe_optimise = 1;
+            c->i++;
+            continue;
+        }
         char key[64];
         size_t kl = strcspn(arg + 2, "=");
         if (strncmp(arg, "--", 2) || kl >= sizeof key) return lm_cli_unknown(c);

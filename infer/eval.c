@@ -25,7 +25,7 @@ static lm_status simulate(const lm_infer_model *im, const lm_cube *truth,
     if (is_rgb(im) && lm_model_has(im->model, LM_CAP_QDO_OPTICS)) {
         lm_qdocam *q = im->qdo;
         lm_noise_opts none = {0};
-        lm_status st = q ? LM_OK : lm_infer_qdocam(&q, err); /* (a model not from a file) */
+        lm_status st = q ? LM_OK : lm_infer_qdocam(NULL, &q, err); /* (a model not from a file) */
         if (!st) st = lm_qdocam_simulate(q, truth->data, truth->height, truth->width,
                                          noise ? noise : &none, rng, frame, nthreads, err);
         if (q && q != im->qdo) {

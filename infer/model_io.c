@@ -102,18 +102,25 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
         return st;
     }
     lm_params_set_requires_grad(&im->model->params, 0);
-    if (lm_model_has(im->model, LM_CAP_QDO_OPTICS)) st = lm_infer_qdocam(&im->qdo, err);
+    if (lm_model_has(im->model, LM_CAP_QDO_OPTICS))
+        st = lm_infer_qdocam(im->weights, &im->qdo, err);
     if (st) lm_infer_model_free(im);
     return st;
 }
 
-lm_status lm_infer_qdocam(lm_qdocam **out, lm_err *err)
+lm_status lm_infer_qdocam(const char *weights, lm_qdocam **out, lm_err *err)
 {
     lm_doe doe;
     lm_qdocam *q = calloc(1, sizeof *q);
     *out = NULL;
     if (!q) return lm_err_set(err, LM_ERR_NOMEM, "qdo camera: out of memory");
-    lm_status st = lm_doe_default(&doe, err);
+    char run_doe[1100] = "";
+    const char *slash = weights ? strrchr(weights, '/') : NULL;
+    if (weights)
+        snprintf(run_doe, sizeof run_doe, "%.*s%sdoe.json", slash ? (int)(slash - weights) : 0,
+                 weights, slash ? "/" : "");
+    lm_status st = run_doe[0] && is_file(run_doe) ? lm_doe_load(run_doe, &doe, err)
+                                                  : lm_doe_default(&doe, err);
     if (!st) {
         st = lm_qdocam_init(q, &doe, LM_RGBCAM_D65, err);
         lm_doe_free(&doe);

@@ -34,9 +34,11 @@ typedef struct lm_infer_model {
 lm_status lm_infer_model_load(const char *path, const char *system_override, lm_infer_model *im,
                               lm_err *err);
 void lm_infer_model_free(lm_infer_model *im);
-/* The QDO baseline's camera with the bundled DOE (data/systems/qdo_default.json), D65;
- * *out freed with lm_qdocam_free + free. */
-lm_status lm_infer_qdocam(lm_qdocam **out, lm_err *err);
+/* The QDO baseline's camera, D65: the DOE of the run whose weights file is `weights` (its
+ * folder's doe.json, written by every QDO training run, e.g. a learned height map), else (no
+ * such file, or weights NULL) the bundled DOE (data/systems/qdo_default.json); *out freed
+ * with lm_qdocam_free + free. */
+lm_status lm_infer_qdocam(const char *weights, lm_qdocam **out, lm_err *err);
 
 /* For a model that reads its input's noise level (m->noise_input): set m->noise_sigma for this
  * frame (height x width raw mosaic), from m->noise_given (k x the frame's maximum) when >= 0,

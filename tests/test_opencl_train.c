@@ -92,7 +92,7 @@ static lm_model *train_on(const char *device, rsrc *s, lm_train_result *res, flo
         *w0 = malloc(m->params.total * sizeof(float));
         memcpy(*w0, m->params.data, m->params.total * sizeof(float));
     }
-    lm_train_source src = {s, r_batch, r_count, r_eval};
+    lm_train_source src = {s, r_batch, r_count, r_eval, NULL};
     CHECK_MSG(lm_train_run(&cfg, m, &src, NULL, res, &e) == LM_OK, "%s: %s", device, e.msg);
     return m;
 }
@@ -240,7 +240,7 @@ static void time_devices(int iters)
         lm_mosaic_default(&mo);
         lm_err e = {0};
         lm_model *m = lm_model_create("han-tiny", &mo, 7, &e);
-        lm_train_source src = {&s, r_batch, r_count, r_eval};
+        lm_train_source src = {&s, r_batch, r_count, r_eval, NULL};
         lm_train_result r1, r2;
         lm_train_opts o = {.stop_after = 1};
         lm_status st = m ? lm_train_run(&cfg, m, &src, &o, &r1, &e) : e.status; /* warm-up */

@@ -121,7 +121,7 @@ static void test_default_doe(void)
 {
     lm_err e = {0};
     lm_qdocam *q = NULL; /* the camera infer/ builds for a qdo-* model: the bundled DOE, D65 */
-    CHECK_MSG(lm_infer_qdocam(&q, &e) == LM_OK, "%s", e.msg);
+    CHECK_MSG(lm_infer_qdocam(NULL, &q, &e) == LM_OK, "%s", e.msg);
     if (!q) return;
     enum { h = 66, w = 64, pl = h * w };
     float *cube = malloc(sizeof(float) * NB * pl), *rgb = malloc(sizeof(float) * 3 * pl);

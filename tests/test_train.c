@@ -67,7 +67,7 @@ static lm_status mem_eval(void *u, int i, float *raw, float *tgt, lm_err *e)
 }
 static lm_train_source source_of(mem_src *s)
 {
-    return (lm_train_source){s, mem_batch, mem_count, mem_eval};
+    return (lm_train_source){s, mem_batch, mem_count, mem_eval, NULL};
 }
 
 static lm_mosaic g_mosaic;

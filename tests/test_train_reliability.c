@@ -63,7 +63,7 @@ static lm_status run(const lm_train_cfg *c, src *s, const lm_train_opts *o, lm_t
 {
     lm_model *m = lm_model_create("linear", &g_mosaic, 1, e);
     if (!m) return e->status;
-    lm_train_source so = {s, batch, NULL, NULL};
+    lm_train_source so = {s, batch, NULL, NULL, NULL};
     lm_status st = lm_train_run(c, m, &so, o, r, e);
     lm_model_free(m);
     return st;

@@ -89,7 +89,7 @@ static void test_network_beats_linear(void)
     const char *env = getenv("LM_SLOW_ITERS");
     long iters = env ? atol(env) : 2000;
     if (h.train && h.val && mkdtemp(dir)) {
-        lm_train_source src = {&h, ho_batch, ho_count, ho_eval};
+        lm_train_source src = {&h, ho_batch, ho_count, ho_eval, NULL};
         /* the baseline gets its own (larger) learning rate so that it converges within the
          * budget: the network must beat a trained linear map, not an unfinished one */
         double lin = train_one("linear", 3e-2f, &mo, &src, dir, iters);

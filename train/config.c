@@ -95,6 +95,16 @@ static const field fields[] = {
         "spans it)", 0, 1e6),
     FLD("clock", F_STR, clock, "C", "what minutes and snapshots count: wall | cpu (CPU time of "
         "the process, all threads; not shrunk by a busy machine)", 0, 0),
+    FLD("doe", F_STR, doe, "FILE", "qdo presets: DOE description (default: bundled; a run's "
+        "doe.json)", 0, 0),
+    FLD("doe_optimise", F_INT, doe_optimise, "0|1", "qdo presets: train the DOE's height map "
+        "with the network (--optimise-doe: 1)", 0, 1),
+    FLD("doe_lr", F_FLOAT, doe_lr, "F", "DOE optimisation: Adam learning rate of the heights "
+        "(fractions of the maximum height; 0.01)", 0, 10),
+    FLD("doe_quantise", F_STR, doe_quantise, "Q", "DOE optimisation: progressive | ste | none "
+        "(quantisation to the DOE's levels in training)", 0, 0),
+    FLD("doe_bands", F_INT, doe_bands, "N", "DOE optimisation: wavelengths whose PSFs get a "
+        "gradient per update (4)", 1, 31),
 };
 #define NFIELDS (int)(sizeof fields / sizeof fields[0])
 
@@ -134,6 +144,9 @@ void lm_train_cfg_default(lm_train_cfg *c)
     c->fit_synth = -1.0f;
     c->res_init = 1.0f;
     snprintf(c->clock, sizeof c->clock, "wall");
+    c->doe_lr = 0.01f;
+    snprintf(c->doe_quantise, sizeof c->doe_quantise, "progressive");
+    c->doe_bands = 4;
 }
 
 static const field *find_field(const char *key)
@@ -305,7 +318,8 @@ static lm_status set_json(lm_train_cfg *c, const field *f, json_t *v, const char
         break;
     case F_STR:
         ok = json_is_string(v);
-        if (ok && (!strcmp(f->name, "system") || !strcmp(f->name, "base")) &&
+        if (ok && (!strcmp(f->name, "system") || !strcmp(f->name, "base") ||
+                   (!strcmp(f->name, "doe") && strcmp(json_string_value(v), "default"))) &&
             json_string_length(v))
             resolve_path(base_dir, json_string_value(v), buf, sizeof buf);
         else if (ok) snprintf(buf, sizeof buf, "%s", json_string_value(v));
@@ -371,7 +385,26 @@ static lm_status parse_root(lm_train_cfg *c, json_t *root, const char *label, co
                           "config format)", where, LM_TRAIN_CFG_VERSION);
     const char *key;
     json_t *v;
+    json_t *doe = json_object_get(root, "doe");
+    if (json_is_object(doe)) { /* "doe": {"file", "optimise", "lr", "quantise", "bands"} */
+        static const char *const sub[][2] = {{"file", "doe"}, {"optimise", "doe_optimise"},
+                                             {"lr", "doe_lr"}, {"quantise", "doe_quantise"},
+                                             {"bands", "doe_bands"}};
+        json_object_foreach(doe, key, v) {
+            int k = 0;
+            while (k < 5 && strcmp(sub[k][0], key)) k++;
+            if (k == 5)
+                return lm_err_set(err, LM_ERR_FORMAT, "%s: unknown field 'doe.%s' (file, "
+                                  "optimise, lr, quantise, bands)", where, key);
+            json_t *val = json_is_boolean(v) ? json_integer(json_is_true(v)) : json_incref(v);
+            const field *f = find_field(sub[k][1]);
+            lm_status st = set_json(c, f, val, where, base, err);
+            json_decref(val);
+            if (st) return st;
+        }
+    }
     json_object_foreach(root, key, v) {
+        if (!strcmp(key, "doe") && json_is_object(v)) continue;
         const field *f = NULL;
         for (int i = 0; i < NFIELDS && !f; i++)
             if (!strcmp(fields[i].name, key)) f = &fields[i];
@@ -463,6 +496,10 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     for (const char *p = c->snapshots; *p; p++)
         if (!strchr("0123456789.,", *p))
             BAD("'snapshots': must be minutes separated by commas (got '%s')", c->snapshots);
+    if (strcmp(c->doe_quantise, "progressive") && strcmp(c->doe_quantise, "ste") &&
+        strcmp(c->doe_quantise, "none"))
+        BAD("'doe_quantise': must be progressive, ste or none (got '%s')", c->doe_quantise);
+    if (!(c->doe_lr > 0)) BAD("'doe_lr': must be > 0 (got %g)", (double)c->doe_lr);
     if (!(c->procedural_fraction == -1.0f || c->procedural_fraction >= 0.0f))
         BAD("'procedural_fraction': must be -1 (default share) or in [0, 1] (got %g)",
             (double)c->procedural_fraction);
@@ -505,6 +542,11 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
                                "sensor_bits", c->sensor_bits, "clock", c->clock,
                                "procedural_fraction", (double)c->procedural_fraction));
     if (root) json_object_set_new(root, "mat_key", json_string(c->mat_key));
+    if (root)
+        json_object_set_new(root, "doe", json_pack("{s:s, s:b, s:f, s:s, s:i}", "file", c->doe,
+                                                   "optimise", c->doe_optimise, "lr",
+                                                   (double)c->doe_lr, "quantise",
+                                                   c->doe_quantise, "bands", c->doe_bands));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

@@ -27,11 +27,12 @@ static lm_status ds_eval(void *u, int i, float *raw, float *target, lm_err *err)
 
 lm_train_source lm_train_source_dataset(lm_dataset *d)
 {
-    return (lm_train_source){d, ds_batch, ds_count, ds_eval};
+    return (lm_train_source){d, ds_batch, ds_count, ds_eval, NULL};
 }
 
+/* pad_y, pad_x: context around each patch (the QDO camera's PSF radius), 0 otherwise. */
 static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int clean, int dp,
-                             lm_err *err)
+                             int pad_y, int pad_x, lm_err *err)
 {
     const char *paths[LM_TRAIN_MAX_PATHS];
     for (int i = 0; i < cfg->ndata; i++) paths[i] = cfg->data[i];
@@ -40,8 +41,8 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.paths = paths;
     dc.npaths = cfg->ndata;
     dc.sys = sys;
-    dc.patch_h = cfg->patch_h;
-    dc.patch_w = cfg->patch_w;
+    dc.patch_h = cfg->patch_h + 2 * pad_y;
+    dc.patch_w = cfg->patch_w + 2 * pad_x;
     dc.synth_fraction = cfg->synth_fraction;
     dc.procedural_fraction = lm_train_procedural_share(cfg);
     dc.noise_min = cfg->noise_min;
@@ -230,7 +231,20 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
     if (!st && closed && opts.resume)
         st = lm_err_set(err, LM_ERR_ARG, "resume: %s is fitted in closed form, nothing to resume "
                         "(use --fit sgd to fine-tune)", cfg->model);
-    if (!st && !(d = open_data(cfg, &sys, closed, opts.data_parallel, err))) st = err->status;
+    int pad_y = 0, pad_x = 0, qdo = !st && lm_model_has(m, LM_CAP_QDO_OPTICS);
+    if (!st && !qdo && (cfg->doe[0] || cfg->doe_optimise))
+        st = lm_err_set(err, LM_ERR_ARG, "config: field 'doe': only for the QDO presets "
+                        "(qdo-mst), not %s", cfg->model);
+    if (!st && qdo && strcmp(cfg->device, "cpu"))
+        st = lm_err_set(err, LM_ERR_ARG, "config: field 'device': the QDO camera runs on the "
+                        "CPU (got '%s')", cfg->device);
+    if (!st && qdo && opts.data_parallel && lm_dist_size() > 1)
+        st = lm_err_set(err, LM_ERR_ARG, "%s: one process only (the DOE is not averaged over "
+                        "ranks)", cfg->model);
+    if (!st && qdo && lm_train_doe_pad(cfg->doe, mo.ty, mo.tx, &pad_y, &pad_x, err))
+        st = err->status;
+    if (!st && !(d = open_data(cfg, &sys, closed, opts.data_parallel, pad_y, pad_x, err)))
+        st = err->status;
     if (!st && opts.progress && (!opts.data_parallel || lm_dist_rank() == 0))
         lm_dataset_describe(d, opts.progress_out ? opts.progress_out : stderr);
     if (!st && closed) {
@@ -239,14 +253,21 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         /* the passive RGB baseline (MST++): same samples, seen through an RGB camera */
         /* (qdo-* presets: the same camera behind the bundled DOE) */
         lm_train_source src;
-        if (lm_model_has(m, LM_CAP_QDO_OPTICS))
-            st = lm_train_source_qdo_open(&src, d, NULL, NULL, cfg->patch_h, cfg->patch_w,
+        int qdo = lm_model_has(m, LM_CAP_QDO_OPTICS);
+        if (qdo) { /* the camera on the tape, patches with real context (train/doe_opt.c) */
+            lm_train_doe_opts o = {.optimise = cfg->doe_optimise, .lr = cfg->doe_lr,
+                                   .bands = cfg->doe_bands, .total = cfg->iterations};
+            snprintf(o.file, sizeof o.file, "%s", cfg->doe);
+            snprintf(o.quantise, sizeof o.quantise, "%s", cfg->doe_quantise);
+            st = lm_train_source_doe_open(&src, d, &o, cfg->patch_h, cfg->patch_w, pad_y, pad_x,
                                           cfg->seed, err);
-        else
+        } else {
             st = lm_train_source_rgb_open(&src, d, NULL, LM_RGBCAM_D65, NULL, cfg->patch_h,
                                           cfg->patch_w, cfg->seed, err);
+        }
         if (!st) st = lm_train_run(cfg, m, &src, &opts, res, err);
-        if (src.user) lm_train_source_rgb_close(&src);
+        if (src.user && qdo) lm_train_source_doe_close(&src);
+        else if (src.user) lm_train_source_rgb_close(&src);
     } else if (!st) {
         lm_train_source src = lm_train_source_dataset(d);
         st = lm_train_run(cfg, m, &src, &opts, res, err);
@@ -262,11 +283,12 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
  * that does not resolve (missing) is kept; opening it reports it. */
 static void absolute_paths(lm_train_cfg *c)
 {
-    char *paths[LM_TRAIN_MAX_PATHS + 2];
+    char *paths[LM_TRAIN_MAX_PATHS + 3];
     int n = 0;
     for (int i = 0; i < c->ndata; i++) paths[n++] = c->data[i];
     paths[n++] = c->system;
     paths[n++] = c->base;
+    if (strcmp(c->doe, "default")) paths[n++] = c->doe;
     for (int i = 0; i < n; i++) {
         char *abs = paths[i][0] ? realpath(paths[i], NULL) : NULL;
         if (abs && strlen(abs) < LM_TRAIN_PATH_LEN) strcpy(paths[i], abs);

@@ -94,7 +94,7 @@ lm_status lm_train_source_rgb_open(lm_train_source *src, lm_dataset *d, const ch
     }
     s->d = d, s->ph = patch_h, s->pw = patch_w, s->seed = seed;
     if (noise) s->noise = *noise;
-    *src = (lm_train_source){s, rgb_batch, rgb_count, rgb_eval};
+    *src = (lm_train_source){s, rgb_batch, rgb_count, rgb_eval, NULL};
     return LM_OK;
 }
 

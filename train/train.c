@@ -152,7 +152,9 @@ static lm_status micro_step(loop *L, long index, double *loss_sum, lm_err *err)
     lm_ctx_reset(c);
     params_in(L);
     set_noise(L, B);
-    lm_tensor *raw = lm_tensor_from(c, 4, (int[]){B, L->model->in_channels, H, W}, L->raw);
+    const lm_train_front *fr = L->src->front;
+    lm_tensor *raw = fr ? fr->input(L->src->user, c, B)
+                        : lm_tensor_from(c, 4, (int[]){B, L->model->in_channels, H, W}, L->raw);
     lm_tensor *tgt = lm_tensor_from(c, 4, (int[]){B, LM_MODEL_OUT_CHANNELS, H, W}, L->target);
     if (L->model->out_channels == 31) tgt = lm_slice(c, tgt, 1, 1, 31); /* 400..700 nm */
     lm_tensor *loss = lm_l1_loss(c, lm_model_forward(c, L->model, raw), tgt);
@@ -188,6 +190,7 @@ static lm_status iteration(loop *L, long it, double *loss, lm_err *err)
 {
     const lm_train_cfg *cfg = L->cfg;
     lm_params_zero_grad(&L->model->params);
+    if (L->src->front) L->src->front->zero_grad(L->src->user);
     double sum = 0.0;
     for (int k = 0; k < cfg->accum_steps; k++) {
         lm_status st = micro_step(L, it * cfg->accum_steps + k, &sum, err);
@@ -205,7 +208,7 @@ static lm_status iteration(loop *L, long it, double *loss, lm_err *err)
     }
     if (isfinite(*loss) && grads_finite(&L->model->params)) {
         lm_adam_step(&L->opt, &L->model->params, lm_nthreads(&L->ctx));
-        return LM_OK;
+        return L->src->front ? L->src->front->step(L->src->user, err) : LM_OK;
     }
     char kept[LM_TRAIN_PATH_LEN + 64];
     kept_text(L, kept, sizeof kept);
@@ -234,6 +237,7 @@ static lm_status validate(loop *L, lm_metrics *out, lm_err *err)
     const lm_train_cfg *cfg = L->cfg;
     int n = L->src->eval_count ? L->src->eval_count(L->src->user) : 0;
     int H = cfg->patch_h, W = cfg->patch_w;
+    if (n > 0 && L->src->front && L->src->front->refresh(L->src->user, err)) return err->status;
     size_t rn = (size_t)L->model->in_channels * H * W, tn = (size_t)LM_MODEL_OUT_CHANNELS * H * W;
     lm_metrics_acc acc = {0};
     lm_ctx *c = &L->ctx;
@@ -437,6 +441,8 @@ static lm_status begin(loop *L, long *start, lm_err *err)
     uint64_t seed = 0;
     if (lm_train_load_checkpoint(L->opts->resume, L->model, &L->opt, start, &nb, &seed, err))
         return err->status;
+    if (L->src->front && L->src->front->load(L->src->user, L->opts->resume, err))
+        return err->status;
     int was_cpu = lm_train_checkpoint_cpu_clock(L->opts->resume);
     if (was_cpu != !strcmp(cfg->clock, "cpu"))
         return lm_err_set(err, LM_ERR_ARG, "resume %s: its training time was counted on the %s "
@@ -586,6 +592,8 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
             !L->rank) {
             lm_train_opts o2 = *L->opts;
             o2.elapsed = elapsed(L);
+            if (L->src->front && L->src->front->save(L->src->user, cfg->output, err))
+                return err->status;
             if (lm_train_save_checkpoint(cfg->output, L->model, &L->opt, it + 1,
                                          (it + 1) * cfg->accum_steps, &o2, cfg, err))
                 return err->status;

@@ -87,6 +87,14 @@ typedef struct lm_train_cfg {
     char clock[8];
     char mat_key[LM_DATASET_KEY_LEN]; /* .mat cube variable of the data ("" = automatic:
                                         * cube, hsi, rad, ref, ...; data/cube_io.h) */
+    /* QDO presets (LM_CAP_QDO_OPTICS) only; JSON also as one object "doe": {"file",
+     * "optimise", "lr", "quantise", "bands"} */
+    char doe[LM_TRAIN_PATH_LEN];    /* DOE description ("" or "default": the bundled one) */
+    int doe_optimise;               /* 1: train the height map with the network */
+    float doe_lr;                   /* Adam learning rate of the height map (fractions of the
+                                     * maximum height; 0.01) */
+    char doe_quantise[16];          /* progressive | ste | none (train/doe_opt.c) */
+    int doe_bands;                  /* wavelengths whose PSFs get a gradient per update (4) */
 } lm_train_cfg;
 
 /* The default share of procedural scenes, chosen on the real validation split (README). */
@@ -116,6 +124,17 @@ void lm_train_cfg_print_help(FILE *f);
 void lm_train_cfg_adam(const lm_train_cfg *cfg, lm_adam_cfg *out);
 
 /* ---- data for the loop ------------------------------------------------------------------ */
+/* A differentiable camera in front of the model (the QDO DOE, train/doe_opt.c): its source's
+ * batch() leaves raw alone and input() makes the model input of that batch on the tape. */
+typedef struct lm_train_front {
+    lm_tensor *(*input)(void *user, lm_ctx *c, int B); /* NULL with the ctx error set */
+    void (*zero_grad)(void *user);
+    lm_status (*step)(void *user, lm_err *err);        /* after the network's Adam update */
+    lm_status (*refresh)(void *user, lm_err *err);     /* before a validation */
+    lm_status (*save)(void *user, const char *dir, lm_err *err); /* with each checkpoint */
+    lm_status (*load)(void *user, const char *dir, lm_err *err); /* on resume */
+} lm_train_front;
+
 /* Where batches come from: data/dataset.h through lm_train_source_dataset, or any other
  * deterministic generator (tests use fixed in-memory batches). Buffers: raw B x 1 x ph x pw
  * (B x in_channels x ph x pw for a model whose in_channels is not 1, e.g. RGB for MST++),
@@ -125,6 +144,7 @@ typedef struct lm_train_source {
     lm_status (*batch)(void *user, long index, int B, float *raw, float *target, lm_err *err);
     int (*eval_count)(void *user);
     lm_status (*eval_sample)(void *user, int i, float *raw, float *target, lm_err *err);
+    const lm_train_front *front;  /* NULL: raw is the model's input */
 } lm_train_source;
 
 typedef struct lm_dataset lm_dataset;
@@ -146,6 +166,26 @@ void lm_train_source_rgb_close(lm_train_source *src);
 lm_status lm_train_source_qdo_open(lm_train_source *src, lm_dataset *d, const char *doe_path,
                                    const lm_noise_opts *noise, int patch_h, int patch_w,
                                    uint64_t seed, lm_err *err);
+
+/* The QDO baseline with the camera on the tape (train/doe_opt.c): dataset patches of
+ * (patch_h + 2 pad_y) x (patch_w + 2 pad_x) (pads >= the PSF radius: real context for the
+ * convolution), targets cropped to the patch; optionally the DOE's height map optimised with
+ * the network. Writes doe.json + doe_heights.png (+ doe_state.safetensors when optimising)
+ * with every checkpoint. Close with lm_train_source_doe_close. */
+typedef struct lm_train_doe_opts {
+    char file[LM_TRAIN_PATH_LEN];  /* "" or "default": bundled */
+    int optimise;
+    float lr;
+    char quantise[16];
+    int bands;
+    long total;                    /* updates of the run (the progressive schedule) */
+} lm_train_doe_opts;
+lm_status lm_train_source_doe_open(lm_train_source *src, lm_dataset *d,
+                                   const lm_train_doe_opts *o, int patch_h, int patch_w,
+                                   int pad_y, int pad_x, uint64_t seed, lm_err *err);
+void lm_train_source_doe_close(lm_train_source *src);
+/* The context pads of that DOE: the PSF radius, raised until 2 pad is a multiple of the tile. */
+int lm_train_doe_pad(const char *doe_path, int ty, int tx, int *py, int *px, lm_err *err);
 
 /* ---- the loop --------------------------------------------------------------------------- */
 typedef struct lm_train_opts {

@@ -175,7 +175,7 @@ check "mst on opencl: no output" no_output "$T/evo"
 
 # ---- the QDO baseline (MST++-tiny behind the bundled DOE): train briefly, evaluate ---------
 RQ=$T/run_qdo
-"$LM" train --model qdo-mst --data "$CAVE" --iterations 2 --batch 2 --accum-steps 1 \
+"$LM" train --model qdo-mst --data "$CAVE" --iterations 2 --batch 2 --accum-steps 1 --patch 24x32 \
   --synth-fraction 0 --noise 0,0 --val-patches 1 --output "$RQ" --quiet > "$T/qlog" 2>&1
 check "train qdo-mst: $(cat "$T/qlog")" [ -s "$RQ/model.safetensors" ]
 "$LM" eval --model "$RQ" "$CAVE" --split all --noise 0,10 --rainbow 66 --output "$T/evq" \
