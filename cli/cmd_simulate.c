@@ -22,6 +22,7 @@
 #include "data/cube_io.h"
 #include "data/frames.h"
 #include "data/image.h"
+#include "data/qdocam.h"
 #include "data/spectra.h"
 #include "data/srgb.h"
 #include "data/video.h"
@@ -68,6 +69,11 @@ static void help(void)
         "                        region:SHAPE,CX,CY,W,H,VX,VY a rect|ellipse region centred at\n"
         "                                                     (CX, CY), W x H pixels, moving at\n"
         "                                                     (VX, VY) pixels/s over the rest\n"
+        "  --doe FILE|default  the QDO baseline's camera instead: the cube's 400-700 nm bands\n"
+        "                      through this DOE (a description, e.g. a training run's doe.json,\n"
+        "                      or the bundled one) onto the RGB sensor, with the noise options;\n"
+        "                      frames/frame_0000.exr (float R, G, B) and .png (8-bit preview,\n"
+        "                      linear, clipped); no --video or --bucket0\n"
         "  --threads T         OpenMP threads (1..1024; default: all cores)\n"
         "  --help              this text\n\n"
         "Frame i starts at i x the frame period; its ground truth is the scene at the centre of\n"
@@ -77,7 +83,7 @@ static void help(void)
 }
 
 typedef struct sim_opts {
-    const char *input, *output, *system, *mat_key;
+    const char *input, *output, *system, *mat_key, *doe;
     int crop, clip, bucket0, video, format;
     double noise, photons, read_noise;
     long long bits, frames, samples;
@@ -150,6 +156,7 @@ static int parse_one(lm_cli *c, sim_opts *o)
         (r = lm_cli_value(c, "--mat-key", &o->mat_key)) ||
         (r = lm_cli_value(c, "--output", &o->output)) ||
         (r = lm_cli_value(c, "--system", &o->system)) || (r = lm_cli_flag(c, "--crop", &o->crop)) ||
+        (r = lm_cli_value(c, "--doe", &o->doe)) ||
         (r = lm_cli_flag(c, "--clip", &o->clip)) ||
         (r = lm_cli_flag(c, "--bucket0", &o->bucket0)) ||
         (r = lm_cli_flag(c, "--video", &o->video)) ||
@@ -189,6 +196,8 @@ static int parse(lm_cli *c, sim_opts *o)
         return lm_cli_error(c, "--output is required (see 'lumosaic simulate --help')");
     if (!o->video && (o->frames >= 0 || o->samples >= 0 || o->nmotion))
         return lm_cli_error(c, "--frames, --samples and --motion need --video");
+    if (o->doe && (o->video || o->bucket0))
+        return lm_cli_error(c, "--doe (the QDO camera's RGB image) takes no --video or --bucket0");
     if (o->frames < 0) o->frames = o->video ? 8 : 1;
     if (o->samples < 0) o->samples = LM_VIDEO_DEFAULT_SAMPLES;
     return 1;
@@ -268,6 +277,7 @@ typedef struct sim_run {
     char tmp[1024];       /* staging folder */
     json_t *files;        /* per-frame entries of simulate.json */
     float *b1, *b0, *rgb;
+    lm_qdocam *qdo;       /* --doe: the QDO camera (b1 then holds 3 planes) */
     lm_rng rng;
 } sim_run;
 
@@ -284,6 +294,11 @@ static lm_status simulate_one(const sim_run *r, int i, lm_rng *rng, lm_cube *gt,
     const sim_opts *o = r->o;
     lm_noise_opts nz = {(float)o->noise, o->photons, (float)o->read_noise, o->clip, (int)o->bits,
                         0.0f};
+    if (r->qdo) {
+        *gt = r->gt0;
+        return lm_qdocam_simulate(r->qdo, r->gt0.data, gt->height, gt->width, &nz, rng, r->b1,
+                                  (int)o->com.threads, e);
+    }
     if (!o->video) {
         lm_forward_opts fo = {.noise = nz, .nthreads = (int)o->com.threads};
         *gt = r->gt0;
@@ -324,7 +339,22 @@ static int write_files(const lm_cli *c, sim_run *r, int i, const lm_cube *gt, js
     int H = gt->height, W = gt->width;
     lm_err e;
     lm_err_clear(&e);
-    for (int k = 0; k < 4; k++) {
+    if (r->qdo) { /* the RGB image: float EXR and an 8-bit preview */
+        snprintf(rel[0], sizeof rel[0], "frames/frame_%04d.exr", i);
+        snprintf(rel[1], sizeof rel[1], "frames/frame_%04d.png", i);
+        static const char *const names[3] = {"R", "G", "B"};
+        size_t n = (size_t)H * W;
+        for (size_t p = 0; p < n; p++)
+            for (int ch = 0; ch < 3; ch++) r->rgb[3 * p + ch] = r->b1[ch * n + p];
+        if (out_path(c, r, rel[0], path, sizeof path)) return 1;
+        lm_status st = lm_image_write_exr(path, W, H, 3, names, r->b1, NULL, &e);
+        if (st == LM_OK && out_path(c, r, rel[1], path, sizeof path)) return 1;
+        if (st == LM_OK) st = lm_image_write_rgb8(path, W, H, r->rgb, &e);
+        if (st != LM_OK) return lm_cli_error(c, "%s", e.msg), 1;
+        json_object_set_new(entry, "rgb", json_string(rel[0]));
+        json_object_set_new(entry, "rgb_preview", json_string(rel[1]));
+    }
+    for (int k = r->qdo ? 2 : 0; k < 4; k++) {
         if (k == 1 && !r->o->bucket0) continue;
         if (out_path(c, r, rel[k], path, sizeof path)) return 1;
         lm_status st;
@@ -404,11 +434,36 @@ static json_t *summary_json(const sim_run *r, const lm_cube *in)
         o->bucket0, "bucket0_scale", bucket0_scale(s), "video", video, "frames", r->files);
 }
 
+/* --doe: the QDO camera of that DOE (its 31 PSFs); the cube must hold the 400-700 nm bands.
+ * Returns 0 or the exit status (error printed). */
+static int open_qdo(const lm_cli *c, const sim_opts *o, sim_run *r)
+{
+    if (r->gt0.bands != LM_GRID31_COUNT)
+        return lm_cli_error(c, "%s: --doe needs the 31 bands 400-700 nm (the cube has %d)",
+                            o->input, r->gt0.bands);
+    lm_doe doe;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_status st = strcmp(o->doe, "default") ? lm_doe_load(o->doe, &doe, &e)
+                                             : lm_doe_default(&doe, &e);
+    if (st) return lm_cli_error(c, "--doe: %s", e.msg), lm_cli_exit_status(st);
+    r->qdo = calloc(1, sizeof *r->qdo);
+    st = r->qdo ? lm_qdocam_init(r->qdo, &doe, LM_RGBCAM_D65, &e)
+                : lm_err_set(&e, LM_ERR_NOMEM, "out of memory");
+    lm_doe_free(&doe);
+    if (st) {
+        free(r->qdo);
+        r->qdo = NULL;
+        return lm_cli_error(c, "--doe: %s", e.msg), lm_cli_exit_status(st);
+    }
+    return 0;
+}
+
 /* Everything after the inputs are loaded; returns the exit status. */
 static int run(const lm_cli *c, sim_run *r, const lm_cube *in)
 {
     size_t n = (size_t)r->gt0.height * r->gt0.width;
-    r->b1 = malloc(sizeof(float) * n);
+    r->b1 = malloc(sizeof(float) * 3 * n);
     r->b0 = malloc(sizeof(float) * n);
     r->rgb = malloc(sizeof(float) * 3 * n);
     r->files = json_array();
@@ -424,6 +479,7 @@ static int run(const lm_cli *c, sim_run *r, const lm_cube *in)
     lm_rng_seed(&r->rng, (uint64_t)r->o->com.seed);
     if (!status) status = run_frames(c, r);
     json_t *js = status ? NULL : summary_json(r, in);
+    if (js && r->o->doe) json_object_set_new(js, "doe", json_string(r->o->doe));
     if (!status && (out_path(c, r, "simulate.json", path, sizeof path) ||
                     !js || json_dump_file(js, path, JSON_INDENT(2) | JSON_REAL_PRECISION(10))))
         status = (lm_cli_error(c, "%s: cannot write the summary: %s", path,
@@ -464,9 +520,12 @@ int lm_cmd_simulate(int argc, char **argv)
     }
     sim_run r = {.o = &o, .sys = &sys};
     status = prepare(&c, &o, &sys, &in, &r.gt0, &r.sim);
+    if (!status && o.doe) status = open_qdo(&c, &o, &r);
     if (!status) status = run(&c, &r, &in);
     json_decref(r.files);
     free(r.b1), free(r.b0), free(r.rgb);
+    if (r.qdo) lm_qdocam_free(r.qdo);
+    free(r.qdo);
     lm_cube_free(&r.gt0);
     lm_cube_free(&r.sim);
     lm_cube_free(&in);

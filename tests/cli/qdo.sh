@@ -53,8 +53,22 @@ JSON
 check "config \"doe\" object (path relative to the config): $(cat "$T/log5")" \
   [ -s "$T/cfgrun/doe_state.safetensors" ]
 
-# ---- bad input ------------------------------------------------------------------------------
 echo '{"version": 1, "aperture_mm": 0.5}' > "$T/bad.json"
+
+# ---- simulate --doe: the QDO camera's RGB image ----------------------------------------------
+"$LM" simulate --input "$CAVE" --crop --doe default --noise 0.01 --output "$T/sim1" > /dev/null 2>&1
+check "simulate --doe default" [ -s "$T/sim1/frames/frame_0000.exr" ]
+check "simulate --doe preview" [ -s "$T/sim1/frames/frame_0000.png" ]
+check "simulate.json names the DOE" grep -q '"doe": "default"' "$T/sim1/simulate.json"
+"$LM" simulate --input "$CAVE" --crop --doe "$T/opt/doe.json" --noise 0.01 --output "$T/sim2"   > /dev/null 2>&1
+check "simulate --doe with a learned DOE" [ -s "$T/sim2/frames/frame_0000.exr" ]
+check_not "another DOE, another image" cmp -s "$T/sim1/frames/frame_0000.exr" "$T/sim2/frames/frame_0000.exr"
+expect_error "simulate: bad DOE" 2 "bad.json: doe_pitch_um: missing" "$T/s3" -- \
+  "$LM" simulate --input "$CAVE" --crop --doe "$T/bad.json" --output "$T/s3"
+expect_error "simulate: --doe with --video" 2 "no --video" "$T/s4" -- \
+  "$LM" simulate --input "$CAVE" --crop --doe default --video --output "$T/s4"
+
+# ---- bad input ------------------------------------------------------------------------------
 expect_error "bad DOE file" 2 "bad.json: doe_pitch_um: missing" "$T/b1" -- \
   "$LM" train "${COMMON[@]}" --iterations 1 --doe "$T/bad.json" --output "$T/b1"
 expect_error "missing DOE file" 2 "nope.json" "$T/b2" -- \
