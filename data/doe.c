@@ -223,7 +223,13 @@ static lm_status finish(parser *p, json_t *root, lm_doe *d)
 {
     lm_status st = parse_root(p, root, d);
     json_decref(root);
-    if (!st) st = lm_doe_build_height(d, p->err);
+    if (!st && d->height_map) { /* the map's errors name the description too */
+        lm_err he = {0};
+        st = lm_doe_build_height(d, &he);
+        if (st) lm_err_set(p->err, st, "doe file %s: profile.file: %s", p->label, he.msg);
+    } else if (!st) {
+        st = lm_doe_build_height(d, p->err);
+    }
     if (st) lm_doe_free(d);
     return st;
 }

@@ -4,7 +4,7 @@
 # build) and, with -DLM_FUZZ=ON under clang, fuzz_<name> linked with libFuzzer
 # (target `fuzz` builds them all).
 set(LM_FUZZ_HARNESSES frame exr_cube mat cave safetensors checkpoint system run_config
-    study_config sidecar)
+    study_config sidecar doe)
 if(LM_FUZZ)
   add_custom_target(fuzz)
 endif()
