@@ -66,6 +66,8 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     {"mst", build_mst, RGB | WHOLE, {0, 0, 0, 0}, 3},
     {"mst-coded", build_mst, WHOLE, {0, 0, 0, 0}, 3},
     {"qdo-mst", build_mst, RGB | WHOLE | QDO, {0, 0, 0, 0}, 1}, /* MST++-tiny behind a DOE */
+    /* the same with the DOE learned end to end (QDO proper; train/doe_opt.c) */
+    {"qdo-mst-doe", build_mst, RGB | WHOLE | QDO | LM_CAP_DOE_LEARNED, {0, 0, 0, 0}, 1},
     {"rt-8", build_rt, CL, {0, 0, 0, 0}, 8},
     {"rt-16", build_rt, CL, {0, 0, 0, 0}, 16},
 };

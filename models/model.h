@@ -19,6 +19,9 @@ typedef enum lm_model_cap {
     LM_CAP_CLOSED_FORM = 1u << 3, /* fitted in closed form (train/fit_lmmse.h) */
     LM_CAP_QDO_OPTICS = 1u << 4,  /* with LM_CAP_RGB_INPUT: the RGB image is seen through the
                                    * QDO baseline's DOE (data/qdocam.h), not a plain lens */
+    LM_CAP_DOE_LEARNED = 1u << 5, /* with LM_CAP_QDO_OPTICS: training also learns the DOE's
+                                   * height map (as the run config's doe_optimise; the run's
+                                   * doe.json then holds the learned DOE) */
 } lm_model_cap;
 
 typedef struct lm_model lm_model;

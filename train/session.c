@@ -255,7 +255,9 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         lm_train_source src;
         int qdo = lm_model_has(m, LM_CAP_QDO_OPTICS);
         if (qdo) { /* the camera on the tape, patches with real context (train/doe_opt.c) */
-            lm_train_doe_opts o = {.optimise = cfg->doe_optimise, .lr = cfg->doe_lr,
+            lm_train_doe_opts o = {.optimise = cfg->doe_optimise ||
+                                               lm_model_has(m, LM_CAP_DOE_LEARNED),
+                                   .lr = cfg->doe_lr,
                                    .bands = cfg->doe_bands, .total = cfg->iterations};
             snprintf(o.file, sizeof o.file, "%s", cfg->doe);
             snprintf(o.quantise, sizeof o.quantise, "%s", cfg->doe_quantise);

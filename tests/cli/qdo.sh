@@ -55,6 +55,10 @@ check "config \"doe\" object (path relative to the config): $(cat "$T/log5")" \
 
 echo '{"version": 1, "aperture_mm": 0.5}' > "$T/bad.json"
 
+"$LM" train "${COMMON[@]/qdo-mst/qdo-mst-doe}" --iterations 1 --doe "$T/small.json" \
+  --output "$T/preset" > "$T/log6" 2>&1
+check "preset qdo-mst-doe learns the DOE: $(cat "$T/log6")" [ -s "$T/preset/doe_state.safetensors" ]
+
 # ---- simulate --doe: the QDO camera's RGB image ----------------------------------------------
 "$LM" simulate --input "$CAVE" --crop --doe default --noise 0.01 --output "$T/sim1" > /dev/null 2>&1
 check "simulate --doe default" [ -s "$T/sim1/frames/frame_0000.exr" ]
