@@ -34,6 +34,16 @@ check_not "eval used the run's DOE (scores differ without it)" cmp -s "$T/ev1/ev
   --doe-quantise ste --checkpoint-interval 2 --output "$T/opt" > "$T/log2" 2>&1
 check "train --optimise-doe: $(cat "$T/log2")" [ -s "$T/opt/doe_state.safetensors" ]
 check_not "the height map changed" cmp -s "$T/opt/doe_heights.png" "$T/fixed/doe_heights.png"
+"$LM" train "${COMMON[@]}" --iterations 3 --doe "$T/small.json" --optimise-doe --doe-lr 0.05 \
+  --doe-quantise ste --checkpoint-interval 2 --output "$T/opt_again" > /dev/null 2>&1
+check "same seed, same learned DOE" cmp -s "$T/opt/doe_heights.png" "$T/opt_again/doe_heights.png"
+check "same seed, same DOE state" cmp -s "$T/opt/doe_state.safetensors" "$T/opt_again/doe_state.safetensors"
+# the tensors after each file's header (its metadata holds the training seconds)
+tensors() { tail -c +$(( $(od -An -t u8 -N8 "$1") + 9 )) "$1"; }
+check "same seed, same weights" cmp -s <(tensors "$T/opt/model.safetensors") \
+  <(tensors "$T/opt_again/model.safetensors")
+check_not "(the weights check can fail)" cmp -s <(tensors "$T/opt/model.safetensors") \
+  <(tensors "$T/fixed/model.safetensors")
 grep -q '"optimise": true' "$T/opt/config.json"
 check "config.json records the doe object" [ $? -eq 0 ]
 "$LM" train "${COMMON[@]}" --iterations 2 --doe "$T/opt/doe.json" --output "$T/reuse" \
