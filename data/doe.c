@@ -286,6 +286,13 @@ double lm_doe_index(const lm_doe *d, double lambda_m)
     return n2 > 0 ? sqrt(n2) : NAN;
 }
 
+double lm_doe_quantise(double frac, int levels)
+{
+    double f = frac - floor(frac);
+    if (levels > 0) f = fmod(floor(f * levels + 0.5), levels) / levels;
+    return f >= 1.0 || !(f >= 0.0) ? 0.0 : f;
+}
+
 /* The height_map profile: the PNG read, checked (one channel, m x m, finite values in [0, 1]),
  * quantised to the levels and masked. */
 static lm_status load_height_map(lm_doe *d, double r2max, lm_err *err)
@@ -310,8 +317,7 @@ static lm_status load_height_map(lm_doe *d, double r2max, lm_err *err)
                                 "outside [0, 1]", d->height_file, frac, i, j);
                 break;
             }
-            if (d->levels > 0) frac = fmod(floor(frac * d->levels + 0.5), d->levels) / d->levels;
-            else if (frac >= 1) frac = 0;
+            frac = lm_doe_quantise(frac, d->levels);
             double y = (i - m / 2) * d->pitch_m, x = (j - m / 2) * d->pitch_m;
             d->mask[k] = x * x + y * y <= r2max;
             d->height[k] = d->mask[k] ? (float)(frac * d->max_height_m) : 0.0f;
@@ -394,8 +400,7 @@ lm_status lm_doe_build_height(lm_doe *d, lm_err *err)
         for (int j = 0; j < m; j++) {
             double y = (i - m / 2) * d->pitch_m, x = (j - m / 2) * d->pitch_m, r2 = x * x + y * y;
             /* lens phase -pi r^2 / (lambda0 f), wrapped to one period, as a fraction */
-            double t = -r2 / (2.0 * d->design_m * d->focal_m), frac = t - floor(t);
-            if (d->levels > 0) frac = fmod(floor(frac * d->levels + 0.5), d->levels) / d->levels;
+            double frac = lm_doe_quantise(-r2 / (2.0 * d->design_m * d->focal_m), d->levels);
             size_t k = (size_t)i * m + j;
             d->mask[k] = r2 <= r2max;
             d->height[k] = d->mask[k] ? (float)(frac * d->max_height_m) : 0.0f;

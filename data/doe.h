@@ -103,6 +103,11 @@ void lm_doe_free(lm_doe *doe);
 lm_status lm_doe_save(const lm_doe *doe, const char *json_path, const char *png_name,
                       lm_err *err);
 
+/* A height as a fraction of max_height wrapped into [0, 1) (one 2 pi phase period at the
+ * design wavelength) and rounded to the nearest of `levels` levels k / levels (the top one wraps
+ * to 0); levels 0: wrapped only. The one rule of every profile and of training (doe_opt.c). */
+double lm_doe_quantise(double frac, int levels);
+
 /* Refractive index of the material at a wavelength in metres. */
 double lm_doe_index(const lm_doe *doe, double lambda_m);
 /* (Re)build the height map from the profile, aperture and levels (after changing any of them

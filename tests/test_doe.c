@@ -292,6 +292,27 @@ static void test_height_map_round_trip(void)
     lm_doe_free(&d);
 }
 
+/* The quantisation rule: wrap into [0, 1), nearest level, the top level wraps to 0. */
+static void test_quantise(void)
+{
+    CHECK(lm_doe_quantise(0.06, 8) == 0.0);
+    CHECK(lm_doe_quantise(0.07, 8) == 0.125);
+    CHECK(lm_doe_quantise(0.5, 8) == 0.5);
+    CHECK(lm_doe_quantise(0.95, 8) == 0.0);           /* nearest is 1 = a full period */
+    CHECK(lm_doe_quantise(-0.1, 8) == 0.875);         /* wrapped first */
+    CHECK(lm_doe_quantise(2.3, 4) == 0.25);
+    CHECK_CLOSE(lm_doe_quantise(1.3, 0), 0.3, 1e-12, 0);
+    CHECK(lm_doe_quantise(-1e-20, 0) == 0.0);         /* 1 - 1e-20 rounds to 1: wraps */
+    CHECK(lm_doe_quantise(NAN, 8) == 0.0);
+    for (int L = 2; L <= 16; L *= 2)
+        for (double v = -2; v < 2; v += 0.013) {
+            double q = lm_doe_quantise(v, L), k = q * L;
+            CHECK(q >= 0 && q < 1 && fabs(k - round(k)) < 1e-12);
+            double d = fabs(v - floor(v) - q); /* at most half a level away, modulo the period */
+            CHECK(fmin(d, 1 - d) <= 0.5 / L + 1e-12);
+        }
+}
+
 int main(void)
 {
     RUN(test_parseval);
@@ -301,5 +322,6 @@ int main(void)
     RUN(test_default);
     RUN(test_bad_fields);
     RUN(test_height_map_round_trip);
+    RUN(test_quantise);
     return check_summary();
 }

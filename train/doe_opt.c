@@ -55,13 +55,8 @@ typedef struct doe_src {
     lm_train_front front;
 } doe_src;
 
-/* The quantised fractions of t (wrapped into [0, 1), nearest of `levels`; 0 = continuous). */
-static float quant(float v, int levels)
-{
-    double f = v - floor(v);
-    if (levels > 0) f = fmod(floor(f * levels + 0.5), levels) / levels;
-    return (float)(f >= 1.0 ? 0.0 : f);
-}
+/* The quantised fraction of one height (lm_doe_quantise). */
+static float quant(float v, int levels) { return (float)lm_doe_quantise(v, levels); }
 
 /* The height map the optics see on the tape: wrapped, and quantised with weight a. */
 static lm_tensor *height_on_tape(doe_src *s, lm_ctx *c, float a)
