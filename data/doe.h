@@ -131,10 +131,12 @@ lm_status lm_doe_psfs(const lm_doe *doe, double start_nm, double step_nm, int nb
  * sum), from the height map t (m x m, heights as fractions of max_height_m, 0 outside the
  * aperture: the mask applies anyway) by tensor ops, so gradients reach t. Same optics as
  * lm_doe_psf (which uses doe->height instead of t); sets the ctx error and returns NULL on a
- * bad shape. Memory: about 12 nb N^2 floats on the tape (N = grid). */
+ * bad shape. Memory: about 12 nb N^2 floats on the tape (N = grid). Runs on the ctx's
+ * backend (on an OpenCL device the DFT is direct: small grids only). */
 lm_tensor *lm_doe_psf_t(lm_ctx *c, const lm_doe *doe, lm_tensor *t, const double *lambda_m,
                         int nb);
-/* doe->height as fractions of max_height_m: a new m x m tensor (no gradient). */
+/* doe->height as fractions of max_height_m: a new m x m tensor on the ctx's backend (no
+ * gradient). */
 lm_tensor *lm_doe_height_t(lm_ctx *c, const lm_doe *doe);
 
 /* Print the description and, at 400..700 nm every 50 nm, the PSF's peak, its centroid offset

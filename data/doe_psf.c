@@ -32,27 +32,34 @@ lm_tensor *lm_doe_psf_t(lm_ctx *c, const lm_doe *d, lm_tensor *t, const double *
         lm_ctx_fail(c, LM_ERR_ARG, "doe_psf: %d wavelengths (1..%d)", nb, LM_AREA_MAX_B);
         return NULL;
     }
-    lm_tensor *scale = lm_tensor_new3(c, nb, 1, 1);
-    lm_tensor *chirp = lm_tensor_new3(c, nb, m, m);
-    lm_tensor *mask = lm_tensor_zeros(c, 4, (int[]){nb, 1, N, N});
-    if (!scale || !chirp || !mask) return NULL;
+    /* the constants, filled on the host and copied (a device ctx places them on its device) */
+    size_t mm = (size_t)m * m, NN = (size_t)N * N;
+    float *hs = malloc((size_t)nb * sizeof(float)), *hc = malloc((size_t)nb * mm * sizeof(float));
+    float *hm = calloc((size_t)nb * NN, sizeof(float));
     double ratio[LM_AREA_MAX_B];
-    for (int b = 0; b < nb; b++) {
+    lm_status bad = !hs || !hc || !hm ? lm_ctx_fail(c, LM_ERR_NOMEM, "doe_psf: out of memory")
+                                      : LM_OK;
+    for (int b = 0; b < nb && !bad; b++) {
         double l = lambda_m[b];
         if (!(l > 0)) {
-            lm_ctx_fail(c, LM_ERR_ARG, "doe_psf: wavelength %g m", l);
-            return NULL;
+            bad = lm_ctx_fail(c, LM_ERR_ARG, "doe_psf: wavelength %g m", l);
+            break;
         }
-        scale->data[b] = (float)(2 * M_PI * (lm_doe_index(d, l) - 1.0) * d->max_height_m / l);
+        hs[b] = (float)(2 * M_PI * (lm_doe_index(d, l) - 1.0) * d->max_height_m / l);
         ratio[b] = d->sensor_pitch_m / (l * d->distance_m / (N * d->pitch_m));
         for (int i = 0; i < m; i++)
             for (int j = 0; j < m; j++) {
                 double y = (i - m / 2) * d->pitch_m, x = (j - m / 2) * d->pitch_m;
-                chirp->data[((size_t)b * m + i) * m + j] =
-                    (float)(M_PI * (x * x + y * y) / (l * d->distance_m));
-                mask->data[((size_t)b * N + i) * N + j] = d->mask[(size_t)i * m + j];
+                hc[b * mm + (size_t)i * m + j] = (float)(M_PI * (x * x + y * y) /
+                                                         (l * d->distance_m));
+                hm[b * NN + (size_t)i * N + j] = d->mask[(size_t)i * m + j];
             }
     }
+    lm_tensor *scale = bad ? NULL : lm_tensor_from(c, 3, (int[]){nb, 1, 1}, hs);
+    lm_tensor *chirp = bad ? NULL : lm_tensor_from(c, 3, (int[]){nb, m, m}, hc);
+    lm_tensor *mask = bad ? NULL : lm_tensor_from(c, 4, (int[]){nb, 1, N, N}, hm);
+    free(hs), free(hc), free(hm);
+    if (!scale || !chirp || !mask) return NULL;
     lm_tensor *t3 = lm_reshape(c, t, 3, (int[]){1, m, m});
     lm_tensor *ph = lm_add(c, lm_mul(c, t3, scale), chirp);
     ph = lm_pad2d(c, lm_reshape(c, ph, 4, (int[]){nb, 1, m, m}), 0, N - m, 0, N - m,
@@ -69,9 +76,14 @@ lm_tensor *lm_doe_height_t(lm_ctx *c, const lm_doe *d)
         lm_ctx_fail(c, LM_ERR_ARG, "doe: no height map");
         return NULL;
     }
-    lm_tensor *t = lm_tensor_new2(c, d->m, d->m);
-    if (!t) return NULL;
-    for (size_t k = 0; k < (size_t)d->m * d->m; k++)
-        t->data[k] = (float)(d->height[k] / d->max_height_m);
+    size_t n = (size_t)d->m * d->m;
+    float *h = malloc(n * sizeof(float));
+    if (!h) {
+        lm_ctx_fail(c, LM_ERR_NOMEM, "doe: out of memory");
+        return NULL;
+    }
+    for (size_t k = 0; k < n; k++) h[k] = (float)(d->height[k] / d->max_height_m);
+    lm_tensor *t = lm_tensor_from(c, 2, (int[]){d->m, d->m}, h);
+    free(h);
     return t;
 }

@@ -3,6 +3,7 @@
  * polar, abs2, cmul (both operands, b repeated), area_sample, and the pupil -> intensity chain.
  * Exit 77 only when no OpenCL platform exists. */
 #include "tests/test_opencl_util.h"
+#include "data/doe.h"
 
 #define SHAPE(...) {__VA_ARGS__}
 
@@ -65,6 +66,30 @@ static void test_area(void)
     check_agree(&a, 10);
 }
 
+/* The differentiable PSF of a small DOE (27 x 27 samples, grid 48) on the device and the CPU,
+ * forward and the gradient w.r.t. the height map. */
+static const char *const SMALL_DOE =
+    "{\"version\": 1, \"aperture_mm\": 0.05, \"doe_pitch_um\": 2, \"grid\": 48, \"levels\": 0,"
+    " \"material\": \"fused_silica\", \"profile\": {\"type\": \"fresnel_lens\", \"focal_mm\": 1,"
+    " \"design_nm\": 550}, \"sensor_distance_mm\": 1, \"sensor_pitch_um\": 20, \"psf_size\": 5}";
+static lm_tensor *f_psf(lm_ctx *c, lm_tensor *const *in, int n, void *u)
+{
+    (void)n;
+    return lm_doe_psf_t(c, u, in[0], (const double[]){430e-9, 640e-9}, 2);
+}
+
+static void test_doe_psf(void)
+{
+    lm_doe d;
+    lm_err e = {0};
+    CHECK_MSG(lm_doe_parse(SMALL_DOE, "small", &d, &e) == LM_OK, "%s", e.msg);
+    if (!d.height) return;
+    agree_case a = {"doe_psf 27x27 grid 48", f_psf, &d, 1, {2}, {SHAPE(27, 27)}, {0}, {1},
+                    .atol = 2e-5, .rtol = 2e-3};
+    check_agree(&a, 11);
+    lm_doe_free(&d);
+}
+
 int main(void)
 {
     int s = opencl_setup();
@@ -72,6 +97,7 @@ int main(void)
     RUN(test_fft);
     RUN(test_elementwise);
     RUN(test_area);
+    RUN(test_doe_psf);
     lm_cl_backend_free(clb_);
     return check_summary();
 }
