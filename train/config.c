@@ -48,6 +48,14 @@ static const field fields[] = {
     FLD("procedural_fraction", F_FLOAT, procedural_fraction, "F", "share of procedural scenes "
         "(textured, varied spectra; not in the paper; -1: 0.2, at most 1 - synth_fraction)", -1,
         1),
+    FLD("motion_fraction", F_FLOAT, motion_fraction, "F", "share of real-scene samples seen "
+        "moving during the exposure (0)", 0, 1),
+    FLD("motion_speed", F_FLOAT, motion_speed, "PX_S", "moving samples: translation speed "
+        "uniform in [0, this] px/s (240)", 0, 1e5),
+    FLD("motion_rotation", F_FLOAT, motion_rotation, "DEG_S", "moving samples: rotation uniform "
+        "in [-this, this] deg/s about the patch centre (0)", 0, 1e5),
+    FLD("motion_samples", F_INT, motion_samples, "N", "moving samples: instants per LED window "
+        "(2)", 1, 64),
     FLD("patch", F_PATCH, patch_h, "HxW", "patch size, multiples of the tile (66x64)", 1,
         MAX_PATCH),
     FLD("batch", F_INT, batch, "N", "samples per forward pass (14)", 1, MAX_BATCH),
@@ -113,6 +121,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     snprintf(c->model, sizeof c->model, "han-paper");
     c->synth_fraction = 0.33f;
     c->procedural_fraction = -1.0f; /* lm_train_procedural_share: 0.2 (measured, README) */
+    c->motion_speed = 240.0f, c->motion_samples = 2;
     c->patch_h = 66, c->patch_w = 64;
     c->batch = 14, c->accum_steps = 2;
     c->iterations = 50000;
@@ -505,6 +514,11 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
                                "sensor_bits", c->sensor_bits, "clock", c->clock,
                                "procedural_fraction", (double)c->procedural_fraction));
     if (root) json_object_set_new(root, "mat_key", json_string(c->mat_key));
+    if (root) /* moving samples (issue 18, item 2) */
+        json_object_update_new(root, json_pack("{s:f, s:f, s:f, s:i}", "motion_fraction",
+                               (double)c->motion_fraction, "motion_speed", (double)c->motion_speed,
+                               "motion_rotation", (double)c->motion_rotation, "motion_samples",
+                               c->motion_samples));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

@@ -247,6 +247,14 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
                                           cfg->patch_w, cfg->seed, err);
         if (!st) st = lm_train_run(cfg, m, &src, &opts, res, err);
         if (src.user) lm_train_source_rgb_close(&src);
+    } else if (!st && cfg->motion_fraction > 0.0f) { /* moving scenes (issue 18, item 2) */
+        lm_train_source src;
+        lm_train_motion_opts mo = {cfg->motion_fraction, cfg->motion_speed, cfg->motion_rotation,
+                                   cfg->motion_samples, cfg->sensor_clip, cfg->sensor_bits};
+        st = lm_train_source_motion_open(&src, d, &sys, &mo, cfg->patch_h, cfg->patch_w,
+                                         cfg->seed, err);
+        if (!st) st = lm_train_run(cfg, m, &src, &opts, res, err);
+        if (src.user) lm_train_source_motion_close(&src);
     } else if (!st) {
         lm_train_source src = lm_train_source_dataset(d);
         st = lm_train_run(cfg, m, &src, &opts, res, err);

@@ -43,6 +43,10 @@ typedef struct lm_train_cfg {
                                      * narrowband patches (paper 0.33) */
     float procedural_fraction;      /* share of procedural scenes (not in the paper); -1 (the
                                      * default): lm_train_procedural_share */
+    float motion_fraction;          /* share of real-scene samples seen moving (0; issue 18) */
+    float motion_speed;             /* their translation speed: uniform in [0, this] px/s (240) */
+    float motion_rotation;          /* their rotation: uniform in [-this, this] deg/s (0) */
+    int motion_samples;             /* instants per LED window (2) */
     int patch_h, patch_w;           /* 66 x 64 */
     int batch, accum_steps;         /* 14, 2 */
     long iterations;                /* optimizer updates (paper 50,000) */
@@ -146,6 +150,29 @@ void lm_train_source_rgb_close(lm_train_source *src);
 lm_status lm_train_source_qdo_open(lm_train_source *src, lm_dataset *d, const char *doe_path,
                                    const lm_noise_opts *noise, int patch_h, int patch_w,
                                    uint64_t seed, lm_err *err);
+
+/* Moving scenes (train/source_motion.c): a share `fraction` of the real-scene samples seen
+ * moving during the exposure (translation up to `speed` px/s in any direction, rotation up to
+ * `rotation` deg/s about the patch centre), each LED's pixels averaging `samples` instants of
+ * its window; the target is the scene at the ground-truth instant (data/video.h). clip / bits:
+ * as the dataset's sensor options. Close with lm_train_source_motion_close. */
+typedef struct lm_train_motion_opts {
+    float fraction, speed, rotation;
+    int samples;
+    int clip, bits;
+} lm_train_motion_opts;
+lm_status lm_train_source_motion_open(lm_train_source *src, lm_dataset *d, const lm_system *sys,
+                                      const lm_train_motion_opts *o, int patch_h, int patch_w,
+                                      uint64_t seed, lm_err *err);
+void lm_train_source_motion_close(lm_train_source *src);
+/* One moving patch as the source renders it: rows [py, py + ph) x columns [px, px + pw) of the
+ * 31-band crop c31 (tile phases from the patch's top-left), moving by m (its coordinates are
+ * the crop's), `samples` instants per LED window: raw (ph x pw, noise-free) and the 33-channel
+ * target at the ground-truth instant. Equals lm_video_frame on the crop up to float rounding. */
+typedef struct lm_motion lm_motion;
+lm_status lm_train_motion_render(const lm_system *sys, const lm_cube *c31, const lm_motion *m,
+                                 int samples, int py, int px, int ph, int pw, float *raw,
+                                 float *target, lm_err *err);
 
 /* ---- the loop --------------------------------------------------------------------------- */
 typedef struct lm_train_opts {
