@@ -54,6 +54,7 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.sensor_bits = cfg->sensor_bits;
     dc.batch_stride = dp ? lm_dist_size() : 1; /* rank r takes every N-th batch (train.c) */
     dc.mat_key = cfg->mat_key;
+    dc.buckets = cfg->buckets;
     if (clean) { /* the fit adds noise, clipping and quantisation itself */
         dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
         dc.sensor_clip = dc.sensor_bits = 0;
@@ -274,6 +275,24 @@ static void absolute_paths(lm_train_cfg *c)
     }
 }
 
+/* The model and the loader read the same buckets: a "-b2" preset sets buckets 2; buckets 2
+ * with a one-bucket name picks the name's "-b2" preset (rt-8 -> rt-8-b2). */
+static lm_status resolve_buckets(lm_train_cfg *c, lm_err *err)
+{
+    size_t n = strlen(c->model);
+    int b2 = n > 3 && !strcmp(c->model + n - 3, "-b2");
+    if (b2) c->buckets = 2;
+    if (b2 || c->buckets != 2) return LM_OK;
+    char name[sizeof c->model + 4];
+    snprintf(name, sizeof name, "%s-b2", c->model);
+    if (strlen(name) >= sizeof c->model || !lm_model_preset_known(name))
+        return lm_err_set(err, LM_ERR_ARG, "config: field 'buckets': model %s has no two-bucket "
+                          "form (lmmse, lmmse-K, rt-8 and rt-16 have: their \"-b2\" presets)",
+                          c->model);
+    snprintf(c->model, sizeof c->model, "%s", name);
+    return LM_OK;
+}
+
 lm_status lm_train_session(const lm_train_cfg *cfg_in, const lm_train_opts *opts_in,
                            lm_train_result *res, lm_err *err)
 {
@@ -283,7 +302,8 @@ lm_status lm_train_session(const lm_train_cfg *cfg_in, const lm_train_opts *opts
     if (!cfg) return lm_err_set(err, LM_ERR_NOMEM, "train: out of memory");
     *cfg = *cfg_in;
     absolute_paths(cfg);
-    lm_status st = session(cfg, opts, res, err);
+    lm_status st = resolve_buckets(cfg, err);
+    if (!st) st = session(cfg, opts, res, err);
     free(cfg);
     return st;
 }
