@@ -21,8 +21,9 @@
  * bank "filters.bucket0" (L x P x 33 x K x K) on the bucket-0 plane, added before the bias
  *     y[c] = sum W_l[p][c] * window(bucket 1) + sum W0_l[p][c] * window(bucket 0) + b_l[p][c];
  * in the tile-unit conv the pixel-unshuffled input has 2P phase planes (bucket 1's first) and
- * the two kernels are concatenated along the input channels. The direct host path (below) and
- * the whole-frame host path read one plane only: a two-bucket model runs the tile-unit conv.
+ * the two kernels are concatenated along the input channels; the direct path (below) runs the
+ * taps over both planes' windows. The whole-frame host path (frame_forward) reads one plane:
+ * none for a two-bucket model (whole frames of it run patch-wise).
  * What it is not: the fit (train/fit_lmmse.c) or the noise estimator. */
 #include "models/model.h"
 #include <math.h>
@@ -196,28 +197,32 @@ static void build_pad(const lm_model *m, const lmmse_net *n, const float *raw, i
     }
 }
 
-/* Packed filters of one phase: K x K taps of `lanes` floats (channels, zero beyond nch), then
- * the bias. */
-static size_t packed_floats(int K, int lanes) { return (size_t)(K * K + 1) * lanes; }
+/* Packed filters of one phase: K x K taps of `lanes` floats (channels, zero beyond nch) for
+ * each of the C input planes (bucket 1's, then bucket 0's), then the bias. */
+static size_t packed_floats(int C, int K, int lanes) { return (size_t)(C * K * K + 1) * lanes; }
 
 /* wt = the filters of channels [ch0, ch0 + nch) at noise sd s, every phase, `lanes` wide. */
 static void pack_filters(const lmmse_net *n, float s, int ch0, int nch, int lanes, float *wt)
 {
-    const int O = LM_MODEL_OUT_CHANNELS, K = n->K, P = n->P;
+    const int O = LM_MODEL_OUT_CHANNELS, K = n->K, P = n->P, C = n->C;
     int li;
     float t;
     level_pair(s, &li, &t);
-    memset(wt, 0, sizeof(float) * (size_t)P * packed_floats(K, lanes));
+    memset(wt, 0, sizeof(float) * (size_t)P * packed_floats(C, K, lanes));
     for (int p = 0; p < P; p++)
         for (int c = 0; c < nch; c++) {
             const int ch = ch0 + c;
             const size_t w0 = (((size_t)li * P + p) * O + ch) * K * K, w1 = w0 + (size_t)P * O * K * K;
             const size_t b0 = ((size_t)li * P + p) * O + ch, b1 = b0 + (size_t)P * O;
-            float *T = wt + (size_t)p * packed_floats(K, lanes);
-            for (int k = 0; k < K * K; k++)
-                T[k * lanes + c] = t == 0.0f ? n->w->data[w0 + k] : t == 1.0f ? n->w->data[w1 + k]
-                                   : n->w->data[w0 + k] * (1.0f - t) + n->w->data[w1 + k] * t;
-            T[K * K * lanes + c] = t == 0.0f ? n->b->data[b0] : t == 1.0f ? n->b->data[b1]
+            float *T = wt + (size_t)p * packed_floats(C, K, lanes);
+            for (int q = 0; q < C; q++) {
+                const float *w = q ? n->w0->data : n->w->data;
+                float *Tq = T + (size_t)q * K * K * lanes;
+                for (int k = 0; k < K * K; k++)
+                    Tq[k * lanes + c] = t == 0.0f ? w[w0 + k] : t == 1.0f ? w[w1 + k]
+                                        : w[w0 + k] * (1.0f - t) + w[w1 + k] * t;
+            }
+            T[C * K * K * lanes + c] = t == 0.0f ? n->b->data[b0] : t == 1.0f ? n->b->data[b1]
                                    : n->b->data[b0] * (1.0f - t) + n->b->data[b1] * t;
         }
 }
@@ -225,13 +230,14 @@ static void pack_filters(const lmmse_net *n, float s, int ch0, int nch, int lane
 /* Row y, phase column j: pixels x = j, j + tx, ... of the phase, NP at a time (the last step
  * repeats its last pixel to fill the registers, stored once), NV 8-lane vectors of channels
  * (NV x 8 = the packing's lanes). NV and NP are constants at each call (always inlined), so
- * the accumulators stay in registers. */
+ * the accumulators stay in registers. C padded planes of PH rows lie one below the other in
+ * pad; the taps run over their windows in turn (plane q's row u is tap row q K + u). */
 static inline __attribute__((always_inline)) void
-row_phase(const float *T, const float *pad, int PW, int K, int y, int j, int W, int tx,
-          float *out, size_t plane, int nch, const int NV, const int NP)
+row_phase(const float *T, const float *pad, int PW, int PH, int C, int K, int y, int j, int W,
+          int tx, float *out, size_t plane, int nch, const int NV, const int NP)
 {
     const int L = NV * 8;
-    const float *B = T + (size_t)K * K * L;
+    const float *B = T + (size_t)C * K * K * L;
     for (int x = j; x < W; x += NP * tx) {
         int np = (W - x + tx - 1) / tx;
         np = np < NP ? np : NP;
@@ -243,9 +249,9 @@ row_phase(const float *T, const float *pad, int PW, int K, int y, int j, int W, 
         for (int q = 0; q < NP; q++)
 #pragma GCC unroll 5
             for (int g = 0; g < NV; g++) a[q][g] = v8_load(B + 8 * g);
-        for (int u = 0; u < K; u++) {
-            const float *row = pad + (size_t)(y + u) * PW + x;
-            const float *Tu = T + (size_t)u * K * L;
+        for (int qu = 0; qu < C * K; qu++) {
+            const float *row = pad + ((size_t)(qu / K) * PH + y + qu % K) * PW + x;
+            const float *Tu = T + (size_t)qu * K * L;
             for (int v = 0; v < K; v++, Tu += L) {
                 v8 t[5];
 #pragma GCC unroll 5
@@ -268,42 +274,46 @@ row_phase(const float *T, const float *pad, int PW, int K, int y, int j, int W, 
 }
 
 /* up to 32 channels (the 31 bands of a whole frame) and up to 40 (a tensor forward's 33) */
-static void row_phase32(const float *T, const float *pad, int PW, int K, int y, int j, int W,
-                        int tx, float *out, size_t plane, int nch)
+static void row_phase32(const float *T, const float *pad, int PW, int PH, int C, int K, int y,
+                        int j, int W, int tx, float *out, size_t plane, int nch)
 {
-    row_phase(T, pad, PW, K, y, j, W, tx, out, plane, nch, 4, NP32);
+    row_phase(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch, 4, NP32);
 }
 
-static void row_phase40(const float *T, const float *pad, int PW, int K, int y, int j, int W,
-                        int tx, float *out, size_t plane, int nch)
+static void row_phase40(const float *T, const float *pad, int PW, int PH, int C, int K, int y,
+                        int j, int W, int tx, float *out, size_t plane, int nch)
 {
-    row_phase(T, pad, PW, K, y, j, W, tx, out, plane, nch, 5, NP40);
+    row_phase(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch, 5, NP40);
 }
 
 /* out (nch planes of H x W) = channels [ch0, ch0 + nch) of the filters at noise sd s on one
- * H x W frame. scratch: direct_scratch_floats(...) floats. */
+ * frame of C planes (C x H x W: bucket 1, then bucket 0 with two buckets). scratch:
+ * direct_scratch_floats(...) floats. */
 static size_t direct_scratch_floats(const lmmse_net *n, int H, int W)
 {
     const int r = n->K / 2;
-    return (size_t)n->P * packed_floats(n->K, 40) + (size_t)(H + 2 * r) * (W + 2 * r);
+    return (size_t)n->P * packed_floats(n->C, n->K, 40) +
+           (size_t)n->C * (H + 2 * r) * (W + 2 * r);
 }
 
 static void direct_frame(const lm_model *m, const lmmse_net *n, float s, const float *raw, int H,
                          int W, int ch0, int nch, float *out, float *scratch, int nthreads)
 {
-    const int ty = m->mosaic.ty, tx = m->mosaic.tx, K = n->K, PW = W + 2 * (K / 2);
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, K = n->K, C = n->C;
+    const int PW = W + 2 * (K / 2), PH = H + 2 * (K / 2);
     const int lanes = nch <= 32 ? 32 : 40;
-    float *wt = scratch, *pad = scratch + (size_t)n->P * packed_floats(K, 40);
+    float *wt = scratch, *pad = scratch + (size_t)n->P * packed_floats(C, K, 40);
     pack_filters(n, s, ch0, nch, lanes, wt);
-    build_pad(m, n, raw, H, W, pad);
+    for (int q = 0; q < C; q++)
+        build_pad(m, n, raw + (size_t)q * H * W, H, W, pad + (size_t)q * PH * PW);
     const size_t plane = (size_t)H * W;
     #pragma omp parallel for schedule(static) num_threads(nthreads)
     for (int y = 0; y < H; y++) {
         const int i = y % ty;
         for (int j = 0; j < tx; j++) {
-            const float *T = wt + (size_t)(i * tx + j) * packed_floats(K, lanes);
-            if (lanes == 32) row_phase32(T, pad, PW, K, y, j, W, tx, out, plane, nch);
-            else row_phase40(T, pad, PW, K, y, j, W, tx, out, plane, nch);
+            const float *T = wt + (size_t)(i * tx + j) * packed_floats(C, K, lanes);
+            if (lanes == 32) row_phase32(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch);
+            else row_phase40(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch);
         }
     }
 }
@@ -311,9 +321,9 @@ static void direct_frame(const lm_model *m, const lmmse_net *n, float s, const f
 /* Can the direct path run? (no gradients needed, no device, no features, host parameters) */
 static int direct_ok(const lm_ctx *c, const lmmse_net *n, const lm_tensor *raw)
 {
-    return !n->D && n->C == 1 &&
+    return !n->D &&
            !(c->grad_enabled && ((raw && lm_requires_grad(raw)) || lm_requires_grad(n->w) ||
-                                 lm_requires_grad(n->b))) &&
+                                 lm_requires_grad(n->b) || (n->w0 && lm_requires_grad(n->w0)))) &&
            !(c->backend && c->backend != lm_backend_cpu()) && (!raw || raw->data) && n->w->data;
 }
 
@@ -328,7 +338,7 @@ static lm_tensor *run_direct(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *ra
     float *scratch = y ? lm_ctx_alloc(c, sizeof(float) * direct_scratch_floats(n, H, W)) : NULL;
     if (!scratch) return NULL; /* the ctx has the error */
     for (int b = 0; b < B; b++)
-        direct_frame(m, n, s, x->data + (size_t)b * H * W, H, W, 0, O,
+        direct_frame(m, n, s, x->data + (size_t)b * n->C * H * W, H, W, 0, O,
                      y->data + (size_t)b * O * H * W, scratch, lm_nthreads(c));
     return y;
 }
@@ -473,7 +483,8 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
                   !(n->rw = lm_params_add(&m->params, "readout.weight", 4, rws, 1, err))))
         return err->status;
     m->forward = lmmse_forward;
-    m->frame_forward = D || n->C == 2 ? NULL : lmmse_frame_forward; /* one plane only */
+    /* the whole-frame host path reads one H x W frame: one-bucket models only */
+    m->frame_forward = D || n->C == 2 ? NULL : lmmse_frame_forward;
     m->init = lmmse_init;
     m->conv_rows = ty * (n->hi_y > -n->lo_y ? n->hi_y : -n->lo_y);
     m->noise_input = 1;

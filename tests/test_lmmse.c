@@ -111,17 +111,17 @@ static void check_forward(const char *preset, int H, int W, float sigma, int l, 
 static void test_direct_matches_tile_path(void)
 {
     const int sizes[3][2] = {{24, 32}, {6, 8}, {30, 20}};
-    for (int k = 0; k < 3; k++) {
-        const int H = sizes[k][0], W = sizes[k][1];
+    for (int k = 0; k < 6; k++) { /* one bucket, then both (the direct path over two planes) */
+        const int H = sizes[k % 3][0], W = sizes[k % 3][1];
         lm_err e = {0};
-        lm_model *m = lm_model_create("lmmse", NULL, 11, &e);
+        lm_model *m = lm_model_create(k < 3 ? "lmmse" : "lmmse-b2", NULL, 11, &e);
         CHECK_MSG(m != NULL, "%s", e.msg);
         if (!m) return;
         lm_ctx c;
         lm_ctx_init(&c, 2);
         lm_rng r;
         lm_rng_seed(&r, 7 + k);
-        lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){3, 1, H, W}, &r, 0.0f, 1.0f);
+        lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){3, m->in_channels, H, W}, &r, 0.0f, 1.0f);
         const float sig[3] = {0.0f, 0.04f, 0.04f};
         m->noise_sigma_items = sig;
         lm_tensor *yt = lm_contiguous(&c, lm_model_forward(&c, m, x));
