@@ -15,7 +15,9 @@
  * Two-bucket models ("-b2" presets) read bucket 0 too: --bucket0 (a frame, pattern or folder
  * like --input, the same count and size), else the bucket0/ folder `simulate --bucket0` writes
  * beside frames/ (the input path with its last "frames" component renamed); bucket 0 is not
- * aligned in time, so such sequences are reconstructed without alignment (a warning).
+ * aligned in time, so such sequences are reconstructed without alignment (a warning). They run
+ * in whole-frame strips of both planes like their one-bucket forms (lmmse-b2 without its
+ * one-plane host path).
  * What it is not: the flow or the alignment scheme themselves (infer/flow.c, infer/align.c). */
 #include <omp.h>
 #include <sys/stat.h>

@@ -2,7 +2,8 @@
 # buckets.sh — both buckets end to end (issue 18, item 3): fit a two-bucket lmmse (train
 # --buckets 2 picks lmmse-3-b2; the run records the bucket count), simulate a frame with
 # --bucket0, reconstruct it with infer --bucket0 (and with bucket0/ found beside frames/: the
-# same cube), against the simulated ground truth; a wrong bucket 0 changes the cube (the model
+# same cube; patch-wise and on OpenCL: close to it), against the simulated ground truth; a
+# wrong bucket 0 changes the cube (the model
 # reads it); eval of the two-bucket model (both buckets simulated). Bad input, one line on
 # stderr and exit 2, nothing written: no bucket 0 for a two-bucket model, --bucket0 for a
 # one-bucket model, a missing bucket-0 file, a bucket-0 frame of another size or count, a
@@ -42,6 +43,17 @@ check "two-bucket PSNR $p2 dB is sane (> 20 dB)" awk -v p="$p2" 'BEGIN { exit !(
 check "bucket0/ found beside frames/: $(cat "$T/err")" cmp -s "$T/o2/cube_0000.exr" "$T/auto/cube_0000.exr"
 "$LM" infer --model "$R2" --input "$S/frames/frame_%04d.png" --output "$T/pat" 2> "$T/err"
 check "a pattern under frames/ too: $(cat "$T/err")" cmp -s "$T/o2/cube_0000.exr" "$T/pat/cube_0000.exr"
+# patch-wise (--tiles) against whole-frame strips of both planes: the same cube away from the
+# windows' blending (the PSNR between them is high)
+"$LM" infer --model "$R2" --input "$S/frames" --output "$T/tiles" --tiles 2> "$T/err"
+pt=$("$PSNR" "$T/tiles/cube_0000.exr" "$T/o2/cube_0000.exr")
+check "--tiles ~ strips ($pt dB): $(cat "$T/err")" awk -v p="$pt" 'BEGIN { exit !(p > 45) }'
+# on an OpenCL device (when a platform exists): the same cube
+if ! command -v clinfo > /dev/null || clinfo -l 2> /dev/null | grep -q 'Platform'; then
+  "$LM" infer --model "$R2" --input "$S/frames" --output "$T/cl" --device opencl 2> "$T/err"
+  pc=$("$PSNR" "$T/cl/cube_0000.exr" "$T/o2/cube_0000.exr")
+  check "OpenCL ~ CPU ($pc dB): $(cat "$T/err")" awk -v p="$pc" 'BEGIN { exit !(p > 80) }'
+fi
 # bucket 1 given as bucket 0: another cube, further from the truth
 "$LM" infer --model "$R2" --input "$S/frames/frame_0000.png" --bucket0 "$S/frames/frame_0000.png" \
   --output "$T/wrong" 2> "$T/err"
