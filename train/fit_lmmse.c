@@ -22,7 +22,9 @@
  * then that of bucket 0 / (LEDs - 1), then the 1. The analytic noise term puts the same s^2 on
  * every window entry of both planes: the same noise sd in the stored units of either bucket
  * (their clean maxima are alike: both are 1 for white), where the loader draws k x each
- * bucket's own maximum; the validation choice of the ridge absorbs the difference.
+ * bucket's own maximum. Bucket 0's stored maximum (a mean over eleven LEDs) is at most about
+ * bucket 1's (the brightest LED's), so this overstates its noise a little: a conservative
+ * filter, not a tuned one (per-plane levels would be a refinement).
  * What it is not: the model (models/lmmse.c) or SGD training (train.c). */
 #include "train/fit_lmmse.h"
 #include "data/dataset.h"
