@@ -97,6 +97,9 @@ static const field fields[] = {
         "PNG frame holds them (0)", 0, 1),
     FLD("sensor_bits", F_INT, sensor_bits, "N", "quantise samples to N bits (0 = off; 16 = PNG)",
         0, 24),
+    FLD("buckets", F_INT, buckets, "1|2", "coded-frame buckets the model reads: 1 (bucket 1, the "
+        "paper) or 2 (bucket 1 and bucket 0 / (LEDs - 1); the model's \"-b2\" preset; a -b2 "
+        "preset sets 2)", 1, 2),
     FLD("snapshots", F_STR, snapshots, "M,M,...", "weights at these minutes of training into "
         "<output>/snapshots/<M>min/", 0, 0),
     FLD("minutes", F_FLOAT, minutes, "M", "time budget in minutes (0 = none; the schedule "
@@ -137,6 +140,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     c->val_patches = 64;
     c->checkpoint_interval = 1000;
     c->log_interval = 100;
+    c->buckets = 1;
     snprintf(c->output, sizeof c->output, "runs/train");
     snprintf(c->fit, sizeof c->fit, "auto");
     c->fit_patches = 4096;
@@ -519,6 +523,7 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
                                (double)c->motion_fraction, "motion_speed", (double)c->motion_speed,
                                "motion_rotation", (double)c->motion_rotation, "motion_samples",
                                c->motion_samples));
+    if (root) json_object_set_new(root, "buckets", json_integer(c->buckets));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

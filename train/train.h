@@ -89,6 +89,8 @@ typedef struct lm_train_cfg {
      * (elapsed time, the default) or "cpu" (CPU time of the process, every thread: a budget a
      * busy machine does not shrink; the study runs presets side by side on it) */
     char clock[8];
+    int buckets;                    /* coded-frame buckets the model reads: 1 (bucket 1) or 2
+                                     * (both; the preset's "-b2" form, which sets 2 itself) */
     char mat_key[LM_DATASET_KEY_LEN]; /* .mat cube variable of the data ("" = automatic:
                                         * cube, hsi, rad, ref, ...; data/cube_io.h) */
 } lm_train_cfg;
