@@ -12,8 +12,15 @@
  * Models with a finite receptive field (linear, rt-*: lm_whole_halo > 0) run on the whole frame
  * in strips (infer/whole.h) unless --tiles. --model auto picks a model per window from a
  * calibration file (infer/auto.h, `lumosaic fit-auto`) and prints the share of each model.
+ * Two-bucket models ("-b2" presets) read bucket 0 too: --bucket0 (a frame, pattern or folder
+ * like --input, the same count and size), else the bucket0/ folder `simulate --bucket0` writes
+ * beside frames/ (the input path with its last "frames" component renamed); bucket 0 is not
+ * aligned in time, so such sequences are reconstructed without alignment (a warning). They run
+ * in whole-frame strips of both planes like their one-bucket forms (lmmse-b2 without its
+ * one-plane host path).
  * What it is not: the flow or the alignment scheme themselves (infer/flow.c, infer/align.c). */
 #include <omp.h>
+#include <sys/stat.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -35,7 +42,8 @@ static void help(void)
 {
     printf("usage: lumosaic infer --model RUN --input FRAMES --output DIR [--batch N]\n"
            "                      [--threads T] [--system FILE] [--no-align] [--tiles]\n"
-           "                      [--device cpu|opencl] [--auto FILE --auto-tol DB]\n\n"
+           "                      [--device cpu|opencl] [--auto FILE --auto-tol DB]\n"
+           "                      [--bucket0 FRAMES]\n\n"
            "Reconstruct 31-band cubes (400-700 nm) from coded frames with a trained model,\n"
            "patch-wise: 66 x 64 windows, stride 30 x 32, on the tile grid, blended by a raised-\n"
            "cosine weight; models with a finite receptive field (linear, rt-8, rt-16) instead\n"
@@ -54,6 +62,10 @@ static void help(void)
            "  --input FRAMES   one coded frame (.png/.tif/.exr), a numbered pattern\n"
            "                   (frame_%%04d.png) or a folder of frames; the size must be a\n"
            "                   multiple of the mosaic tile and at least 66 x 64\n"
+           "  --bucket0 FRAMES two-bucket models (\"-b2\" presets): bucket 0 of the same frames,\n"
+           "                   stored / (LEDs - 1) as 'simulate --bucket0' writes it (a file,\n"
+           "                   pattern or folder; same count and size as --input). Default:\n"
+           "                   the bucket0/ folder beside the input's frames/ folder\n"
            "  --output DIR     output folder (must not exist, or be empty); written atomically\n"
            "  --batch N        windows per network call (1..4096; default 8)\n"
            "  --threads T      OpenMP threads (1..1024; default: all cores)\n"
@@ -73,7 +85,7 @@ static void help(void)
 }
 
 typedef struct infer_opts {
-    const char *model, *input, *output, *system, *auto_file;
+    const char *model, *input, *output, *system, *auto_file, *bucket0;
     lm_cli_common com; /* --threads, --device */
     long long batch;
     double auto_tol, noise_level;
@@ -95,6 +107,7 @@ static int parse(lm_cli *c, infer_opts *o)
             (r = lm_cli_value(c, "--output", &o->output)) ||
             (r = lm_cli_value(c, "--system", &o->system)) ||
             (r = lm_cli_value(c, "--auto", &o->auto_file)) ||
+            (r = lm_cli_value(c, "--bucket0", &o->bucket0)) ||
             (r = lm_cli_real(c, "--auto-tol", 0.0, 1e6, &o->auto_tol)) ||
             (r = lm_cli_real(c, "--noise-level", 0.0, 1.0, &o->noise_level)) ||
             (r = lm_cli_flag(c, "--tiles", &o->tiles)) ||
@@ -146,6 +159,8 @@ typedef struct infer_run {
     int choice[LM_AUTO_MAX_BINS], whole;
     long windows[LM_AUTO_MAX_MODELS];
     lm_frame_seq seq;
+    lm_frame_seq seq0;   /* two-bucket models: bucket 0 of the frames (count 0 otherwise) */
+    float *in2;          /* two-bucket models: bucket 1 then bucket 0, 2 x H x W */
     lm_srgb srgb;
     lm_ctx ctx;
     lm_tile_device dev;
@@ -185,7 +200,7 @@ static int align_init(infer_run *r, lm_err *e)
 {
     infer_align *a = &r->al;
     const lm_system *s = &r->im.sys;
-    if (r->o->no_align || r->seq.count < 2) return 0;
+    if (r->o->no_align || r->seq.count < 2 || r->seq0.count) return 0;
     a->ty = s->tile_rows;
     a->tx = s->tile_cols;
     a->np = a->ty * a->tx;
@@ -295,6 +310,26 @@ static lm_status auto_frame(infer_run *r, const float *in, int H, int W, lm_tile
     return st;
 }
 
+/* Two-bucket models: frame i's bucket 0 after bucket 1 (in) in r->in2; *in points at it. */
+static lm_status with_bucket0(infer_run *r, int i, const float **in, int H, int W, lm_err *e)
+{
+    if (!r->seq0.count) return LM_OK;
+    lm_frame f0;
+    if (lm_frame_seq_read(&r->seq0, i, &f0, e)) return e->status;
+    lm_status st = LM_OK;
+    if (f0.height != H || f0.width != W)
+        st = lm_err_set(e, LM_ERR_SHAPE, "%s: bucket 0 is %d x %d, bucket 1 (%s) %d x %d",
+                        r->seq0.paths[i], f0.width, f0.height, r->seq.paths[i], W, H);
+    if (!st) {
+        const size_t n = (size_t)H * W;
+        memcpy(r->in2, *in, sizeof(float) * n);
+        memcpy(r->in2 + n, f0.data, sizeof(float) * n);
+        *in = r->in2;
+    }
+    lm_frame_free(&f0);
+    return st;
+}
+
 /* One frame to a 31-band cube by the run's path: auto, whole frame or windows. */
 static lm_status reconstruct(infer_run *r, const float *in, int H, int W, lm_cube *cube,
                              lm_err *e)
@@ -339,8 +374,13 @@ static int run_frames(infer_run *r)
             return fail(r->c, &e, 0);
         }
         double ta = omp_get_wtime();
-        st = reconstruct(r, in, f.height ? f.height : r->seq.height,
-                         f.width ? f.width : r->seq.width, &cube, &e);
+        const int H = f.height ? f.height : r->seq.height, W = f.width ? f.width : r->seq.width;
+        st = with_bucket0(r, i, &in, H, W, &e);
+        if (st) {
+            lm_frame_free(&f);
+            return fail(r->c, &e, 0);
+        }
+        st = reconstruct(r, in, H, W, &cube, &e);
         lm_frame_free(&f);
         double t1 = omp_get_wtime();
         if (st) {
@@ -375,6 +415,9 @@ static int open_auto(infer_run *r, lm_err *e)
         if (lm_infer_model_load(a->models[m].path, r->o->system, im, e))
             return lm_cli_error(r->c, "%s: model %d: %s", r->o->auto_file, m, e->msg);
         r->models[m] = im->model;
+        if (lm_model_buckets(im->model) == 2)
+            return lm_cli_error(r->c, "%s: model '%s' reads both buckets: --model auto takes "
+                                "one-bucket models only", r->o->auto_file, a->models[m].path);
         if (im->model->mosaic.ty != r->im.model->mosaic.ty ||
             im->model->mosaic.tx != r->im.model->mosaic.tx ||
             im->model->out_channels != LM_MODEL_OUT_CHANNELS)
@@ -384,6 +427,8 @@ static int open_auto(infer_run *r, lm_err *e)
     lm_auto_choose(a, r->o->auto_tol, r->choice);
     return 0;
 }
+
+static int open_bucket0(infer_run *r, lm_err *e);
 
 static int open_inputs(infer_run *r, lm_err *e)
 {
@@ -397,6 +442,8 @@ static int open_inputs(infer_run *r, lm_err *e)
     }
     r->whole = !r->o->is_auto && !r->o->tiles && lm_whole_halo(r->im.model) > 0;
     if (lm_frame_seq_open(r->o->input, &r->seq, e)) return fail(r->c, e, 0);
+    int rc = open_bucket0(r, e);
+    if (rc) return rc;
     lm_tile_opts to;
     lm_tile_default_opts(&to);
     const lm_mosaic *mo = &r->im.model->mosaic;
@@ -411,6 +458,65 @@ static int open_inputs(infer_run *r, lm_err *e)
         return 1;
     }
     return align_init(r, e);
+}
+
+/* The bucket0/ folder (or file, or pattern) beside the input's frames/: the input path with
+ * its last "frames" component renamed; "" when the input has none or it does not exist. */
+static void bucket0_beside(const char *input, char *out, size_t n)
+{
+    out[0] = 0;
+    const char *hit = NULL;
+    for (const char *p = strstr(input, "frames"); p; p = strstr(p + 1, "frames"))
+        if ((p == input || p[-1] == '/') && (p[6] == 0 || p[6] == '/')) hit = p;
+    if (!hit) return;
+    int k = snprintf(out, n, "%.*sbucket0%s", (int)(hit - input), input, hit + 6);
+    if (k < 0 || (size_t)k >= n) {
+        out[0] = 0;
+        return;
+    }
+    char dir[1100]; /* it must exist: the folder itself, or the folder holding the file(s) */
+    snprintf(dir, sizeof dir, "%.*sbucket0", (int)(hit - input), input);
+    struct stat st;
+    if (stat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) out[0] = 0;
+}
+
+/* Two-bucket models: open bucket 0 (--bucket0, else beside frames/) and check it against the
+ * input; a one-bucket model refuses --bucket0. 0 or an exit status (printed). */
+static int open_bucket0(infer_run *r, lm_err *e)
+{
+    const int two = !r->o->is_auto && lm_model_buckets(r->im.model) == 2;
+    if (!two) {
+        if (r->o->bucket0)
+            return lm_cli_error(r->c, "--bucket0: model %s reads bucket 1 only (two-bucket "
+                                "models are the \"-b2\" presets)", r->im.model->preset);
+        return 0;
+    }
+    char found[1100];
+    const char *spec = r->o->bucket0;
+    if (!spec) {
+        bucket0_beside(r->o->input, found, sizeof found);
+        if (!found[0])
+            return lm_cli_error(r->c, "model %s reads both buckets: give --bucket0 (no bucket0/ "
+                                "folder beside the input's frames/)", r->im.model->preset);
+        spec = found;
+    }
+    if (lm_frame_seq_open(spec, &r->seq0, e))
+        return lm_cli_error(r->c, "--bucket0: %s", e->msg);
+    if (r->seq0.count != r->seq.count)
+        return lm_cli_error(r->c, "--bucket0 %s: %d frames, the input has %d", spec,
+                            r->seq0.count, r->seq.count);
+    if (r->seq0.height != r->seq.height || r->seq0.width != r->seq.width)
+        return lm_cli_error(r->c, "%s: bucket 0 is %d x %d, bucket 1 (%s) %d x %d",
+                            r->seq0.paths[0], r->seq0.width, r->seq0.height, r->seq.paths[0],
+                            r->seq.width, r->seq.height);
+    r->in2 = malloc(sizeof(float) * 2 * (size_t)r->seq.height * r->seq.width);
+    if (!r->in2) return lm_cli_error(r->c, "out of memory (%d x %d frame)", r->seq.width,
+                                     r->seq.height), 1;
+    if (r->seq.count > 1 && !r->o->no_align)
+        fprintf(stderr, "lumosaic infer: warning: bucket 0 is not aligned in time: the two-bucket "
+                "model %s reconstructs the frames without temporal alignment\n",
+                r->im.model->preset);
+    return 0;
 }
 
 /* Under mpirun: rank r of N reconstructs the block of frames [r n / N, (r + 1) n / N) (it
@@ -486,6 +592,8 @@ int lm_cmd_infer(int argc, char **argv)
     free(r.rgb);
     align_free(&r.al);
     lm_frame_seq_free(&r.seq);
+    lm_frame_seq_free(&r.seq0);
+    free(r.in2);
     lm_infer_model_free(&r.im);
     for (int m = 1; m < LM_AUTO_MAX_MODELS; m++) lm_infer_model_free(&r.more[m]);
     return rc;

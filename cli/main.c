@@ -10,6 +10,7 @@ static const lm_command commands[] = {
     {"version", lm_cmd_version, "print the version and build configuration"},
     /* one line per command (keep alphabetical after version) */
     {"calibrate", lm_cmd_calibrate, "LED gains from ColorChecker frames (NNLS): a new system file"},
+    {"coding", lm_cmd_coding, "learn the LED allocation and tile map under shot/read noise"},
     {"eval", lm_cmd_eval, "score a trained model: PSNR/SSIM/MAE/SAM vs noise, rainbow test"},
     {"fit-auto", lm_cmd_fit_auto, "fit infer --model auto: error vs difficulty, cost per model"},
     {"infer", lm_cmd_infer, "reconstruct 31-band cubes from coded frames with a trained model"},
@@ -45,7 +46,7 @@ static void usage(FILE *f)
 static void omp_wait_policy(int argc, char **argv)
 {
     static const char *const heavy[] = {"train", "infer", "eval", "study", "simulate", "fit-auto",
-                                        NULL}; /* the commands whose work is parallel */
+                                        "coding", NULL}; /* the commands whose work is parallel */
     int compute = 0;
     for (int i = 0; argc > 1 && heavy[i]; i++) compute |= !strcmp(argv[1], heavy[i]);
     if (!compute || getenv("OMP_WAIT_POLICY") || getenv("GOMP_SPINCOUNT") ||

@@ -229,24 +229,53 @@ static void absolute_csv(json_t *spec, const char *dir)
 lm_status lm_calib_write_system(const lm_system *sys, const double *gains, const char *note,
                                 const char *out_path, lm_err *err)
 {
+    char name[160];
+    snprintf(name, sizeof name, "%s (calibrated)", sys->name[0] ? sys->name : "system");
+    lm_system_edit ed = {.gains = gains, .name = name, .note = note};
+    return lm_system_write_edit(sys, &ed, out_path, err);
+}
+
+lm_status lm_system_write_edit(const lm_system *sys, const lm_system_edit *ed,
+                               const char *out_path, lm_err *err)
+{
     json_error_t je;
     json_t *root = json_load_file(sys->path, JSON_REJECT_DUPLICATES, &je);
     if (!root)
-        return lm_err_set(err, LM_ERR_IO, "calibrate: cannot re-read the system file %s: %s",
+        return lm_err_set(err, LM_ERR_IO, "system: cannot re-read the system file %s: %s",
                           sys->path, je.text);
     char dir[PATH_MAX], real[PATH_MAX];
     snprintf(dir, sizeof dir, "%s", realpath(sys->path, real) ? real : sys->path);
     char *slash = strrchr(dir, '/');
     if (slash) *slash = 0;
     else snprintf(dir, sizeof dir, ".");
-    json_t *g = json_array();
-    for (int l = 0; l < sys->nleds; l++) json_array_append_new(g, json_real(gains[l]));
-    json_object_set_new(root, "gains", g);
-    char name[160];
-    snprintf(name, sizeof name, "%s (calibrated)", sys->name[0] ? sys->name : "system");
-    json_object_set_new(root, "name", json_string(name));
-    json_object_set_new(root, "description", json_string(note));
     json_t *sensor = json_object_get(root, "sensor"), *leds = json_object_get(root, "leds");
+    if (ed->gains) {
+        json_t *g = json_array();
+        for (int l = 0; l < sys->nleds; l++) json_array_append_new(g, json_real(ed->gains[l]));
+        json_object_set_new(root, "gains", g);
+    }
+    if (ed->subframes) { /* leds[] is in file order, as sys->leds */
+        long total = 0;
+        for (size_t i = 0; i < json_array_size(leds) && (int)i < sys->nleds; i++) {
+            json_object_set_new(json_array_get(leds, i), "subframes",
+                                json_integer(ed->subframes[i]));
+            total += ed->subframes[i];
+        }
+        json_object_set_new(root, "subframes_total", json_integer(total));
+    }
+    if (ed->tile_led) {
+        json_t *rows = json_array();
+        for (int y = 0; y < sys->tile_rows; y++) {
+            json_t *row = json_array();
+            for (int x = 0; x < sys->tile_cols; x++)
+                json_array_append_new(
+                    row, json_string(sys->leds[ed->tile_led[y * sys->tile_cols + x]].name));
+            json_array_append_new(rows, row);
+        }
+        json_object_set_new(root, "tile_map", rows);
+    }
+    if (ed->name) json_object_set_new(root, "name", json_string(ed->name));
+    if (ed->note) json_object_set_new(root, "description", json_string(ed->note));
     if (sensor) absolute_csv(json_object_get(sensor, "qe"), dir);
     for (size_t i = 0; i < json_array_size(leds); i++)
         absolute_csv(json_object_get(json_array_get(leds, i), "emission"), dir);
@@ -260,7 +289,7 @@ lm_status lm_calib_write_system(const lm_system *sys, const double *gains, const
                                    strerror(errno))
                       : LM_OK;
     if (!st && lm_system_load(tmp, &check, &e2))
-        st = lm_err_set(err, LM_ERR_FORMAT, "calibrate: the calibrated system does not load: %s",
+        st = lm_err_set(err, LM_ERR_FORMAT, "system: the written system does not load: %s",
                         e2.msg);
     else if (!st) lm_system_free(&check);
     if (!st && rename(tmp, out_path) != 0)

@@ -75,6 +75,17 @@ lm_status lm_calib_solve(const lm_system *sys, const double *A, const double *M,
  * to out_path, atomically, and check that it loads. */
 lm_status lm_calib_write_system(const lm_system *sys, const double *gains, const char *note,
                                 const char *out_path, lm_err *err);
+/* The general form: a copy of sys->path with the fields given replaced (NULL = keep): gains
+ * (nleds), subframes per LED (file order; "subframes_total" updated), the tile map (LED index
+ * per phase, the system's tile size), name, description. Atomic, checked by loading it back. */
+typedef struct lm_system_edit {
+    const double *gains;
+    const int *subframes;
+    const int *tile_led;
+    const char *name, *note;
+} lm_system_edit;
+lm_status lm_system_write_edit(const lm_system *sys, const lm_system_edit *ed,
+                               const char *out_path, lm_err *err);
 
 /* A cube on the system's grid (height x width): a grey background of reflectance `background`
  * and each patch region filled with its reflectance (C). For trying calibration on simulated

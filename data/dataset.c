@@ -24,7 +24,7 @@ void lm_dataset_default_cfg(lm_dataset_cfg *cfg)
     *cfg = (lm_dataset_cfg){.patch_h = 66, .patch_w = 64, .synth_fraction = 0.33f,
                             .noise_min = 0.0f, .noise_max = 0.15f, .flips = 1, .seed = 1,
                             .workers = 2, .cache_scenes = 0, .val_patches = 64,
-                            .val_noise = 0.0f, .procedural_fraction = 0.0f};
+                            .val_noise = 0.0f, .procedural_fraction = 0.0f, .buckets = 1};
 }
 
 /* ---- split: group keys and the hash ---------------------------------------------------- */
@@ -434,13 +434,24 @@ lm_status lm_ds_make_sample(lm_dataset *d, lm_data_split split, long i, float *r
     lm_cube c31 = {0}, c41 = {0}, t33 = {0};
     if (st == LM_OK) st = sample_cube(d, &p, split, &c31, err);
     if (st == LM_OK) st = lm_cube_mirror41(&c31, &c41, err);
-    if (st == LM_OK) st = lm_forward_clean(d->cfg.sys, &c41, 0, 0, raw, NULL, 1, err);
+    const int ph = d->cfg.patch_h, pw = d->cfg.patch_w, two = d->cfg.buckets == 2;
+    float *b0 = two ? raw + (size_t)ph * pw : NULL; /* raw bucket 0 until scaled below */
+    if (st == LM_OK) st = lm_forward_clean(d->cfg.sys, &c41, 0, 0, raw, b0, 1, err);
     if (st == LM_OK && (p.info.noise_k > 0.0f || d->cfg.sensor_clip || d->cfg.sensor_bits)) {
         lm_noise_opts no = {0};
         no.gauss_k = p.info.noise_k;
         no.clip = d->cfg.sensor_clip;
         no.bits = d->cfg.sensor_bits;
-        st = lm_forward_noise(raw, d->cfg.patch_h, d->cfg.patch_w, &no, &p.noise_rng, 1, err);
+        st = lm_forward_noise(raw, ph, pw, &no, &p.noise_rng, 1, err);
+        /* bucket 0 next from the same generator (lm_forward_noise advanced it), as
+         * lm_forward_simulate does: bucket 1's numbers are those of a one-bucket sample */
+        lm_noise_opts n0 = lm_forward_bucket0_noise(&no, d->cfg.sys->nleds);
+        if (st == LM_OK && two) st = lm_forward_noise(b0, ph, pw, &n0, &p.noise_rng, 1, err);
+    }
+    if (st == LM_OK && two) {
+        const int nl = d->cfg.sys->nleds;
+        const float f = nl > 1 ? 1.0f / (float)(nl - 1) : 1.0f; /* as simulate --bucket0 */
+        for (size_t k = 0; k < (size_t)ph * pw; k++) b0[k] *= f;
     }
     if (st == LM_OK) st = lm_cube_target33(&c41, &t33, err);
     if (st == LM_OK)
@@ -470,6 +481,8 @@ lm_status lm_dataset_eval_sample(lm_dataset *d, lm_data_split split, int i, floa
                           lm_dataset_eval_count(d, split) - 1);
     return lm_ds_make_sample(d, split, i, raw, target, err);
 }
+
+int lm_dataset_buckets(const lm_dataset *d) { return d->cfg.buckets == 2 ? 2 : 1; }
 
 int lm_dataset_num_scenes(const lm_dataset *d, lm_data_split split)
 {
@@ -558,9 +571,10 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
     const lm_dataset_cfg *c = &d->cfg;
     fprintf(f, "dataset: %d scenes in %d groups; patch %d x %d; narrowband synthetic %.0f%%, "
             "procedural %.0f%%; noise k ~ U[%g, %g]; flips %s; seed %llu; %d "
-            "workers; cache %d scenes\n", d->nscenes, d->ngroups, c->patch_h, c->patch_w,
+            "workers; cache %d scenes%s\n", d->nscenes, d->ngroups, c->patch_h, c->patch_w,
             100.0 * c->synth_fraction, 100.0 * c->procedural_fraction, c->noise_min, c->noise_max,
-            c->flips ? "on" : "off", (unsigned long long)c->seed, d->nthreads, d->cache_cap);
+            c->flips ? "on" : "off", (unsigned long long)c->seed, d->nthreads, d->cache_cap,
+            c->buckets == 2 ? "; both buckets (bucket 1, bucket 0 / (LEDs - 1))" : "");
     fprintf(f, "  split by scene group (name without a _crop<N> or _<height|width> tag): test "
             "and val take %d of the %d groups each (a tenth, rounded), by hash rank\n",
             (d->ngroups + 5) / 10, d->ngroups);
@@ -611,6 +625,9 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
     if (c->mat_key && strlen(c->mat_key) >= LM_DATASET_KEY_LEN)
         return lm_err_set(err, LM_ERR_ARG, "dataset: .mat key longer than %d characters",
                           LM_DATASET_KEY_LEN - 1);
+    if (c->buckets < 0 || c->buckets > 2)
+        return lm_err_set(err, LM_ERR_ARG, "dataset: buckets %d (1: bucket 1 only, 2: both)",
+                          c->buckets);
     if (c->npaths == 0 && c->synth_fraction + c->procedural_fraction < 1.0f)
         return lm_err_set(err, LM_ERR_ARG, "dataset: no scene paths given (only a fully "
                           "synthetic dataset, synth_fraction + procedural_fraction = 1, needs "

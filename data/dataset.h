@@ -58,6 +58,12 @@ typedef struct lm_dataset_cfg {
     int batch_stride;           /* the caller asks for batch index + stride after index (data-
                                  * parallel ranks take every stride-th batch): what the workers
                                  * prepare ahead (0 or 1 = the next one) */
+    int buckets;                /* 1 (or 0): samples are bucket 1 only (1 plane, the paper);
+                                 * 2: bucket 1 and bucket 0 / (LEDs - 1) (2 planes, the stored
+                                 * scale of `simulate --bucket0`). Each bucket gets the noise
+                                 * independently: Gaussian k x that bucket's own clean maximum
+                                 * (the same k), clipping / quantisation on its own full scale
+                                 * (lm_forward_bucket0_noise) */
     const char *mat_key;        /* .mat cube variable (NULL or "": automatic, cube_io.h);
                                  * copied by lm_dataset_open */
 } lm_dataset_cfg;
@@ -82,7 +88,10 @@ void lm_dataset_default_cfg(lm_dataset_cfg *cfg);
 lm_dataset *lm_dataset_open(const lm_dataset_cfg *cfg, lm_err *err);
 void lm_dataset_close(lm_dataset *d);
 int lm_dataset_num_scenes(const lm_dataset *d, lm_data_split split);
-/* Training batch number `index` (0-based): raw is B x 1 x ph x pw (coded patches, bucket 1),
+/* Planes of a sample's raw input: 1 (bucket 1) or 2 (both buckets, cfg.buckets 2). */
+int lm_dataset_buckets(const lm_dataset *d);
+/* Training batch number `index` (0-based): raw is B x 1 x ph x pw (coded patches, bucket 1;
+ * B x 2 x ph x pw with cfg.buckets 2: bucket 1, then bucket 0 / (LEDs - 1)),
  * target B x 33 x ph x pw; host buffers owned by the caller. Same index, same numbers: item j
  * is training sample index * B + j. With workers, batch index + 1 is prepared in the
  * background after each call. Call from one thread at a time. */

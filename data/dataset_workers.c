@@ -7,7 +7,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-static size_t raw_items(const lm_dataset *d) { return (size_t)d->cfg.patch_h * d->cfg.patch_w; }
+static size_t px_items(const lm_dataset *d) { return (size_t)d->cfg.patch_h * d->cfg.patch_w; }
+/* one sample's raw floats: a plane per bucket */
+static size_t raw_items(const lm_dataset *d)
+{
+    return px_items(d) * (size_t)(d->cfg.buckets == 2 ? 2 : 1);
+}
 
 static batch_slot *find_job(lm_dataset *d)
 {
@@ -34,7 +39,7 @@ static void *worker_main(void *arg)
         pthread_mutex_unlock(&d->mu);
         lm_err e = {LM_OK, ""};
         lm_status st = lm_ds_make_sample(d, LM_SPLIT_TRAIN, i, s->raw + (size_t)j * n,
-                                   s->target + (size_t)j * LM_TARGET_CHANNELS * n, &e);
+                                   s->target + (size_t)j * LM_TARGET_CHANNELS * px_items(d), &e);
         pthread_mutex_lock(&d->mu);
         s->inflight--;
         s->done++;
@@ -55,10 +60,10 @@ static batch_slot *slot_start(lm_dataset *d, long index, int B, lm_err *err)
     /* batch_pooled frees every other slot first, so one is always free */
     batch_slot *s = d->slot[0].batch == 0 ? &d->slot[0] : &d->slot[1];
     if (s->cap < B) {
-        size_t n = raw_items(d) * (size_t)B;
+        size_t n = raw_items(d) * (size_t)B, np = px_items(d) * (size_t)B;
         float *raw = realloc(s->raw, n * sizeof(float));
         if (raw) s->raw = raw;
-        float *tg = raw ? realloc(s->target, n * LM_TARGET_CHANNELS * sizeof(float)) : NULL;
+        float *tg = raw ? realloc(s->target, np * LM_TARGET_CHANNELS * sizeof(float)) : NULL;
         if (tg) s->target = tg;
         if (!raw || !tg) {
             lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory for a batch of %d", B);
@@ -104,9 +109,9 @@ static lm_status batch_pooled(lm_dataset *d, long index, int B, float *raw, floa
     }
     pthread_mutex_unlock(&d->mu);
     if (st == LM_OK) {
-        size_t n = raw_items(d) * (size_t)B;
+        size_t n = raw_items(d) * (size_t)B, np = px_items(d) * (size_t)B;
         memcpy(raw, s->raw, n * sizeof(float));
-        memcpy(target, s->target, n * LM_TARGET_CHANNELS * sizeof(float));
+        memcpy(target, s->target, np * LM_TARGET_CHANNELS * sizeof(float));
     }
     pthread_mutex_lock(&d->mu);
     if (s) s->batch = 0;
@@ -127,7 +132,7 @@ lm_status lm_dataset_batch(lm_dataset *d, long index, int batch, float *raw, flo
     size_t n = raw_items(d);
     for (int j = 0; j < batch; j++) {
         lm_status st = lm_ds_make_sample(d, LM_SPLIT_TRAIN, index * batch + j, raw + (size_t)j * n,
-                                   target + (size_t)j * LM_TARGET_CHANNELS * n, err);
+                                   target + (size_t)j * LM_TARGET_CHANNELS * px_items(d), err);
         if (st != LM_OK) return st;
     }
     return LM_OK;

@@ -211,6 +211,16 @@ lm_status lm_forward_noise(float *img, int height, int width, const lm_noise_opt
 }
 
 /* ---- whole simulation -------------------------------------------------------------------- */
+lm_noise_opts lm_forward_bucket0_noise(const lm_noise_opts *o, int nleds)
+{
+    lm_noise_opts b = *o;
+    const float f = nleds > 1 ? (float)(nleds - 1) : 1.0f;
+    b.full_scale = (o->full_scale > 0.0f ? o->full_scale : 1.0f) * f;
+    b.photons = o->photons * f;
+    if (!(o->photons > 0.0)) b.read_noise = o->read_noise / f; /* a fraction of the full scale */
+    return b;
+}
+
 lm_status lm_forward_simulate(const lm_system *sys, const lm_cube *cube,
                               const lm_forward_opts *o, lm_rng *rng, float *bucket1,
                               float *bucket0, lm_err *err)
@@ -219,9 +229,9 @@ lm_status lm_forward_simulate(const lm_system *sys, const lm_cube *cube,
     if (st == LM_OK)
         st = lm_forward_noise(bucket1, cube->height, cube->width, &o->noise, rng, o->nthreads,
                               err);
+    lm_noise_opts n0 = lm_forward_bucket0_noise(&o->noise, sys->nleds);
     if (st == LM_OK && bucket0)
-        st = lm_forward_noise(bucket0, cube->height, cube->width, &o->noise, rng, o->nthreads,
-                              err);
+        st = lm_forward_noise(bucket0, cube->height, cube->width, &n0, rng, o->nthreads, err);
     return st;
 }
 

@@ -56,7 +56,15 @@ lm_status lm_forward_clean(const lm_system *sys, const lm_cube *cube, int y0, in
  * non-finite options, bits outside 0..24, or a missing rng. */
 lm_status lm_forward_noise(float *img, int height, int width, const lm_noise_opts *o,
                            lm_rng *rng, int nthreads, lm_err *err);
-/* lm_forward_clean then lm_forward_noise on each produced bucket (bucket 1 first). */
+/* The noise options of bucket 0's raw values (the sum of the other LEDs' light, up to LEDs - 1
+ * times bucket 1's white response), given bucket 1's: bucket 0's full scale is (LEDs - 1) x
+ * bucket 1's (a well and ADC sized for the complement, which is what the stored bucket-0 files,
+ * divided by LEDs - 1 with white = 1, presume); the same signal per photo-electron (photons x
+ * (LEDs - 1) at its full scale) and the same read noise in signal units; the same relative
+ * Gaussian level k (of that bucket's own maximum). Equal to o for a single LED. */
+lm_noise_opts lm_forward_bucket0_noise(const lm_noise_opts *o, int nleds);
+/* lm_forward_clean then lm_forward_noise on each produced bucket (bucket 1 first; bucket 0 with
+ * lm_forward_bucket0_noise(&o->noise, sys->nleds)). */
 lm_status lm_forward_simulate(const lm_system *sys, const lm_cube *cube,
                               const lm_forward_opts *o, lm_rng *rng, float *bucket1,
                               float *bucket0, lm_err *err);

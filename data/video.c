@@ -313,8 +313,8 @@ lm_status lm_video_frame(const lm_system *sys, const lm_cube *cube, const lm_vid
     if (st == LM_OK) st = buckets(sys, cube, o, frame, bucket1, bucket0, err);
     int H = cube->height, W = cube->width;
     if (st == LM_OK) st = lm_forward_noise(bucket1, H, W, &o->noise, rng, o->nthreads, err);
-    if (st == LM_OK && bucket0)
-        st = lm_forward_noise(bucket0, H, W, &o->noise, rng, o->nthreads, err);
+    lm_noise_opts n0 = lm_forward_bucket0_noise(&o->noise, sys->nleds);
+    if (st == LM_OK && bucket0) st = lm_forward_noise(bucket0, H, W, &n0, rng, o->nthreads, err);
     if (st == LM_OK && gt) {
         double t = 1e-6 * (lm_video_frame_start_us(sys, frame) + lm_video_gt_time_us(sys));
         st = lm_video_warp(cube, &o->motion, t, gt, o->nthreads, err);

@@ -14,6 +14,12 @@
 
 static int is_rgb(const lm_infer_model *im) { return lm_model_has(im->model, LM_CAP_RGB_INPUT); }
 
+/* Planes of the frame the model takes: 3 (RGB), 2 (both buckets) or 1 (bucket 1). */
+static int planes_of(const lm_infer_model *im)
+{
+    return is_rgb(im) ? 3 : lm_model_buckets(im->model) == 2 ? 2 : 1;
+}
+
 /* lm_eval_simulate with an explicit thread count and a mutable rng (advanced). */
 static lm_status simulate(const lm_infer_model *im, const lm_cube *truth,
                           const lm_noise_opts *noise, lm_rng *rng, int nthreads, float *frame,
@@ -42,14 +48,22 @@ static lm_status simulate(const lm_infer_model *im, const lm_cube *truth,
         return lm_rgbcam_simulate(&cam, truth->data, truth->height, truth->width,
                                   noise ? noise : &none, rng, frame, nthreads, err);
     }
-    if (im->model->in_channels != 1)
-        return lm_err_set(err, LM_ERR_ARG, "eval: model %s takes %d input channels (need 1 or "
-                          "3)", im->model->preset, im->model->in_channels);
+    const int two = lm_model_buckets(im->model) == 2;
+    if (im->model->in_channels != (two ? 2 : 1))
+        return lm_err_set(err, LM_ERR_ARG, "eval: model %s takes %d input channels (need 1, 2 "
+                          "or 3)", im->model->preset, im->model->in_channels);
     lm_forward_opts fo;
     memset(&fo, 0, sizeof fo);
     if (noise) fo.noise = *noise;
     fo.nthreads = nthreads;
-    return lm_forward_simulate31(&im->sys, truth, &fo, rng, frame, NULL, err);
+    const size_t npx = (size_t)truth->height * truth->width;
+    /* both buckets: the same noise model on each (bucket 0's own maximum and full scale),
+     * bucket 0 then stored / (LEDs - 1) as simulate --bucket0 writes it */
+    lm_status st = lm_forward_simulate31(&im->sys, truth, &fo, rng, frame, two ? frame + npx
+                                         : NULL, err);
+    const float f = im->sys.nleds > 1 ? 1.0f / (float)(im->sys.nleds - 1) : 1.0f;
+    for (size_t i = 0; two && !st && i < npx; i++) frame[npx + i] *= f;
+    return st;
 }
 
 lm_status lm_eval_simulate(const lm_infer_model *im, const lm_cube *truth,
@@ -60,7 +74,7 @@ lm_status lm_eval_simulate(const lm_infer_model *im, const lm_cube *truth,
     *n = 0;
     if (!im || !im->model)
         return lm_err_set(err, LM_ERR_ARG, "eval: simulate: no model");
-    size_t cnt = (size_t)(is_rgb(im) ? 3 : 1) * truth->height * truth->width;
+    size_t cnt = (size_t)planes_of(im) * truth->height * truth->width;
     float *f = malloc(sizeof(float) * (cnt ? cnt : 1));
     if (!f) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
     lm_rng r;
@@ -96,7 +110,7 @@ lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *
         if (st) lm_cube_free(out);
         return st;
     }
-    if (m->in_channels != 1)
+    if (m->in_channels != (lm_model_buckets(m) == 2 ? 2 : 1))
         return lm_err_set(err, LM_ERR_ARG, "eval: model %s takes %d input channels and is not "
                           "MST++", m->preset, m->in_channels);
     if (whole && lm_whole_halo(m) > 0) return lm_whole_infer(c, m, frame, height, width, out, err);
@@ -173,7 +187,7 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
     for (int i = 0; i < nnoise; i++)
         if (!(k[i] >= 0.0f) || !isfinite(k[i]))
             return lm_err_set(err, LM_ERR_ARG, "eval: noise level %g is not >= 0", (double)k[i]);
-    float *frame = malloc(sizeof(float) * (is_rgb(im) ? 3 : 1) * (size_t)truth->height *
+    float *frame = malloc(sizeof(float) * planes_of(im) * (size_t)truth->height *
                           truth->width);
     if (!frame) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
     lm_status st = LM_OK;
@@ -300,7 +314,7 @@ static lm_status score_region(lm_ctx *c, const lm_infer_model *im, const float *
 static lm_status score_still(lm_ctx *c, const lm_infer_model *im, const lm_tile_opts *to,
                              const lm_cube *truth, lm_eval_motion *r, lm_err *err)
 {
-    size_t n = (size_t)(is_rgb(im) ? 3 : 1) * truth->height * truth->width;
+    size_t n = (size_t)planes_of(im) * truth->height * truth->width;
     float *frame = malloc(sizeof(float) * n);
     if (!frame) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
     lm_status st = simulate(im, truth, NULL, NULL, lm_nthreads(c), frame, err);
@@ -389,6 +403,9 @@ lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube 
         return lm_err_set(err, LM_ERR_SHAPE, "eval: motion at %g px/s: the %d x %d scene keeps "
                           "%d x %d pixels in view over the video (need %d x %d)", speed, W, H,
                           out->width, out->height, LM_SSIM_WIN, LM_SSIM_WIN);
+    if (lm_model_buckets(im->model) == 2)
+        return lm_err_set(err, LM_ERR_ARG, "eval: the motion test aligns bucket 1's LED "
+                          "sub-images only: not for the two-bucket model %s", im->model->preset);
     if (is_rgb(im)) {
         lm_motion mo;
         memset(&mo, 0, sizeof mo);
@@ -461,7 +478,7 @@ lm_status lm_eval_rainbow_run(lm_ctx *c, const lm_infer_model *im, int size,
     lm_status st = lm_synth_rainbow(size, size, &truth, err);
     if (st) return st;
     st = lm_eval_prepare(&truth, im->model->mosaic.ty, im->model->mosaic.tx, err);
-    float *frame = st ? NULL : malloc(sizeof(float) * (is_rgb(im) ? 3 : 1) *
+    float *frame = st ? NULL : malloc(sizeof(float) * planes_of(im) *
                                       (size_t)truth.height * truth.width);
     if (!st && !frame) st = lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
     lm_cube pred;

@@ -101,6 +101,15 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
         lm_infer_model_free(im);
         return st;
     }
+    char *bk = lm_safetensors_meta(im->weights, "buckets", &e3); /* older files: none */
+    if (bk && bk[0] && atoi(bk) != lm_model_buckets(im->model))
+        st = lm_err_set(err, LM_ERR_FORMAT, "%s: records %s bucket(s), its preset %s reads %d",
+                        im->weights, bk, preset, lm_model_buckets(im->model));
+    free(bk);
+    if (st) {
+        lm_infer_model_free(im);
+        return st;
+    }
     lm_params_set_requires_grad(&im->model->params, 0);
     if (lm_model_has(im->model, LM_CAP_QDO_OPTICS))
         st = lm_infer_qdocam(im->weights, &im->qdo, err);

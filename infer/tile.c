@@ -60,6 +60,7 @@ void lm_tile_kernel_1d(int n, float *k)
 /* Per-fold state: window grid, kernel, host buffers. */
 typedef struct fold {
     int H, W, wh, ww, ny, nx, nwin, out_ch;
+    int planes;   /* input planes of the frame (2: both buckets) */
     int *ys, *xs;
     float *K;     /* wh * ww */
     float *in;    /* batch * wh * ww: windows of the frame */
@@ -77,9 +78,11 @@ static void fold_free(fold *f)
     free(f->wsum);
 }
 
-static lm_status fold_init(fold *f, int H, int W, const lm_tile_opts *o, int out_ch, lm_err *err)
+static lm_status fold_init(fold *f, int H, int W, const lm_tile_opts *o, int out_ch, int planes,
+                           lm_err *err)
 {
     memset(f, 0, sizeof *f);
+    f->planes = planes;
     f->H = H, f->W = W, f->wh = o->win_h, f->ww = o->win_w, f->out_ch = out_ch;
     f->ny = lm_tile_positions(H, o->win_h, o->stride_y, NULL, 0);
     f->nx = lm_tile_positions(W, o->win_w, o->stride_x, NULL, 0);
@@ -88,7 +91,7 @@ static lm_status fold_init(fold *f, int H, int W, const lm_tile_opts *o, int out
     f->ys = malloc(sizeof(int) * f->ny);
     f->xs = malloc(sizeof(int) * f->nx);
     f->K = malloc(sizeof(float) * win);
-    f->in = malloc(sizeof(float) * win * o->batch);
+    f->in = malloc(sizeof(float) * win * o->batch * planes);
     f->res = malloc(sizeof(float) * win * o->batch * out_ch);
     f->wsum = calloc((size_t)H * W, sizeof(float));
     float *ky = malloc(sizeof(float) * f->wh), *kx = malloc(sizeof(float) * f->ww);
@@ -111,14 +114,16 @@ static lm_status fold_init(fold *f, int H, int W, const lm_tile_opts *o, int out
     return LM_OK;
 }
 
-/* Copy windows [w0, w0 + nb) of the frame into f->in. */
+/* Copy windows [w0, w0 + nb) of the frame (every plane) into f->in. */
 static void fold_gather(fold *f, const float *frame, int w0, int nb)
 {
+    const size_t plane = (size_t)f->H * f->W;
     for (int b = 0; b < nb; b++) {
         int y0 = f->ys[(w0 + b) / f->nx], x0 = f->xs[(w0 + b) % f->nx];
-        for (int i = 0; i < f->wh; i++)
-            memcpy(f->in + ((size_t)b * f->wh + i) * f->ww, frame + (size_t)(y0 + i) * f->W + x0,
-                   sizeof(float) * f->ww);
+        for (int q = 0; q < f->planes; q++)
+            for (int i = 0; i < f->wh; i++)
+                memcpy(f->in + (((size_t)b * f->planes + q) * f->wh + i) * f->ww,
+                       frame + q * plane + (size_t)(y0 + i) * f->W + x0, sizeof(float) * f->ww);
     }
 }
 
@@ -149,7 +154,7 @@ static void fold_accumulate(const fold *f, float *out, int w0, int nb, int nthre
 /* One batch through fn into f->res; LM_OK or the error (ctx error moved into err). */
 static lm_status fold_batch(lm_ctx *c, fold *f, int nb, lm_tile_fn fn, void *user, lm_err *err)
 {
-    int shape[4] = {nb, 1, f->wh, f->ww};
+    int shape[4] = {nb, f->planes, f->wh, f->ww};
     lm_tensor *raw = lm_tensor_from(c, 4, shape, f->in);
     lm_tensor *y = raw ? fn(c, raw, user) : NULL;
     if (y && !lm_ctx_status(c) &&
@@ -187,10 +192,19 @@ lm_status lm_tile_fold_timed(lm_ctx *c, const float *frame, int height, int widt
                              int tx, const lm_tile_opts *o, lm_tile_fn fn, void *user,
                              int out_ch, float *out, lm_tile_timing *t, lm_err *err)
 {
+    return lm_tile_fold_planes(c, frame, 1, height, width, ty, tx, o, fn, user, out_ch, out, t,
+                               err);
+}
+
+lm_status lm_tile_fold_planes(lm_ctx *c, const float *frame, int planes, int height, int width,
+                              int ty, int tx, const lm_tile_opts *o, lm_tile_fn fn, void *user,
+                              int out_ch, float *out, lm_tile_timing *t, lm_err *err)
+{
     if (lm_tile_check(o, height, width, ty, tx, err)) return err->status;
     if (out_ch <= 0) return lm_err_set(err, LM_ERR_ARG, "tile: %d output channels", out_ch);
+    if (planes < 1 || planes > 2) return lm_err_set(err, LM_ERR_ARG, "tile: %d input planes", planes);
     fold f;
-    if (fold_init(&f, height, width, o, out_ch, err)) return err->status;
+    if (fold_init(&f, height, width, o, out_ch, planes, err)) return err->status;
     const size_t plane = (size_t)height * width;
     memset(out, 0, sizeof(float) * plane * out_ch);
     int grad = lm_ctx_set_grad(c, 0);
@@ -245,8 +259,10 @@ lm_status lm_tile_infer(lm_ctx *c, lm_model *m, const float *frame, int height, 
     float *full = malloc(sizeof(float) * plane * LM_MODEL_OUT_CHANNELS);
     if (!full) return lm_err_set(err, LM_ERR_NOMEM, "tile: out of memory (%dx%d frame)", height,
                                  width);
-    lm_status st = lm_tile_fold(c, frame, height, width, m->mosaic.ty, m->mosaic.tx, o, model_fn,
-                                m, LM_MODEL_OUT_CHANNELS, full, err);
+    const int planes = lm_model_buckets(m) == 2 ? 2 : 1;
+    lm_status st = lm_tile_fold_planes(c, frame, planes, height, width, m->mosaic.ty,
+                                       m->mosaic.tx, o, model_fn, m, LM_MODEL_OUT_CHANNELS, full,
+                                       NULL, err);
     if (!st && lm_cube_alloc(cube, 31, height, width, 400.0f, 10.0f))
         st = lm_err_set(err, LM_ERR_NOMEM, "tile: out of memory (31x%dx%d cube)", height, width);
     if (!st) memcpy(cube->data, full + plane, sizeof(float) * plane * 31);

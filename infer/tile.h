@@ -70,8 +70,16 @@ lm_status lm_tile_fold_timed(lm_ctx *c, const float *frame, int height, int widt
                              int tx, const lm_tile_opts *o, lm_tile_fn fn, void *user,
                              int out_ch, float *out, lm_tile_timing *t, lm_err *err);
 
+/* lm_tile_fold_timed on a frame of `planes` planes (1 or 2; planes x height x width, plane
+ * after plane): every window holds the same region of each plane, fn gets B x planes x h x w. */
+lm_status lm_tile_fold_planes(lm_ctx *c, const float *frame, int planes, int height, int width,
+                              int ty, int tx, const lm_tile_opts *o, lm_tile_fn fn, void *user,
+                              int out_ch, float *out, lm_tile_timing *t, lm_err *err);
+
 /* A model on a whole frame: lm_tile_fold with lm_model_forward, then channels 1..31 (400-700 nm)
- * of the 33-channel output as a 31-band cube (allocated here; lm_cube_free). */
+ * of the 33-channel output as a 31-band cube (allocated here; lm_cube_free). A two-bucket model
+ * (lm_model_buckets 2) takes frame = bucket 1 then bucket 0 / (LEDs - 1), 2 x height x width;
+ * the noise level is read from bucket 1. */
 lm_status lm_tile_infer(lm_ctx *c, lm_model *m, const float *frame, int height, int width,
                         const lm_tile_opts *o, lm_cube *cube, lm_err *err);
 

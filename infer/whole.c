@@ -13,7 +13,7 @@ void lm_whole_default_opts(lm_whole_opts *o)
 int lm_whole_halo(const lm_model *m)
 {
     const int ty = m->mosaic.ty;
-    if (m->conv_rows < 0 || m->in_channels != 1) return -1;
+    if (m->conv_rows < 0 || lm_model_buckets(m) == 0) return -1; /* coded frames only */
     /* demosaic: up to ty - 1 rows at a strip edge see a clamped neighbour */
     int rows = ty - 1 + m->conv_rows;
     return (rows + ty - 1) / ty * ty;
@@ -66,11 +66,18 @@ static lm_status strip_store(lm_ctx *c, const lm_tensor *y, int a, int y0, int y
     return LM_OK;
 }
 
-/* One strip: frame rows [a, b) through the model; ctx error moved into err. */
-static lm_status strip_run(lm_ctx *c, lm_model *m, const float *frame, int W, int a, int b,
-                           lm_tensor **y, lm_err *err)
+/* One strip: frame rows [a, b) through the model (of each of its input planes: a two-bucket
+ * model's frame is bucket 1 then bucket 0, H x W each, copied into one strip tensor); ctx error
+ * moved into err. */
+static lm_status strip_run(lm_ctx *c, lm_model *m, const float *frame, int H, int W, int a,
+                           int b, float *sbuf, lm_tensor **y, lm_err *err)
 {
-    lm_tensor *raw = lm_tensor_from(c, 4, (int[]){1, 1, b - a, W}, frame + (size_t)a * W);
+    const int C = m->in_channels; /* C > 1: the planes' rows gathered into sbuf (host) */
+    for (int q = 0; C > 1 && q < C; q++)
+        memcpy(sbuf + (size_t)q * (b - a) * W, frame + ((size_t)q * H + a) * W,
+               sizeof(float) * (size_t)(b - a) * W);
+    lm_tensor *raw = lm_tensor_from(c, 4, (int[]){1, C, b - a, W},
+                                    C == 1 ? frame + (size_t)a * W : sbuf);
     *y = raw ? lm_model_forward(c, m, raw) : NULL;
     if (*y && !lm_ctx_status(c)) *y = lm_contiguous(c, *y);
     char buf[64];
@@ -97,22 +104,29 @@ lm_status lm_whole_forward(lm_ctx *c, lm_model *m, const float *frame, int heigh
     S = (S + ty - 1) / ty * ty;
     lm_infer_set_noise(m, frame, height, width);
     int grad = lm_ctx_set_grad(c, 0);
-    if (m->frame_forward && (!c->backend || c->backend == lm_backend_cpu())) {
+    if (m->frame_forward && m->in_channels == 1 && (!c->backend || c->backend == lm_backend_cpu())) {
         st = m->frame_forward(c, m, frame, height, width, ch0, nch, out, err);
         lm_ctx_set_grad(c, grad);
         return st;
     }
     float *buf = NULL; /* a device's strip, read back */
     size_t cap = 0;
+    float *sbuf = NULL; /* two-bucket models: one strip of both planes */
+    if (m->in_channels > 1 &&
+        !(sbuf = malloc(sizeof(float) * m->in_channels * (size_t)(S + 2 * halo) * width))) {
+        lm_ctx_set_grad(c, grad);
+        return lm_err_set(err, LM_ERR_NOMEM, "whole: out of memory (strip)");
+    }
     for (int y0 = 0; y0 < height && !st; y0 += S) {
         int y1 = y0 + S < height ? y0 + S : height;
         int a = y0 - halo > 0 ? y0 - halo : 0, b = y1 + halo < height ? y1 + halo : height;
         lm_tensor *y;
-        st = strip_run(c, m, frame, width, a, b, &y, err);
+        st = strip_run(c, m, frame, height, width, a, b, sbuf, &y, err);
         if (!st) st = strip_store(c, y, a, y0, y1, ch0, nch, height, out, &buf, &cap, err);
         lm_ctx_reset(c);
     }
     free(buf);
+    free(sbuf);
     lm_ctx_set_grad(c, grad);
     return st;
 }

@@ -37,7 +37,8 @@ void lm_whole_default_opts(lm_whole_opts *o);
  * when the model's receptive field is not finite or not declared (its family is not supported). */
 int lm_whole_halo(const lm_model *m);
 
-/* Run the model over frame (height x width, row-major) in strips and write output channels
+/* Run the model over frame (height x width, row-major; a two-bucket model's: bucket 1 then
+ * bucket 0 / (LEDs - 1), 2 x height x width) in strips and write output channels
  * [ch0, ch0 + nch) into out (nch x height x width). Errors (message starting "whole:"):
  * LM_ERR_ARG for an unsupported model, bad options or channel range; LM_ERR_SHAPE for a frame
  * size that is not a positive multiple of the tile; the model's ctx error otherwise. */

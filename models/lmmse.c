@@ -16,6 +16,14 @@
  * r rows, so whole frames run in strips (infer/whole.h).
  * Noise level: the caller sets m->noise_sigma (or noise_sigma_items per batch item), as the
  * estimator of data/noise_est.h gives it; forward fails when neither is set.
+ * Both buckets (LM_CAP_TWO_BUCKETS, "lmmse-b2", "lmmse-K-b2"): the input is B x 2 x H x W
+ * (bucket 1, bucket 0 / (LEDs - 1)) and each phase's window covers both planes: a second filter
+ * bank "filters.bucket0" (L x P x 33 x K x K) on the bucket-0 plane, added before the bias
+ *     y[c] = sum W_l[p][c] * window(bucket 1) + sum W0_l[p][c] * window(bucket 0) + b_l[p][c];
+ * in the tile-unit conv the pixel-unshuffled input has 2P phase planes (bucket 1's first) and
+ * the two kernels are concatenated along the input channels; the direct path (below) runs the
+ * taps over both planes' windows. The whole-frame host path (frame_forward) reads one plane:
+ * none for a two-bucket model (whole frames of it run patch-wise).
  * What it is not: the fit (train/fit_lmmse.c) or the noise estimator. */
 #include "models/model.h"
 #include <math.h>
@@ -30,10 +38,11 @@ const float lm_lmmse_sigmas[LM_LMMSE_LEVELS] = {0.0f,  0.0025f, 0.005f, 0.01f, 0
 
 typedef struct lmmse_net {
     lm_tensor *w;              /* L x P x 33 x K x K */
+    lm_tensor *w0;             /* two buckets: the bucket-0 plane's filters, same shape */
     lm_tensor *b;              /* L x P x 33 */
     lm_conv feat;              /* D > 0: features 1 -> D, K x K (random at init) */
     lm_tensor *rw;             /* D > 0: readout L x P x 33 x D */
-    int K, P, D;
+    int K, P, D, C;            /* C: input planes (1, or 2 = both buckets) */
     int lo_y, hi_y, lo_x, hi_x; /* tile offsets the windows reach (lo <= 0 <= hi) */
     float *scratch;            /* whole-frame host path: packed filters and padded frame */
     size_t scratch_cap;        /* floats */
@@ -53,13 +62,22 @@ static void level_pair(float s, int *i, float *t)
     *t = (s - lm_lmmse_sigmas[k]) / (lm_lmmse_sigmas[k + 1] - lm_lmmse_sigmas[k]);
 }
 
-/* Parameters of one level (or the blend of two) as views: w P x 33 x K x K, b P x 33. */
-static void blend(lm_ctx *c, const lmmse_net *n, float s, lm_tensor **w, lm_tensor **b)
+/* Parameters of one level (or the blend of two) as views: w P x 33 x K x K, b P x 33; *w0 the
+ * bucket-0 filters (NULL with one plane). */
+static void blend(lm_ctx *c, const lmmse_net *n, float s, lm_tensor **w, lm_tensor **b,
+                  lm_tensor **wz)
 {
     int i;
     float t;
     level_pair(s, &i, &t);
     int ws[4] = {n->P, LM_MODEL_OUT_CHANNELS, n->K, n->K}, bs[2] = {n->P, LM_MODEL_OUT_CHANNELS};
+    *wz = NULL;
+    if (n->C == 2) {
+        lm_tensor *v0 = lm_reshape(c, lm_slice(c, n->w0, 0, i, 1), 4, ws);
+        lm_tensor *v1 = t == 0.0f ? NULL : lm_reshape(c, lm_slice(c, n->w0, 0, i + 1, 1), 4, ws);
+        *wz = t == 0.0f ? v0 : t == 1.0f ? v1
+              : lm_add(c, lm_affine(c, v0, 1.0f - t, 0.0f), lm_affine(c, v1, t, 0.0f));
+    }
     lm_tensor *w0 = lm_reshape(c, lm_slice(c, n->w, 0, i, 1), 4, ws);
     lm_tensor *b0 = lm_reshape(c, lm_slice(c, n->b, 0, i, 1), 2, bs);
     if (t == 0.0f) { *w = w0; *b = b0; return; }
@@ -179,28 +197,32 @@ static void build_pad(const lm_model *m, const lmmse_net *n, const float *raw, i
     }
 }
 
-/* Packed filters of one phase: K x K taps of `lanes` floats (channels, zero beyond nch), then
- * the bias. */
-static size_t packed_floats(int K, int lanes) { return (size_t)(K * K + 1) * lanes; }
+/* Packed filters of one phase: K x K taps of `lanes` floats (channels, zero beyond nch) for
+ * each of the C input planes (bucket 1's, then bucket 0's), then the bias. */
+static size_t packed_floats(int C, int K, int lanes) { return (size_t)(C * K * K + 1) * lanes; }
 
 /* wt = the filters of channels [ch0, ch0 + nch) at noise sd s, every phase, `lanes` wide. */
 static void pack_filters(const lmmse_net *n, float s, int ch0, int nch, int lanes, float *wt)
 {
-    const int O = LM_MODEL_OUT_CHANNELS, K = n->K, P = n->P;
+    const int O = LM_MODEL_OUT_CHANNELS, K = n->K, P = n->P, C = n->C;
     int li;
     float t;
     level_pair(s, &li, &t);
-    memset(wt, 0, sizeof(float) * (size_t)P * packed_floats(K, lanes));
+    memset(wt, 0, sizeof(float) * (size_t)P * packed_floats(C, K, lanes));
     for (int p = 0; p < P; p++)
         for (int c = 0; c < nch; c++) {
             const int ch = ch0 + c;
             const size_t w0 = (((size_t)li * P + p) * O + ch) * K * K, w1 = w0 + (size_t)P * O * K * K;
             const size_t b0 = ((size_t)li * P + p) * O + ch, b1 = b0 + (size_t)P * O;
-            float *T = wt + (size_t)p * packed_floats(K, lanes);
-            for (int k = 0; k < K * K; k++)
-                T[k * lanes + c] = t == 0.0f ? n->w->data[w0 + k] : t == 1.0f ? n->w->data[w1 + k]
-                                   : n->w->data[w0 + k] * (1.0f - t) + n->w->data[w1 + k] * t;
-            T[K * K * lanes + c] = t == 0.0f ? n->b->data[b0] : t == 1.0f ? n->b->data[b1]
+            float *T = wt + (size_t)p * packed_floats(C, K, lanes);
+            for (int q = 0; q < C; q++) {
+                const float *w = q ? n->w0->data : n->w->data;
+                float *Tq = T + (size_t)q * K * K * lanes;
+                for (int k = 0; k < K * K; k++)
+                    Tq[k * lanes + c] = t == 0.0f ? w[w0 + k] : t == 1.0f ? w[w1 + k]
+                                        : w[w0 + k] * (1.0f - t) + w[w1 + k] * t;
+            }
+            T[C * K * K * lanes + c] = t == 0.0f ? n->b->data[b0] : t == 1.0f ? n->b->data[b1]
                                    : n->b->data[b0] * (1.0f - t) + n->b->data[b1] * t;
         }
 }
@@ -208,13 +230,14 @@ static void pack_filters(const lmmse_net *n, float s, int ch0, int nch, int lane
 /* Row y, phase column j: pixels x = j, j + tx, ... of the phase, NP at a time (the last step
  * repeats its last pixel to fill the registers, stored once), NV 8-lane vectors of channels
  * (NV x 8 = the packing's lanes). NV and NP are constants at each call (always inlined), so
- * the accumulators stay in registers. */
+ * the accumulators stay in registers. C padded planes of PH rows lie one below the other in
+ * pad; the taps run over their windows in turn (plane q's row u is tap row q K + u). */
 static inline __attribute__((always_inline)) void
-row_phase(const float *T, const float *pad, int PW, int K, int y, int j, int W, int tx,
-          float *out, size_t plane, int nch, const int NV, const int NP)
+row_phase(const float *T, const float *pad, int PW, int PH, int C, int K, int y, int j, int W,
+          int tx, float *out, size_t plane, int nch, const int NV, const int NP)
 {
     const int L = NV * 8;
-    const float *B = T + (size_t)K * K * L;
+    const float *B = T + (size_t)C * K * K * L;
     for (int x = j; x < W; x += NP * tx) {
         int np = (W - x + tx - 1) / tx;
         np = np < NP ? np : NP;
@@ -226,9 +249,9 @@ row_phase(const float *T, const float *pad, int PW, int K, int y, int j, int W, 
         for (int q = 0; q < NP; q++)
 #pragma GCC unroll 5
             for (int g = 0; g < NV; g++) a[q][g] = v8_load(B + 8 * g);
-        for (int u = 0; u < K; u++) {
-            const float *row = pad + (size_t)(y + u) * PW + x;
-            const float *Tu = T + (size_t)u * K * L;
+        for (int qu = 0; qu < C * K; qu++) {
+            const float *row = pad + ((size_t)(qu / K) * PH + y + qu % K) * PW + x;
+            const float *Tu = T + (size_t)qu * K * L;
             for (int v = 0; v < K; v++, Tu += L) {
                 v8 t[5];
 #pragma GCC unroll 5
@@ -251,42 +274,46 @@ row_phase(const float *T, const float *pad, int PW, int K, int y, int j, int W, 
 }
 
 /* up to 32 channels (the 31 bands of a whole frame) and up to 40 (a tensor forward's 33) */
-static void row_phase32(const float *T, const float *pad, int PW, int K, int y, int j, int W,
-                        int tx, float *out, size_t plane, int nch)
+static void row_phase32(const float *T, const float *pad, int PW, int PH, int C, int K, int y,
+                        int j, int W, int tx, float *out, size_t plane, int nch)
 {
-    row_phase(T, pad, PW, K, y, j, W, tx, out, plane, nch, 4, NP32);
+    row_phase(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch, 4, NP32);
 }
 
-static void row_phase40(const float *T, const float *pad, int PW, int K, int y, int j, int W,
-                        int tx, float *out, size_t plane, int nch)
+static void row_phase40(const float *T, const float *pad, int PW, int PH, int C, int K, int y,
+                        int j, int W, int tx, float *out, size_t plane, int nch)
 {
-    row_phase(T, pad, PW, K, y, j, W, tx, out, plane, nch, 5, NP40);
+    row_phase(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch, 5, NP40);
 }
 
 /* out (nch planes of H x W) = channels [ch0, ch0 + nch) of the filters at noise sd s on one
- * H x W frame. scratch: direct_scratch_floats(...) floats. */
+ * frame of C planes (C x H x W: bucket 1, then bucket 0 with two buckets). scratch:
+ * direct_scratch_floats(...) floats. */
 static size_t direct_scratch_floats(const lmmse_net *n, int H, int W)
 {
     const int r = n->K / 2;
-    return (size_t)n->P * packed_floats(n->K, 40) + (size_t)(H + 2 * r) * (W + 2 * r);
+    return (size_t)n->P * packed_floats(n->C, n->K, 40) +
+           (size_t)n->C * (H + 2 * r) * (W + 2 * r);
 }
 
 static void direct_frame(const lm_model *m, const lmmse_net *n, float s, const float *raw, int H,
                          int W, int ch0, int nch, float *out, float *scratch, int nthreads)
 {
-    const int ty = m->mosaic.ty, tx = m->mosaic.tx, K = n->K, PW = W + 2 * (K / 2);
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, K = n->K, C = n->C;
+    const int PW = W + 2 * (K / 2), PH = H + 2 * (K / 2);
     const int lanes = nch <= 32 ? 32 : 40;
-    float *wt = scratch, *pad = scratch + (size_t)n->P * packed_floats(K, 40);
+    float *wt = scratch, *pad = scratch + (size_t)n->P * packed_floats(C, K, 40);
     pack_filters(n, s, ch0, nch, lanes, wt);
-    build_pad(m, n, raw, H, W, pad);
+    for (int q = 0; q < C; q++)
+        build_pad(m, n, raw + (size_t)q * H * W, H, W, pad + (size_t)q * PH * PW);
     const size_t plane = (size_t)H * W;
     #pragma omp parallel for schedule(static) num_threads(nthreads)
     for (int y = 0; y < H; y++) {
         const int i = y % ty;
         for (int j = 0; j < tx; j++) {
-            const float *T = wt + (size_t)(i * tx + j) * packed_floats(K, lanes);
-            if (lanes == 32) row_phase32(T, pad, PW, K, y, j, W, tx, out, plane, nch);
-            else row_phase40(T, pad, PW, K, y, j, W, tx, out, plane, nch);
+            const float *T = wt + (size_t)(i * tx + j) * packed_floats(C, K, lanes);
+            if (lanes == 32) row_phase32(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch);
+            else row_phase40(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch);
         }
     }
 }
@@ -296,7 +323,7 @@ static int direct_ok(const lm_ctx *c, const lmmse_net *n, const lm_tensor *raw)
 {
     return !n->D &&
            !(c->grad_enabled && ((raw && lm_requires_grad(raw)) || lm_requires_grad(n->w) ||
-                                 lm_requires_grad(n->b))) &&
+                                 lm_requires_grad(n->b) || (n->w0 && lm_requires_grad(n->w0)))) &&
            !(c->backend && c->backend != lm_backend_cpu()) && (!raw || raw->data) && n->w->data;
 }
 
@@ -311,7 +338,7 @@ static lm_tensor *run_direct(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *ra
     float *scratch = y ? lm_ctx_alloc(c, sizeof(float) * direct_scratch_floats(n, H, W)) : NULL;
     if (!scratch) return NULL; /* the ctx has the error */
     for (int b = 0; b < B; b++)
-        direct_frame(m, n, s, x->data + (size_t)b * H * W, H, W, 0, O,
+        direct_frame(m, n, s, x->data + (size_t)b * n->C * H * W, H, W, 0, O,
                      y->data + (size_t)b * O * H * W, scratch, lm_nthreads(c));
     return y;
 }
@@ -346,16 +373,22 @@ static lm_tensor *run_group(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw
     const int ty = m->mosaic.ty, tx = m->mosaic.tx;
     lm_tensor *d = run_direct(c, m, n, raw, s);
     if (d || lm_ctx_status(c)) return d;
-    lm_tensor *w, *b, *cw, *cb;
-    blend(c, n, s, &w, &b);
+    lm_tensor *w, *b, *w0, *cw, *cb;
+    blend(c, n, s, &w, &b, &w0);
     tile_kernel(c, m, n, w, b, &cw, &cb);
-    lm_tensor *u = lm_pixel_unshuffle(c, raw, ty, tx); /* B x P x h x w */
+    if (w0) { /* the bucket-0 plane's kernel: input channels P..2P-1 of the unshuffled raw */
+        lm_tensor *cw0, *cb0, *ks[2];
+        tile_kernel(c, m, n, w0, b, &cw0, &cb0);
+        ks[0] = cw, ks[1] = cw0;
+        cw = lm_concat(c, ks, 2, 1);
+    }
+    lm_tensor *u = lm_pixel_unshuffle(c, raw, ty, tx); /* B x C P x h x w, plane-major */
     if (!u) return NULL;
     const int h = u->shape[2], wd = u->shape[3];
     lm_pad_mode mode = (h > n->hi_y && h > -n->lo_y && wd > n->hi_x && wd > -n->lo_x)
                            ? LM_PAD_REFLECT : LM_PAD_ZERO; /* reflect needs pad < size */
     u = lm_pad2d(c, u, -n->lo_y, n->hi_y, -n->lo_x, n->hi_x, mode);
-    lm_conv tk = {.w = cw, .b = cb, .cin = n->P, .kh = n->hi_y - n->lo_y + 1,
+    lm_conv tk = {.w = cw, .b = cb, .cin = n->C * n->P, .kh = n->hi_y - n->lo_y + 1,
                   .kw = n->hi_x - n->lo_x + 1}; /* through lm_conv_forward: profiles count it */
     if (cw) cw->name = "filters.weight";
     lm_tensor *y = lm_pixel_shuffle(c, lm_conv_forward(c, &tk, u), ty, tx);
@@ -398,6 +431,7 @@ static void lmmse_init(lm_model *m, lm_rng *r)
     float bound = 1.0f / (float)n->K;
     lm_init_uniform(n->w, r, bound);
     lm_init_uniform(n->b, r, bound);
+    if (n->C == 2) lm_init_uniform(n->w0, r, bound);
     if (n->D == 0) return;
     /* random features: N(0, 1/K^2) weights (unit gain on a window of comparable values),
      * N(0, 0.1^2) biases (a probe of linear vs random-feature ridge: +1.2 dB validation PSNR
@@ -426,6 +460,10 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
     n->K = K;
     n->D = D;
     n->P = ty * tx;
+    n->C = m->in_channels == 2 ? 2 : 1;
+    if (D > 0 && n->C == 2)
+        return lm_err_set(err, LM_ERR_ARG, "lmmse: random features read one plane: no "
+                          "two-bucket lmmse-rf");
     if (D < 0 || D > 4096) return lm_err_set(err, LM_ERR_ARG, "lmmse: %d features (0..4096)", D);
     if (n->P > LM_MOSAIC_MAX_CH)
         return lm_err_set(err, LM_ERR_ARG, "lmmse: %d x %d tile has too many phases", ty, tx);
@@ -436,7 +474,8 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
     int ws[5] = {LM_LMMSE_LEVELS, n->P, LM_MODEL_OUT_CHANNELS, K, K};
     int bs[3] = {LM_LMMSE_LEVELS, n->P, LM_MODEL_OUT_CHANNELS};
     if (!(n->w = lm_params_add(&m->params, "filters.weight", 5, ws, 1, err)) ||
-        !(n->b = lm_params_add(&m->params, "filters.bias", 3, bs, 1, err)))
+        !(n->b = lm_params_add(&m->params, "filters.bias", 3, bs, 1, err)) ||
+        (n->C == 2 && !(n->w0 = lm_params_add(&m->params, "filters.bucket0", 5, ws, 1, err))))
         return err->status;
     int rws[4] = {LM_LMMSE_LEVELS, n->P, LM_MODEL_OUT_CHANNELS, D};
     lm_conv_spec fs = {1, D, K, K, 1, 0, 0, 1, 1};
@@ -444,7 +483,8 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
                   !(n->rw = lm_params_add(&m->params, "readout.weight", 4, rws, 1, err))))
         return err->status;
     m->forward = lmmse_forward;
-    m->frame_forward = D ? NULL : lmmse_frame_forward;
+    /* the whole-frame host path reads one H x W frame: one-bucket models only */
+    m->frame_forward = D || n->C == 2 ? NULL : lmmse_frame_forward;
     m->init = lmmse_init;
     m->conv_rows = ty * (n->hi_y > -n->lo_y ? n->hi_y : -n->lo_y);
     m->noise_input = 1;
@@ -482,14 +522,18 @@ lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *c
     if (level < 0 || level >= LM_LMMSE_LEVELS || phase < 0 || phase >= n->P)
         return lm_err_set(err, LM_ERR_ARG, "lmmse: level %d / phase %d out of range", level,
                           phase);
-    const int O = LM_MODEL_OUT_CHANNELS, F = K * K, D = n->D;
+    const int O = LM_MODEL_OUT_CHANNELS, F = K * K, D = n->D, C = n->C;
     float *w = n->w->data + ((size_t)level * n->P + phase) * O * F;
+    float *w0 = C == 2 ? n->w0->data + ((size_t)level * n->P + phase) * O * F : NULL;
     float *b = n->b->data + ((size_t)level * n->P + phase) * O;
     float *rw = D ? n->rw->data + ((size_t)level * n->P + phase) * O * D : NULL;
     for (int c = 0; c < O; c++) {
         for (int f = 0; f < F; f++) w[(size_t)c * F + f] = (float)coef[(size_t)f * O + c];
-        for (int d = 0; d < D; d++) rw[(size_t)c * D + d] = (float)coef[(size_t)(F + d) * O + c];
-        b[c] = (float)coef[(size_t)(F + D) * O + c];
+        for (int f = 0; w0 && f < F; f++)
+            w0[(size_t)c * F + f] = (float)coef[(size_t)(F + f) * O + c];
+        for (int d = 0; d < D; d++)
+            rw[(size_t)c * D + d] = (float)coef[(size_t)(C * F + d) * O + c];
+        b[c] = (float)coef[(size_t)(C * F + D) * O + c];
     }
     return LM_OK;
 }

@@ -50,7 +50,9 @@ static lm_status build_rt(lm_model *m, const preset *ps, lm_err *err)
 #define RGB LM_CAP_RGB_INPUT
 #define WHOLE LM_CAP_WHOLE_FRAME
 #define QDO LM_CAP_QDO_OPTICS
-static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rfD]" its flags */
+#define B2 LM_CAP_TWO_BUCKETS
+static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rfD]" its flags,
+                                   * "lmmse-b2" those of "lmmse-K-b2" */
     {"linear", build_linear, CL, {0, 0, 0, 0}, 0},
     {"lmmse", build_lmmse, CL | FIT, {0, 0, 0, 0}, 0},
     {"lmmse-rf", build_lmmse, CL | FIT, {0, 0, 0, 0}, 256},
@@ -70,7 +72,12 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     {"qdo-mst-doe", build_mst, RGB | WHOLE | QDO | LM_CAP_DOE_LEARNED, {0, 0, 0, 0}, 1},
     {"rt-8", build_rt, CL, {0, 0, 0, 0}, 8},
     {"rt-16", build_rt, CL, {0, 0, 0, 0}, 16},
+    /* both buckets: the same families reading bucket 1 and bucket 0 (2 input planes) */
+    {"lmmse-b2", build_lmmse, CL | FIT | B2, {0, 0, 0, 0}, 0},
+    {"rt-8-b2", build_rt, CL | B2, {0, 0, 0, 0}, 8},
+    {"rt-16-b2", build_rt, CL | B2, {0, 0, 0, 0}, 16},
 };
+#undef B2
 #undef CL
 #undef FIT
 #undef RGB
@@ -100,12 +107,13 @@ static void unknown_preset(const char *name, lm_err *err)
         strncat(list, presets[i].name, sizeof list - strlen(list) - 3);
         if (i + 1 < NPRESETS) strcat(list, ", ");
     }
-    lm_err_set(err, LM_ERR_ARG, "unknown model '%s' (presets: %s, lmmse-K, lmmse-K-rfD)", name, list);
+    lm_err_set(err, LM_ERR_ARG, "unknown model '%s' (presets: %s, lmmse-K, lmmse-K-rfD, "
+               "lmmse-K-b2)", name, list);
 }
 
 /* "lmmse-K" or "lmmse-K-rfD": the lmmse window K (odd, 1..31), else 0; *D the random
  * features (0..4096). */
-static int lmmse_k(const char *name, int *D)
+static int lmmse_k_plain(const char *name, int *D)
 {
     *D = 0;
     if (strncmp(name, "lmmse-", 6)) return 0;
@@ -121,6 +129,27 @@ static int lmmse_k(const char *name, int *D)
     return *end || end == name + 6 || k < 1 || k > 31 || k % 2 == 0 ? 0 : (int)k;
 }
 
+/* The same, or "lmmse-K-b2" (*b2 = 1: the two-bucket form, no random features). */
+static int lmmse_k2(const char *name, int *D, int *b2)
+{
+    *b2 = 0;
+    *D = 0;
+    if (strncmp(name, "lmmse-", 6)) return 0;
+    char *end;
+    long k = strtol(name + 6, &end, 10);
+    if (end != name + 6 && !strcmp(end, "-b2")) {
+        *b2 = 1;
+        return k < 1 || k > 31 || k % 2 == 0 ? 0 : (int)k;
+    }
+    return lmmse_k_plain(name, D);
+}
+
+static int lmmse_k(const char *name, int *D)
+{
+    int b2;
+    return lmmse_k2(name, D, &b2);
+}
+
 int lm_model_preset_known(const char *name)
 {
     int D;
@@ -131,7 +160,7 @@ int lm_model_preset_known(const char *name)
 static lm_status build(lm_model *m, const char *name, lm_err *err)
 {
     const preset *ps = find_preset(name);
-    int D = 0, K = lmmse_k(name, &D);
+    int D = 0, b2 = 0, K = ps ? 0 : lmmse_k2(name, &D, &b2);
     if (!ps && !K) return unknown_preset(name, err), err->status;
     snprintf(m->preset, sizeof m->preset, "%s", name);
     m->out_channels = LM_MODEL_OUT_CHANNELS;
@@ -140,10 +169,12 @@ static lm_status build(lm_model *m, const char *name, lm_err *err)
     m->noise_sigma = -1.0f;
     m->noise_given = -1.0f;
     if (K) {
-        m->caps = find_preset("lmmse")->caps;
+        m->caps = find_preset(b2 ? "lmmse-b2" : "lmmse")->caps;
+        m->in_channels = lm_model_buckets(m);
         return lm_lmmse_build(m, K, D, err);
     }
     m->caps = ps->caps;
+    if (m->caps & LM_CAP_TWO_BUCKETS) m->in_channels = 2; /* builders may set it otherwise */
     return ps->build(m, ps, err);
 }
 
@@ -198,6 +229,10 @@ lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
                         b->out_channels != m->out_channels))
         st = lm_err_set(err, LM_ERR_ARG, "residual %s on %s: both must map the raw mosaic to %d "
                         "channels", preset, base_preset, m->out_channels);
+    if (st == LM_OK && lm_model_buckets(m) != lm_model_buckets(b))
+        st = lm_err_set(err, LM_ERR_ARG, "residual %s on %s: the net reads %d bucket(s), the "
+                        "base %d; use both of one kind (\"-b2\" presets read both buckets)",
+                        preset, base_preset, lm_model_buckets(m), lm_model_buckets(b));
     int gs[1] = {m->out_channels};
     lm_tensor *g = st == LM_OK ? lm_params_add(&m->params, "res_scale", 1, gs, 1, err) : NULL;
     if (st == LM_OK && !g) st = err->status;
@@ -217,7 +252,8 @@ lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
                    : m->conv_rows > b->conv_rows ? m->conv_rows : b->conv_rows;
     m->noise_input |= b->noise_input;
     /* a residual is trained by gradient descent; on OpenCL only if both parts run there */
-    m->caps = ((m->caps | b->caps) & LM_CAP_WHOLE_FRAME) | (m->caps & b->caps & LM_CAP_OPENCL);
+    m->caps = ((m->caps | b->caps) & LM_CAP_WHOLE_FRAME) | (m->caps & b->caps & LM_CAP_OPENCL) |
+              (m->caps & LM_CAP_TWO_BUCKETS);
     m->res_scale = g;
     return m;
 }
@@ -235,17 +271,18 @@ lm_tensor *lm_model_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
 {
     if (!lm_check_inputs(c, m->preset, 1, raw)) return NULL;
     char sb[64];
-    if (m->in_channels != 1) {
+    const int nb = lm_model_buckets(m);
+    if (nb == 0) {
         if (raw->ndim == 4 && raw->shape[1] == m->in_channels) return m->forward(c, m, raw);
         lm_ctx_fail(c, LM_ERR_SHAPE, "%s: input %s must be B x %d x H x W", m->preset,
                     lm_shape_str(raw, sb, sizeof sb), m->in_channels);
         return NULL;
     }
-    if (raw->ndim != 4 || raw->shape[1] != 1 || raw->shape[2] % m->mosaic.ty ||
+    if (raw->ndim != 4 || raw->shape[1] != nb || raw->shape[2] % m->mosaic.ty ||
         raw->shape[3] % m->mosaic.tx) {
-        lm_ctx_fail(c, LM_ERR_SHAPE, "%s: input %s must be B x 1 x H x W with H %% %d == 0 and "
-                    "W %% %d == 0", m->preset, lm_shape_str(raw, sb, sizeof sb), m->mosaic.ty,
-                    m->mosaic.tx);
+        lm_ctx_fail(c, LM_ERR_SHAPE, "%s: input %s must be B x %d x H x W (%s) with H %% %d == 0 "
+                    "and W %% %d == 0", m->preset, lm_shape_str(raw, sb, sizeof sb), nb,
+                    nb == 2 ? "bucket 1, bucket 0" : "bucket 1", m->mosaic.ty, m->mosaic.tx);
         return NULL;
     }
     if (!m->base) return m->forward(c, m, raw);

@@ -19,7 +19,10 @@ typedef enum lm_model_cap {
     LM_CAP_CLOSED_FORM = 1u << 3, /* fitted in closed form (train/fit_lmmse.h) */
     LM_CAP_QDO_OPTICS = 1u << 4,  /* with LM_CAP_RGB_INPUT: the RGB image is seen through the
                                    * QDO baseline's DOE (data/qdocam.h), not a plain lens */
-    LM_CAP_DOE_LEARNED = 1u << 5, /* with LM_CAP_QDO_OPTICS: training also learns the DOE's
+    LM_CAP_TWO_BUCKETS = 1u << 5, /* input: both buckets of the coded frame, B x 2 x H x W
+                                   * (bucket 1, then bucket 0 / (LEDs - 1) as `simulate
+                                   * --bucket0` stores it); in_channels 2. Presets "<name>-b2" */
+    LM_CAP_DOE_LEARNED = 1u << 6, /* with LM_CAP_QDO_OPTICS: training also learns the DOE's
                                    * height map (as the run config's doe_optimise; the run's
                                    * doe.json then holds the learned DOE) */
 } lm_model_cap;
@@ -32,7 +35,8 @@ struct lm_model {
     lm_mosaic mosaic;
     int out_channels;
     int in_channels;               /* channels of the input tensor: 1 = raw coded mosaic
-                                    * (default); 3 = RGB image (MST++ baseline) */
+                                    * (default); 2 = both buckets (LM_CAP_TWO_BUCKETS);
+                                    * 3 = RGB image (MST++ baseline) */
     lm_tensor *(*forward)(lm_ctx *c, lm_model *m, lm_tensor *raw);
     /* Optional whole-frame host path (no tensors, no gradients, no device): channels
      * [ch0, ch0 + nch) of the output for one H x W raw frame written straight into out (nch
@@ -86,7 +90,13 @@ lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
                                    float res_init, lm_err *err);
 /* Does m have every flag of caps (lm_model_cap)? */
 static inline int lm_model_has(const lm_model *m, unsigned caps) { return (m->caps & caps) == caps; }
-/* Is name a preset (a listed name or lmmse-K)? */
+/* Buckets of the coded frame the model reads: 2 with LM_CAP_TWO_BUCKETS, else 1 (0 for an
+ * RGB-input model). */
+static inline int lm_model_buckets(const lm_model *m)
+{
+    return m->caps & LM_CAP_RGB_INPUT ? 0 : m->caps & LM_CAP_TWO_BUCKETS ? 2 : 1;
+}
+/* Is name a preset (a listed name, lmmse-K, or either with "-b2")? */
 int lm_model_preset_known(const char *name);
 /* NULL-terminated list of preset names. */
 const char *const *lm_model_presets(void);
@@ -108,7 +118,8 @@ lm_status lm_mst_build(lm_model *m, int stages, int raw_input, lm_err *err);
  * (planar, host), out = out_channels x H x W. Own ctx with nthreads (0 = all cores). */
 lm_status lm_mst_reconstruct(lm_model *m, const float *in, int H, int W, float *out,
                              int nthreads, lm_err *err);
-/* Closed-form linear floor (models/lmmse.c): per tile phase a K x K raw window -> 33
+/* Closed-form linear floor (models/lmmse.c): per tile phase a K x K raw window (of each input
+ * plane: both buckets with LM_CAP_TWO_BUCKETS) -> 33
  * channels, one filter set per noise level of lm_lmmse_sigmas (absolute noise sd of the input),
  * interpolated between levels. Presets "lmmse" (K = 11), "lmmse-K" (odd K), "lmmse-rf" (K = 11
  * plus 256 random ReLU features). */
@@ -123,10 +134,12 @@ int lm_lmmse_window(const lm_model *m);
 int lm_lmmse_features(const lm_model *m);
 /* The feature maps relu(features(raw)) (B x D x H x W, zero-padded borders), for the fit. */
 lm_tensor *lm_lmmse_feature_maps(lm_ctx *c, const lm_model *m, lm_tensor *raw);
-/* Set the filter of (level, phase) from coef[(K*K + D + 1) x 33] (rows: window position
- * u * K + v, then the D features, last the bias), as the fit produces it. */
+/* Set the filter of (level, phase) from coef[(C*K*K + D + 1) x 33] (rows: window position
+ * u * K + v of plane 0 (bucket 1), then of plane 1 (bucket 0) when C = 2, then the D
+ * features, last the bias), as the fit produces it. */
 lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *coef, lm_err *err);
-/* Real-time: demosaic + raw, two 3x3 convs at `width`, 1x1 head (models/rt.c). */
+/* Real-time: demosaic + raw, two 3x3 convs at `width`, 1x1 head (models/rt.c); with
+ * LM_CAP_TWO_BUCKETS the branch's first conv also reads the bucket-0 plane. */
 lm_status lm_rt_build(lm_model *m, int width, lm_err *err);
 
 #endif

@@ -9,6 +9,8 @@
  * Purely convolutional with a finite receptive field (demosaic + two 3x3 convs), so whole frames
  * run in strips (infer/whole.h) instead of overlapping windows; sized so that a 640x480 frame
  * reconstructs at >= 30 frames per second on two cores (bench/bench_rt.c).
+ * Both buckets (LM_CAP_TWO_BUCKETS, "rt-N-b2"): the branch's first conv reads the bucket-0
+ * plane beside bucket 1 (P + 2 input channels); the demosaic and the head are unchanged.
  * What it is not: an attention network; nothing here depends on the frame size. */
 #include "models/model.h"
 #include <stdio.h>
@@ -19,7 +21,9 @@ typedef struct rt_net { lm_conv body0, body2, head; } rt_net;
 static lm_tensor *rt_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
 {
     rt_net *n = m->impl;
-    lm_tensor *x = lm_mosaic_demosaic(c, &m->mosaic, raw);
+    /* both buckets (in_channels 2): the demosaic of bucket 1; the branch reads both planes */
+    lm_tensor *b1 = m->in_channels == 1 ? raw : lm_contiguous(c, lm_slice(c, raw, 1, 0, 1));
+    lm_tensor *x = lm_mosaic_demosaic(c, &m->mosaic, b1);
     lm_tensor *xr[2] = {x, raw};
     lm_tensor *f = lm_relu(c, lm_conv_forward(c, &n->body0, lm_concat(c, xr, 2, 1)));
     lm_tensor *xf[2] = {x, lm_relu(c, lm_conv_forward(c, &n->body2, f))};
@@ -49,7 +53,7 @@ lm_status lm_rt_build(lm_model *m, int width, lm_err *err)
     if (width < 1) return lm_err_set(err, LM_ERR_ARG, "rt: width %d < 1", width);
     int P = m->mosaic.nch, O = m->out_channels;
     lm_conv_spec head = {P + width, O, 1, 1, 1, 0, 0, 1, 1};
-    if (lm_conv3_declare(&m->params, &n->body0, "body.0", P + 1, width, err) ||
+    if (lm_conv3_declare(&m->params, &n->body0, "body.0", P + m->in_channels, width, err) ||
         lm_conv3_declare(&m->params, &n->body2, "body.2", width, width, err) ||
         lm_conv_declare(&m->params, &n->head, "head", head, 1, err))
         return err->status;

@@ -459,6 +459,186 @@ static void test_flips_before_simulation(void)
     lm_dataset_close(d);
 }
 
+/* ---- both buckets ------------------------------------------------------------------------ */
+/* Bucket 0 of a 31-band crop, written out: per pixel, (sum over every LED of a_l . r) minus the
+ * pixel's own LED's a . r, on the mirrored 41 bins, in double. */
+static void ref_bucket0(const lm_cube *c31, double *b0)
+{
+    lm_cube c41;
+    lm_err e;
+    lm_err_clear(&e);
+    CHECK(lm_cube_mirror41(c31, &c41, &e) == LM_OK);
+    const lm_system *s = &g_sys;
+    for (int y = 0; y < PH; y++)
+        for (int x = 0; x < PW; x++) {
+            const int own = s->tile_led[(y % s->tile_rows) * s->tile_cols + x % s->tile_cols];
+            double all = 0, mine = 0;
+            for (int l = 0; l < s->nleds; l++)
+                for (int b = 0; b < s->nbins; b++) {
+                    double v = (double)s->leds[l].response[b] * lm_cube_band(&c41, b)[y * PW + x];
+                    all += v;
+                    if (l == own) mine += v;
+                }
+            b0[y * PW + x] = all - mine;
+        }
+    lm_cube_free(&c41);
+}
+
+/* buckets 2: plane 0 is bucket 1 as before, plane 1 bucket 0 / (LEDs - 1) of the same (flipped)
+ * crop; noise-free. */
+static void test_two_buckets_clean(void)
+{
+    const char *paths[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    cfg.flips = 1;
+    cfg.buckets = 2;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *d = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(d != NULL, "%s", e.msg);
+    if (!d) return;
+    CHECK(lm_dataset_buckets(d) == 2);
+    const size_t n = (size_t)PH * PW;
+    float raw[2 * PH * PW], target[33 * PH * PW], rr[PH * PW], rt[33 * PH * PW];
+    double b0[PH * PW];
+    const double inv = 1.0 / (g_sys.nleds - 1);
+    int flipped = 0;
+    for (long i = 0; i < 16; i++) {
+        lm_dataset_sample_info info;
+        CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        CHECK_MSG(lm_dataset_batch(d, i, 1, raw, target, &e) == LM_OK, "%s", e.msg);
+        flipped += info.flip_h || info.flip_v;
+        lm_cube c;
+        crop(&c, info.y0, info.x0, info.flip_h, info.flip_v);
+        ref_raw(&c, rr);
+        ref_target(&c, rt);
+        ref_bucket0(&c, b0);
+        CHECK_ARRAY_CLOSE(raw, rr, n, 1e-6, 1e-5);
+        CHECK_ARRAY_CLOSE(target, rt, 33 * n, 1e-7, 1e-6);
+        double worst = 0, mean = 0;
+        for (size_t p = 0; p < n; p++) {
+            double want = b0[p] * inv, err = fabs(raw[n + p] - want) / (fabs(want) + 1e-6);
+            worst = err > worst ? err : worst;
+            mean += raw[n + p] / n;
+        }
+        CHECK_MSG(worst < 1e-5, "sample %ld: bucket 0 off by %g (relative)", i, worst);
+        CHECK(mean > 0.05); /* the fixture is bright: bucket 0 is not empty */
+        lm_cube_free(&c);
+    }
+    CHECK(flipped > 0);
+    /* validation samples: two planes too, the same as the training path */
+    CHECK(lm_dataset_eval_sample(d, LM_SPLIT_VAL, 0, raw, target, &e) == LM_OK);
+    lm_dataset_sample_info info;
+    CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_VAL, 0, &info, &e) == LM_OK);
+    lm_cube c;
+    crop(&c, info.y0, info.x0, 0, 0);
+    ref_bucket0(&c, b0);
+    for (size_t p = 0; p < n; p++) CHECK_CLOSE(raw[n + p], b0[p] * inv, 1e-6, 1e-5);
+    lm_cube_free(&c);
+    lm_dataset_close(d);
+}
+
+/* FNV-1a over the bytes of n floats. */
+static uint64_t hash_floats(const float *v, size_t n)
+{
+    uint64_t h = 0xcbf29ce484222325ull;
+    const unsigned char *p = (const unsigned char *)v;
+    for (size_t i = 0; i < n * sizeof(float); i++) h = (h ^ p[i]) * 0x100000001b3ull;
+    return h;
+}
+
+/* With noise, clipping, quantisation, flips and synthetic shares: bucket 1 of a two-bucket
+ * sample is bit for bit the one-bucket sample (and the one-bucket batch is the numbers the
+ * loader gave before buckets existed: a fixed hash), bucket 0 gets noise of sd k x its own clean
+ * maximum, drawn independently of bucket 1's. */
+static void test_two_buckets_noise(void)
+{
+    const char *paths[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    cfg.flips = 1;
+    cfg.synth_fraction = 0.3f;
+    cfg.procedural_fraction = 0.2f;
+    cfg.noise_min = 0.05f;
+    cfg.noise_max = 0.15f;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *one = lm_dataset_open(&cfg, &e);
+    cfg.buckets = 2;
+    lm_dataset *two = lm_dataset_open(&cfg, &e);
+    cfg.noise_min = cfg.noise_max = 0.0f;
+    lm_dataset *clean = lm_dataset_open(&cfg, &e);
+    cfg.noise_min = 0.05f;
+    cfg.noise_max = 0.15f;
+    cfg.sensor_clip = 1;
+    cfg.sensor_bits = 16;
+    cfg.buckets = 1;
+    lm_dataset *one_q = lm_dataset_open(&cfg, &e);
+    cfg.buckets = 2;
+    cfg.workers = 2; /* the pool too */
+    lm_dataset *two_q = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(one && two && clean && one_q && two_q, "%s", e.msg);
+    if (!one || !two || !clean || !one_q || !two_q) goto done;
+    enum { B = 8 };
+    const size_t n = (size_t)PH * PW;
+    static float r1[B * PH * PW], r2[B * 2 * PH * PW], rc[B * 2 * PH * PW];
+    static float t1[B * 33 * PH * PW], t2[B * 33 * PH * PW];
+    CHECK(lm_dataset_batch(one, 0, B, r1, t1, &e) == LM_OK);
+    /* the one-bucket loader's numbers before buckets existed (measured with commit defe02e:
+     * same seed, fixture and options) */
+    uint64_t h1 = hash_floats(r1, B * n), ht = hash_floats(t1, B * 33 * n);
+    CHECK_MSG(h1 == 0xc9b174cf1e73b7f8ull, "one-bucket batch hash %016llx", (unsigned long long)h1);
+    CHECK_MSG(ht == 0x48717e10521704a7ull, "one-bucket target hash %016llx", (unsigned long long)ht);
+    int kinds[3] = {0, 0, 0};
+    double corr_sum = 0;
+    for (long bi = 0; bi < 3; bi++) {
+        CHECK(lm_dataset_batch(one, bi, B, r1, t1, &e) == LM_OK);
+        CHECK(lm_dataset_batch(two, bi, B, r2, t2, &e) == LM_OK);
+        CHECK(lm_dataset_batch(clean, bi, B, rc, t2, &e) == LM_OK);
+        CHECK(memcmp(t1, t2, sizeof t1) == 0);
+        for (int j = 0; j < B; j++) {
+            lm_dataset_sample_info info;
+            CHECK(lm_dataset_sample_info_get(two, LM_SPLIT_TRAIN, bi * B + j, &info, &e) == LM_OK);
+            kinds[info.kind]++;
+            CHECK_MSG(memcmp(r1 + j * n, r2 + 2 * j * n, n * sizeof(float)) == 0,
+                      "sample %ld: bucket 1 differs from the one-bucket sample", bi * B + j);
+            const float *c0 = rc + (2 * j + 1) * n, *v0 = r2 + (2 * j + 1) * n;
+            const float *c1 = rc + 2 * j * n, *v1 = r2 + 2 * j * n;
+            double mx = 0, s = 0, ss = 0, cross = 0, s1 = 0, ss1 = 0;
+            for (size_t p = 0; p < n; p++) {
+                double d0 = v0[p] - c0[p], d1 = v1[p] - c1[p];
+                mx = c0[p] > mx ? c0[p] : mx;
+                s += d0, ss += d0 * d0, s1 += d1, ss1 += d1 * d1, cross += d0 * d1;
+            }
+            double m = s / n, sd = sqrt(ss / n - m * m), m1 = s1 / n, sd1 = sqrt(ss1 / n - m1 * m1);
+            CHECK_MSG(fabs(sd / mx / info.noise_k - 1) < 0.15, "sample %ld: bucket 0 noise sd "
+                      "%g x max, k %g", bi * B + j, sd / mx, info.noise_k);
+            corr_sum += (cross / n - m * m1) / (sd * sd1);
+        }
+    }
+    CHECK_MSG(fabs(corr_sum / (3 * B)) < 0.05, "bucket noises correlated: %g", corr_sum / (3 * B));
+    for (int k = 0; k < 3; k++) CHECK_MSG(kinds[k] > 0, "sample kind %d never drawn", k);
+    /* clipped and quantised: each bucket on its own full scale, stored in [0, 1] */
+    CHECK(lm_dataset_batch(one_q, 1, B, r1, t1, &e) == LM_OK);
+    CHECK(lm_dataset_batch(two_q, 1, B, r2, t2, &e) == LM_OK);
+    int top0 = 0;
+    for (int j = 0; j < B; j++) {
+        CHECK(memcmp(r1 + j * n, r2 + 2 * j * n, n * sizeof(float)) == 0);
+        for (size_t p = 0; p < n; p++) {
+            float v = r2[(2 * j + 1) * n + p];
+            /* 16-bit steps of the stored scale (up to the float rounding of the 1/11) */
+            CHECK(v >= 0.0f && v <= 1.0f && fabsf(v * 65535.0f - rintf(v * 65535.0f)) < 1e-2f);
+            top0 += v > 0.2f;
+        }
+    }
+    CHECK(top0 > 0); /* not clipped at bucket 1's full scale (1 / 11 once stored) */
+done:
+    lm_dataset_close(one);
+    lm_dataset_close(two);
+    lm_dataset_close(clean);
+    lm_dataset_close(one_q);
+    lm_dataset_close(two_q);
+}
+
 /* ---- determinism on the real CAVE scenes ------------------------------------------------- */
 static lm_dataset *open_cave(int workers, uint64_t seed, int cache)
 {
@@ -743,6 +923,10 @@ static void test_bad_input(void)
     cfg.noise_min = 0.2f;
     cfg.noise_max = 0.1f;
     expect_open_fails(&cfg, LM_ERR_ARG, "noise");
+    cfg.noise_min = cfg.noise_max = 0.0f;
+    cfg.buckets = 3;
+    expect_open_fails(&cfg, LM_ERR_ARG, "buckets 3");
+    cfg.buckets = 1;
     /* a scene that becomes unreadable after open: the batch error names it */
     char gone[1100];
     snprintf(gone, sizeof gone, "%s/gone.exr", tmpdir);
@@ -828,6 +1012,8 @@ int main(void)
     RUN(test_eval_samples_fixed);
     RUN(test_patches_on_tile_grid);
     RUN(test_flips_before_simulation);
+    RUN(test_two_buckets_clean);
+    RUN(test_two_buckets_noise);
     RUN(test_cave_scenes_listed);
     RUN(test_batches_deterministic);
     RUN(test_noise_levels);

@@ -381,6 +381,50 @@ static void test_full_well_before_read_noise(void)
     free(s);
 }
 
+/* Bucket 0's noise (lm_forward_bucket0_noise): its full scale is (LEDs - 1) x bucket 1's, so a
+ * white frame is neither clipped nor quantised away at bucket 1's full well; shot noise has the
+ * same signal per photo-electron (variance = v x fs / photons) and read noise the same sd. */
+static void test_bucket0_noise(void)
+{
+    if (!g_ok) return;
+    const int H = 60, W = 80;
+    const long n = (long)H * W;
+    lm_cube c;
+    CHECK(lm_cube_alloc(&c, 41, H, W, 380, 10) == LM_OK);
+    for (long i = 0; i < 41 * n; i++) c.data[i] = 0.5f;
+    float *b1 = malloc(sizeof(float) * n), *b0 = malloc(sizeof(float) * n);
+    lm_noise_opts base = {.clip = 1, .bits = 16};
+    lm_noise_opts z = lm_forward_bucket0_noise(&base, g_sys.nleds);
+    CHECK(z.full_scale == 11.0f && z.clip && z.bits == 16 && z.photons == 0.0);
+    lm_forward_opts o = {.noise = base, .nthreads = 2};
+    lm_rng r;
+    lm_rng_seed(&r, 3);
+    CHECK(lm_forward_simulate(&g_sys, &c, &o, &r, b1, b0, NULL) == LM_OK);
+    for (long i = 0; i < n; i += 97) {
+        CHECK_CLOSE(b1[i], 0.5, 1e-4, 0);
+        CHECK_CLOSE(b0[i], 5.5, 11.0 / 65535, 0); /* 16-bit steps of 11, not clipped at 1 */
+    }
+    /* shot + read noise: variance 5.5 / photons x 1 (per electron) + read^2, as bucket 1's */
+    lm_noise_opts sn = {.photons = 2000, .read_noise = 3};
+    o.noise = sn;
+    CHECK(lm_forward_simulate(&g_sys, &c, &o, &r, b1, b0, NULL) == LM_OK);
+    double m0, v0, m1, v1;
+    moments(b0, n, 0.0, 1.0, &m0, &v0);
+    moments(b1, n, 0.0, 1.0, &m1, &v1);
+    const double e = 1.0 / 2000, want0 = 5.5 * e + 9 * e * e, want1 = 0.5 * e + 9 * e * e;
+    CHECK_CLOSE(m0, 5.5, 5 * sqrt(want0 / n), 0);
+    CHECK_CLOSE(v0, want0, 0.06 * want0, 0);
+    CHECK_CLOSE(v1, want1, 0.06 * want1, 0);
+    /* read noise as a fraction of the full scale (no photons): the same absolute sd */
+    lm_noise_opts rf = {.read_noise = 0.01f};
+    o.noise = rf;
+    CHECK(lm_forward_simulate(&g_sys, &c, &o, &r, b1, b0, NULL) == LM_OK);
+    moments(b0, n, 0.0, 1.0, &m0, &v0);
+    CHECK_CLOSE(sqrt(v0), 0.01, 0.05 * 0.01, 0);
+    free(b1), free(b0);
+    lm_cube_free(&c);
+}
+
 static void test_full_frame_speed(void)
 {
     if (!g_ok) return;
@@ -415,6 +459,7 @@ int main(void)
     RUN(test_noise_determinism);
     RUN(test_quantisation_and_clipping);
     RUN(test_full_well_before_read_noise);
+    RUN(test_bucket0_noise);
     RUN(test_full_frame_speed);
     lm_system_free(&g_sys);
     return check_summary();

@@ -1,7 +1,8 @@
 /* test_lmmse.c — the closed-form linear floor (models/lmmse.c, train/fit_lmmse.c) and residual
  * models (lm_model_create_residual): the forward against a direct per-pixel double loop (with
  * the tile-reflected borders), noise-level interpolation, finite-difference gradients, the
- * fit's optimality on the very samples it was fitted on, and a residual that starts at its base. */
+ * fit's optimality on the very samples it was fitted on, and a residual that starts at its base;
+ * the same for the two-bucket form ("-b2": a second K x K window on the bucket-0 plane). */
 #include "data/dataset.h"
 #include "data/system.h"
 #include "data/spectra.h"
@@ -36,6 +37,9 @@ static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y
     const lm_param *fw = D ? lm_params_find(&m->params, "features.weight") : NULL;
     const lm_param *fb = D ? lm_params_find(&m->params, "features.bias") : NULL;
     const lm_param *rw = D ? lm_params_find(&m->params, "readout.weight") : NULL;
+    /* two buckets: plane 1 (bucket 0) through its own filters */
+    const lm_param *w0p = lm_params_find(&m->params, "filters.bucket0");
+    const float *raw0 = raw + (size_t)H * W;
     double acc = 0;
     for (int lv = l; lv <= l + 1; lv++) {
         double a = lv == l ? 1 - t : t;
@@ -45,6 +49,11 @@ static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y
         for (int u = 0; u < K; u++)
             for (int v = 0; v < K; v++)
                 s += w[u * K + v] * raw[reflect_raw(Y - r + u, H, ty) * W + reflect_raw(X - r + v, W, tx)];
+        const float *w0 = w0p ? w0p->t.data + (((size_t)lv * P + p) * O + c) * K * K : NULL;
+        for (int u = 0; w0 && u < K; u++)
+            for (int v = 0; v < K; v++)
+                s += w0[u * K + v] *
+                     raw0[reflect_raw(Y - r + u, H, ty) * W + reflect_raw(X - r + v, W, tx)];
         for (int d = 0; d < D; d++) { /* random feature d at (Y, X), read out */
             double h = fb->t.data[d];
             for (int u = 0; u < K; u++)
@@ -72,7 +81,7 @@ static void check_forward_mode(const char *preset, int H, int W, float sigma, in
     lm_ctx_init(&c, 2);
     lm_rng r;
     lm_rng_seed(&r, 4);
-    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){1, 1, H, W}, &r, 0.0f, 1.0f);
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){1, m->in_channels, H, W}, &r, 0.0f, 1.0f);
     m->noise_sigma = sigma;
     lm_ctx_set_grad(&c, grad);
     lm_tensor *y = lm_model_forward(&c, m, x);
@@ -102,17 +111,17 @@ static void check_forward(const char *preset, int H, int W, float sigma, int l, 
 static void test_direct_matches_tile_path(void)
 {
     const int sizes[3][2] = {{24, 32}, {6, 8}, {30, 20}};
-    for (int k = 0; k < 3; k++) {
-        const int H = sizes[k][0], W = sizes[k][1];
+    for (int k = 0; k < 6; k++) { /* one bucket, then both (the direct path over two planes) */
+        const int H = sizes[k % 3][0], W = sizes[k % 3][1];
         lm_err e = {0};
-        lm_model *m = lm_model_create("lmmse", NULL, 11, &e);
+        lm_model *m = lm_model_create(k < 3 ? "lmmse" : "lmmse-b2", NULL, 11, &e);
         CHECK_MSG(m != NULL, "%s", e.msg);
         if (!m) return;
         lm_ctx c;
         lm_ctx_init(&c, 2);
         lm_rng r;
         lm_rng_seed(&r, 7 + k);
-        lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){3, 1, H, W}, &r, 0.0f, 1.0f);
+        lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){3, m->in_channels, H, W}, &r, 0.0f, 1.0f);
         const float sig[3] = {0.0f, 0.04f, 0.04f};
         m->noise_sigma_items = sig;
         lm_tensor *yt = lm_contiguous(&c, lm_model_forward(&c, m, x));
@@ -171,6 +180,10 @@ static void test_forward_matches_direct_loop(void)
     check_forward("lmmse-3", 9, 12, 10.0f, LM_LMMSE_LEVELS - 2, 1.0); /* clamped at the top */
     check_forward("lmmse-5-rf6", 12, 16, 0.0f, 0, 0.0);               /* random features */
     check_forward("lmmse-3-rf4", 9, 12, s, 4, 0.5);
+    /* both buckets: the bucket-0 window adds its own filters */
+    check_forward("lmmse-b2", 18, 24, 0.0f, 0, 0.0);
+    check_forward("lmmse-5-b2", 12, 16, s, 4, 0.5);
+    check_forward("lmmse-3-b2", 6, 8, lm_lmmse_sigmas[3], 3, 0.0); /* zero-padded borders */
 }
 
 static void test_counts_and_capabilities(void)
@@ -184,6 +197,28 @@ static void test_counts_and_capabilities(void)
     lm_model_free(m);
     CHECK(lm_model_create("lmmse-4", NULL, 1, &e) == NULL && e.status == LM_ERR_ARG);
     CHECK(lm_model_preset_known("lmmse-7") && !lm_model_preset_known("lmmse-x"));
+    /* two buckets: a second filter bank of the same size, in_channels 2, no host paths */
+    m = lm_model_create("lmmse-b2", NULL, 1, &e);
+    CHECK_MSG(m != NULL, "%s", e.msg);
+    if (m) {
+        CHECK(lm_params_count(&m->params, 0) ==
+              (long)LM_LMMSE_LEVELS * 12 * (2 * 11 * 11 + 1) * 33);
+        CHECK(m->in_channels == 2 && lm_model_buckets(m) == 2 && !m->frame_forward &&
+              lm_model_has(m, LM_CAP_CLOSED_FORM | LM_CAP_TWO_BUCKETS));
+    }
+    lm_model_free(m);
+    CHECK(lm_model_preset_known("lmmse-7-b2") && !lm_model_preset_known("lmmse-7-b3") &&
+          !lm_model_preset_known("lmmse-4-b2") && !lm_model_preset_known("lmmse-7-rf4-b2"));
+    /* one-bucket input to a two-bucket model (and back): a one-line shape error */
+    lm_ctx c1;
+    lm_ctx_init(&c1, 1);
+    m = lm_model_create("lmmse-3-b2", NULL, 1, &e);
+    if (m) m->noise_sigma = 0.0f;
+    lm_tensor *x1 = lm_tensor_zeros(&c1, 4, (int[]){1, 1, 6, 8});
+    CHECK(m && lm_model_forward(&c1, m, x1) == NULL && strstr(c1.msg, "B x 2 x H x W") &&
+          !strchr(c1.msg, '\n'));
+    lm_model_free(m);
+    lm_ctx_free(&c1);
     /* no noise level set: a clear error, not the clean filter */
     m = lm_model_create("lmmse-3", NULL, 1, &e);
     lm_ctx c;
@@ -210,7 +245,7 @@ static void gradcheck(lm_model *m, const float *sig, int kinks)
     lm_ctx_init(&c, 2);
     lm_rng r;
     lm_rng_seed(&r, 2);
-    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){3, 1, 9, 12}, &r, 0.1f, 1.0f);
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){3, m->in_channels, 9, 12}, &r, 0.1f, 1.0f);
     lm_tensor_set_requires_grad(x, 1);
     m->noise_sigma_items = sig;
     int np = m->params.n;
@@ -255,6 +290,17 @@ static void test_gradients(void)
     lm_model *rm = lm_model_create_residual("linear", "lmmse-3", NULL, 7, 1, 0.5f, &e);
     CHECK_MSG(rm != NULL, "%s", e.msg);
     if (rm) gradcheck(rm, sig, 0);
+    lm_model_free(rm);
+    /* both buckets: the input's two planes and both filter banks (and the bias) */
+    m = lm_model_create("lmmse-5-b2", NULL, 7, &e);
+    CHECK_MSG(m && m->in_channels == 2 && lm_params_find(&m->params, "filters.bucket0"), "%s",
+              e.msg);
+    if (m) gradcheck(m, sig, 0);
+    lm_model_free(m);
+    /* an rt-8-b2 residual on a trainable lmmse-3-b2 (rt has ReLUs: kinks allowed) */
+    rm = lm_model_create_residual("rt-8-b2", "lmmse-3-b2", NULL, 7, 1, 0.5f, &e);
+    CHECK_MSG(rm != NULL, "%s", e.msg);
+    if (rm) gradcheck(rm, sig, 1);
     lm_model_free(rm);
 }
 
@@ -313,6 +359,8 @@ static void fit_least_squares(const char *preset)
     lm_dataset_default_cfg(&dc);
     dc.paths = paths, dc.npaths = 1, dc.sys = &sys, dc.workers = 0;
     dc.patch_h = 24, dc.patch_w = 32, dc.noise_min = dc.noise_max = 0.0f;
+    const int C = m && lm_model_buckets(m) == 2 ? 2 : 1;
+    dc.buckets = C;
     lm_dataset *d = lm_dataset_open(&dc, &e);
     CHECK_MSG(m && d, "%s", e.msg);
     lm_lmmse_fit_report rep;
@@ -329,22 +377,27 @@ static void fit_least_squares(const char *preset)
     CHECK_MSG(nsyn > 0 && nsyn < NP && fabs(rep.synth_weight[0] - (double)nsyn / NP) < 1e-12,
               "%s: synthetic share %g, sampled %d of %d", preset, rep.synth_weight[0], nsyn, NP);
     /* ridge without validation is the small default: nudging must not help, clean level */
-    float *raw = malloc(sizeof(float) * NP * 24 * 32), *tgt = malloc(sizeof(float) * NP * O * 24 * 32);
+    float *raw = malloc(sizeof(float) * NP * C * 24 * 32), *tgt = malloc(sizeof(float) * NP * O * 24 * 32);
     for (int k = 0; k < NP / B; k++)
-        CHECK(lm_dataset_batch(d, k, B, raw + (size_t)k * B * 24 * 32,
+        CHECK(lm_dataset_batch(d, k, B, raw + (size_t)k * B * C * 24 * 32,
                                tgt + (size_t)k * B * O * 24 * 32, &e) == LM_OK);
     lm_ctx c;
     lm_ctx_init(&c, 2);
     m->noise_sigma = 0.0f;
-    double base = 0, nudged[2] = {0, 0};
-    lm_param *w = lm_params_find(&m->params, "filters.weight");
-    const size_t coef = (size_t)(1 * O + 5) * 25 + 12; /* phase 1, channel 5, centre tap */
-    for (int pass = 0; pass < 3; pass++) {
+    double base = 0, nudged[4] = {0, 0, 0, 0};
+    /* phase 1, channel 5, centre tap of bucket 1's filter; with two buckets also bucket 0's
+     * (phase 2, channel 9, a tap off centre) */
+    lm_param *w1 = lm_params_find(&m->params, "filters.weight");
+    lm_param *w0 = lm_params_find(&m->params, "filters.bucket0");
+    CHECK((C == 2) == (w0 != NULL));
+    for (int pass = 0; pass < (C == 2 ? 5 : 3); pass++) {
+        lm_param *w = pass < 3 ? w1 : w0;
+        const size_t coef = pass < 3 ? (size_t)(1 * O + 5) * 25 + 12 : (size_t)(2 * O + 9) * 25 + 7;
         float keep = w->t.data[coef];
-        if (pass) w->t.data[coef] = keep * (pass == 1 ? 1.02f : 0.98f) + (pass == 1 ? 1e-3f : -1e-3f);
+        if (pass) w->t.data[coef] = keep * (pass % 2 ? 1.02f : 0.98f) + (pass % 2 ? 1e-3f : -1e-3f);
         double sse = 0;
         lm_ctx_reset(&c);
-        lm_tensor *x = lm_tensor_from(&c, 4, (int[]){NP, 1, 24, 32}, raw);
+        lm_tensor *x = lm_tensor_from(&c, 4, (int[]){NP, C, 24, 32}, raw);
         lm_tensor *y = lm_model_forward(&c, m, x);
         for (int b = 0; y && b < NP; b++)
             for (int ch = 0; ch < O; ch++)
@@ -360,6 +413,9 @@ static void fit_least_squares(const char *preset)
     }
     CHECK_MSG(base > 0 && base < nudged[0] && base < nudged[1], "%s: fit SSE %.9g, nudged %.9g / "
               "%.9g", preset, base, nudged[0], nudged[1]);
+    if (C == 2)
+        CHECK_MSG(base < nudged[2] && base < nudged[3], "%s: fit SSE %.9g, bucket-0 filter "
+                  "nudged %.9g / %.9g", preset, base, nudged[2], nudged[3]);
     free(raw), free(tgt);
     lm_ctx_free(&c);
     lm_dataset_close(d);
@@ -371,6 +427,7 @@ static void test_fit_is_least_squares(void)
 {
     fit_least_squares("lmmse-5");
     fit_least_squares("lmmse-5-rf6"); /* random features: the readout is still least squares */
+    fit_least_squares("lmmse-5-b2");  /* both buckets: two windows per pixel */
 }
 
 int main(void)

@@ -28,6 +28,17 @@ static void test_parameter_counts(void)
     check_count("mcan", 887710, 887290);
     check_count("srnet", 1867670, 1867670);
     check_count("linear", 12 * 33 + 33, 12 * 33 + 33);
+    /* rt-W: body.0 (12 + planes -> W, 3x3), body.2 (W -> W, 3x3), head (12 + W -> 33, 1x1);
+     * the -b2 form reads one more plane (bucket 0) in body.0 */
+    for (int w = 8; w <= 16; w += 8) {
+        long one = (13L * w * 9 + w) + ((long)w * w * 9 + w) + ((12L + w) * 33 + 33);
+        char nm[16];
+        snprintf(nm, sizeof nm, "rt-%d", w);
+        check_count(nm, one, one);
+        snprintf(nm, sizeof nm, "rt-%d-b2", w);
+        check_count(nm, one + 9L * w, one + 9L * w);
+    }
+    check_count("rt-8-b2", 2293, 2293); /* as lumosaic info prints it */
 }
 
 static void test_paper_han_count(void)
@@ -71,7 +82,7 @@ static void forward_shape(const char *preset, int B, int H, int W)
     lm_ctx_init(&c, 2);
     lm_rng r;
     lm_rng_seed(&r, 1);
-    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){B, 1, H, W}, &r, 0, 1);
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){B, m->in_channels, H, W}, &r, 0, 1);
     lm_tensor *y = lm_model_forward(&c, m, x);
     CHECK_CTX_OK(&c);
     CHECK_MSG(y && y->shape[0] == B && y->shape[1] == 33 && y->shape[2] == H && y->shape[3] == W,
@@ -84,6 +95,22 @@ static void forward_shape(const char *preset, int B, int H, int W)
     lm_tensor *bad = lm_tensor_zeros(&c, 4, (int[]){1, 1, 10, 16});
     CHECK(lm_model_forward(&c, m, bad) == NULL);
     CHECK_CTX_FAILED(&c, LM_ERR_SHAPE);
+    if (lm_model_buckets(m) == 2) {
+        /* one bucket to a two-bucket model: refused; the bucket-0 plane changes the output */
+        lm_ctx_clear_error(&c);
+        lm_tensor *one = lm_tensor_zeros(&c, 4, (int[]){B, 1, H, W});
+        CHECK(lm_model_forward(&c, m, one) == NULL && strstr(c.msg, "B x 2 x H x W"));
+        CHECK_CTX_FAILED(&c, LM_ERR_SHAPE);
+        lm_ctx_clear_error(&c);
+        lm_tensor *x2 = lm_tensor_uniform(&c, 4, (int[]){B, 2, H, W}, &r, 0, 1);
+        memcpy(x2->data, x->data, sizeof(float) * (size_t)B * 2 * H * W);
+        for (int b = 0; b < B; b++) /* bucket 0 of every item halved */
+            for (long i = 0; i < (long)H * W; i++) x2->data[((size_t)b * 2 + 1) * H * W + i] *= 0.5f;
+        lm_tensor *y2 = lm_model_forward(&c, m, x2);
+        double diff = 0;
+        for (long i = 0; y && y2 && i < n; i++) diff += fabs(y->data[i] - y2->data[i]);
+        CHECK_MSG(diff > 1e-3, "%s: bucket 0 does not reach the output (%g)", preset, diff);
+    }
     lm_ctx_free(&c);
     lm_model_free(m);
 }
@@ -94,6 +121,9 @@ static void test_forward_shapes(void)
     forward_shape("han-tiny", 2, 66, 64);
     forward_shape("mcan-tiny", 2, 66, 64);
     forward_shape("srnet-tiny", 2, 66, 64);
+    forward_shape("rt-8", 2, 12, 16);
+    forward_shape("rt-8-b2", 2, 12, 16);
+    forward_shape("rt-16-b2", 1, 66, 64);
 }
 
 typedef struct gc_user { lm_model *m; } gc_user;
@@ -121,7 +151,7 @@ static void gradcheck_model(const char *preset, int H, int W)
     lm_ctx_init(&c, 2);
     lm_rng r;
     lm_rng_seed(&r, 2);
-    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){2, 1, H, W}, &r, 0.1f, 1.0f);
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){2, m->in_channels, H, W}, &r, 0.1f, 1.0f);
     lm_tensor_set_requires_grad(x, 1);
     int np = m->params.n;
     lm_tensor **in = malloc((size_t)(np + 1) * sizeof *in);
@@ -159,6 +189,7 @@ static void test_gradcheck_models(void)
     gradcheck_model("han-tiny", 6, 8);
     gradcheck_model("mcan-tiny", 6, 8);
     gradcheck_model("srnet-tiny", 12, 16);
+    gradcheck_model("rt-8-b2", 6, 8);
 }
 
 /* A training step (forward, loss, backward) allocates nothing from the system after the

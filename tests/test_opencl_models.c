@@ -1,7 +1,8 @@
 /* test_opencl_models.c — CPU vs OpenCL agreement of whole models: for linear, han-tiny (LAM and
  * CSAM scales set non-zero), mcan-tiny and srnet-tiny (with a response map), rt-8, rt-16, lmmse,
- * lmmse-5-rf6, a residual rt-8 on lmmse-5 and the RGB baseline mst-tiny (3 channels in, 31
- * out; attention over the whole input), the same weights
+ * lmmse-5-rf6, a residual rt-8 on lmmse-5, the two-bucket lmmse-5-b2 and rt-8-b2 on it, and
+ * the RGB baseline mst-tiny (3 channels in, 31 out; attention over the whole input), the same
+ * weights
  * and input run forward + L1 loss + backward on a CPU ctx and on an OpenCL ctx (parameters
  * swapped onto the device for the step, lm_tensors_swap_to_device); the outputs, the loss, the
  * input gradient and every parameter gradient are compared, and the worst absolute and relative
@@ -182,6 +183,8 @@ static void test_models(void)
     check_model("lmmse", 2, 18, 24);
     check_model("lmmse-5-rf6", 2, 12, 16);
     check_model_on("rt-8", "lmmse-5", 2, 12, 16);
+    check_model("lmmse-5-b2", 2, 12, 16); /* both buckets: two input planes */
+    check_model_on("rt-8-b2", "lmmse-5-b2", 2, 12, 16);
     check_model("linear", 2, 12, 16);
     check_model("han-tiny", 2, 12, 16);
     check_model("mcan-tiny", 2, 12, 16);

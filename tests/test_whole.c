@@ -192,16 +192,17 @@ static double strip_error(lm_model *m, int H, int W, int strip, int halo, int th
     lm_ctx_init(&c, threads);
     lm_rng r;
     lm_rng_seed(&r, (uint64_t)(H * 1000 + W));
-    float *frame = malloc(sizeof(float) * (size_t)H * W);
+    const int C = m->in_channels; /* 2: both buckets, plane after plane */
+    float *frame = malloc(sizeof(float) * C * (size_t)H * W);
     float *out = malloc(sizeof(float) * 33 * (size_t)H * W);
-    lm_rng_fill_uniform(&r, frame, (long)H * W, 0.0f, 1.0f);
+    lm_rng_fill_uniform(&r, frame, (long)C * H * W, 0.0f, 1.0f);
     lm_whole_opts o = {strip, halo};
     lm_err e = {0};
     double worst = -1;
     lm_status st = lm_whole_forward(&c, m, frame, H, W, &o, 0, 33, out, &e);
     CHECK_MSG(st == LM_OK, "%s", e.msg);
     lm_ctx_set_grad(&c, 0);
-    lm_tensor *raw = lm_tensor_from(&c, 4, (int[]){1, 1, H, W}, frame);
+    lm_tensor *raw = lm_tensor_from(&c, 4, (int[]){1, C, H, W}, frame);
     lm_tensor *y = st ? NULL : lm_model_forward(&c, m, raw);
     CHECK_CTX_OK(&c);
     if (y) {
@@ -216,11 +217,11 @@ static double strip_error(lm_model *m, int H, int W, int strip, int halo, int th
 
 static void test_strips_equal_whole(void)
 {
-    const char *names[] = {"linear", "rt-8", "rt-16"};
+    const char *names[] = {"linear", "rt-8", "rt-16", "rt-8-b2", "lmmse-5-b2"};
     const int sizes[][2] = {{33, 44}, {51, 28}, {6, 12}};
     const int strips[] = {3, 9, 16, 96};
     lm_err e = {0};
-    for (int n = 0; n < 3; n++) {
+    for (int n = 0; n < 5; n++) { /* the -b2 models: strips of both bucket planes */
         lm_model *m = lm_model_create(names[n], NULL, 3, &e);
         CHECK_MSG(m != NULL, "%s", e.msg);
         if (!m) continue;
@@ -240,9 +241,9 @@ static void test_strips_equal_whole(void)
 /* One tile row less halo than declared: the strip edges show (the equality test can fail). */
 static void test_small_halo_breaks(void)
 {
-    const char *names[] = {"linear", "rt-8"};
+    const char *names[] = {"linear", "rt-8", "rt-8-b2"};
     lm_err e = {0};
-    for (int n = 0; n < 2; n++) {
+    for (int n = 0; n < 3; n++) {
         lm_model *m = lm_model_create(names[n], NULL, 3, &e);
         if (!m) continue;
         double d = strip_error(m, 33, 44, 9, lm_whole_halo(m) - 3, 2);

@@ -48,6 +48,14 @@ static const field fields[] = {
     FLD("procedural_fraction", F_FLOAT, procedural_fraction, "F", "share of procedural scenes "
         "(textured, varied spectra; not in the paper; -1: 0.2, at most 1 - synth_fraction)", -1,
         1),
+    FLD("motion_fraction", F_FLOAT, motion_fraction, "F", "share of real-scene samples seen "
+        "moving during the exposure (0)", 0, 1),
+    FLD("motion_speed", F_FLOAT, motion_speed, "PX_S", "moving samples: translation speed "
+        "uniform in [0, this] px/s (240)", 0, 1e5),
+    FLD("motion_rotation", F_FLOAT, motion_rotation, "DEG_S", "moving samples: rotation uniform "
+        "in [-this, this] deg/s about the patch centre (0)", 0, 1e5),
+    FLD("motion_samples", F_INT, motion_samples, "N", "moving samples: instants per LED window "
+        "(2)", 1, 64),
     FLD("patch", F_PATCH, patch_h, "HxW", "patch size, multiples of the tile (66x64)", 1,
         MAX_PATCH),
     FLD("batch", F_INT, batch, "N", "samples per forward pass (14)", 1, MAX_BATCH),
@@ -89,6 +97,9 @@ static const field fields[] = {
         "PNG frame holds them (0)", 0, 1),
     FLD("sensor_bits", F_INT, sensor_bits, "N", "quantise samples to N bits (0 = off; 16 = PNG)",
         0, 24),
+    FLD("buckets", F_INT, buckets, "1|2", "coded-frame buckets the model reads: 1 (bucket 1, the "
+        "paper) or 2 (bucket 1 and bucket 0 / (LEDs - 1); the model's \"-b2\" preset; a -b2 "
+        "preset sets 2)", 1, 2),
     FLD("snapshots", F_STR, snapshots, "M,M,...", "weights at these minutes of training into "
         "<output>/snapshots/<M>min/", 0, 0),
     FLD("minutes", F_FLOAT, minutes, "M", "time budget in minutes (0 = none; the schedule "
@@ -123,6 +134,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     snprintf(c->model, sizeof c->model, "han-paper");
     c->synth_fraction = 0.33f;
     c->procedural_fraction = -1.0f; /* lm_train_procedural_share: 0.2 (measured, README) */
+    c->motion_speed = 240.0f, c->motion_samples = 2;
     c->patch_h = 66, c->patch_w = 64;
     c->batch = 14, c->accum_steps = 2;
     c->iterations = 50000;
@@ -138,6 +150,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     c->val_patches = 64;
     c->checkpoint_interval = 1000;
     c->log_interval = 100;
+    c->buckets = 1;
     snprintf(c->output, sizeof c->output, "runs/train");
     snprintf(c->fit, sizeof c->fit, "auto");
     c->fit_patches = 4096;
@@ -547,6 +560,12 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
                                                    "optimise", c->doe_optimise, "lr",
                                                    (double)c->doe_lr, "quantise",
                                                    c->doe_quantise, "bands", c->doe_bands));
+    if (root) /* moving samples (issue 18, item 2) */
+        json_object_update_new(root, json_pack("{s:f, s:f, s:f, s:i}", "motion_fraction",
+                               (double)c->motion_fraction, "motion_speed", (double)c->motion_speed,
+                               "motion_rotation", (double)c->motion_rotation, "motion_samples",
+                               c->motion_samples));
+    if (root) json_object_set_new(root, "buckets", json_integer(c->buckets));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

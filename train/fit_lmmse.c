@@ -18,6 +18,13 @@
  * With random features (lmmse-rf, D > 0) the features of noisy inputs are nonlinear in the
  * noise, so the statistics are accumulated again, with sampled noise, at six of the levels
  * (0, 0.005, 0.02, 0.05, 0.15, 0.3), and the levels between are interpolated linearly.
+ * Both buckets (lmmse-b2: the loader opened with buckets 2): x = the K x K window of bucket 1,
+ * then that of bucket 0 / (LEDs - 1), then the 1. The analytic noise term puts the same s^2 on
+ * every window entry of both planes: the same noise sd in the stored units of either bucket
+ * (their clean maxima are alike: both are 1 for white), where the loader draws k x each
+ * bucket's own maximum. Bucket 0's stored maximum (a mean over eleven LEDs) is at most about
+ * bucket 1's (the brightest LED's), so this overstates its noise a little: a conservative
+ * filter, not a tuned one (per-plane levels would be a refinement).
  * What it is not: the model (models/lmmse.c) or SGD training (train.c). */
 #include "train/fit_lmmse.h"
 #include "data/dataset.h"
@@ -42,6 +49,7 @@ typedef struct stats {     /* one phase */
 
 typedef struct fitter {
     int K, D, F1, P, ty, tx, ph, pw;
+    int C;                  /* input planes: 1, or 2 (both buckets) */
     stats *tr, *ts, *va;    /* training (real scenes), training (synthetic), validation */
     stats mix;              /* scratch: a mixture of tr and ts for one phase */
     lm_dataset *d;          /* the training patches' kinds */
@@ -64,7 +72,8 @@ static lm_status fitter_init(fitter *f, const lm_model *m, int ph, int pw, int b
     memset(f, 0, sizeof *f);
     f->K = lm_lmmse_window(m);
     f->D = lm_lmmse_features(m);
-    f->F1 = f->K * f->K + f->D + 1;
+    f->C = lm_model_buckets(m) == 2 ? 2 : 1;
+    f->F1 = f->C * f->K * f->K + f->D + 1;
     f->ty = m->mosaic.ty, f->tx = m->mosaic.tx, f->P = f->ty * f->tx;
     f->ph = ph, f->pw = pw;
     if (ph < f->K + f->ty || pw < f->K + f->tx)
@@ -99,8 +108,8 @@ static void fitter_free(fitter *f)
     free(f->tr), free(f->ts), free(f->va), free(f->X), free(f->Y), free(f->mix.A), free(f->mix.B);
 }
 
-/* Rows of phase p from the patches idx[0..nb) (raw: patches x ph x pw, target: patches x 33
- * x ph x pw; idx NULL: 0..nb-1) into X, Y. */
+/* Rows of phase p from the patches idx[0..nb) (raw: patches x C x ph x pw, target: patches x
+ * 33 x ph x pw; idx NULL: 0..nb-1) into X, Y. */
 static long gather(fitter *f, int p, const float *raw, const float *tgt, const int *idx, int nb)
 {
     const int r = f->K / 2, ph = f->ph, pw = f->pw, i = p / f->tx, j = p % f->tx;
@@ -108,16 +117,19 @@ static long gather(fitter *f, int p, const float *raw, const float *tgt, const i
     long n = 0;
     for (int q = 0; q < nb; q++) {
         const int b = idx ? idx[q] : q;
-        const float *rb = raw + b * plane, *tb = tgt + (size_t)b * O * plane;
+        const float *rb = raw + (size_t)b * f->C * plane, *tb = tgt + (size_t)b * O * plane;
         int y0 = r + ((i - r) % f->ty + f->ty) % f->ty, x0 = r + ((j - r) % f->tx + f->tx) % f->tx;
         for (int y = y0; y < ph - r; y += f->ty)
             for (int x = x0; x < pw - r; x += f->tx, n++) {
                 double *xr = f->X + n * f->F1;
-                for (int u = 0; u < f->K; u++)
-                    for (int v = 0; v < f->K; v++)
-                        xr[u * f->K + v] = rb[(size_t)(y - r + u) * pw + (x - r + v)];
+                const int KK = f->K * f->K;
+                for (int q = 0; q < f->C; q++)
+                    for (int u = 0; u < f->K; u++)
+                        for (int v = 0; v < f->K; v++)
+                            xr[q * KK + u * f->K + v] =
+                                rb[q * plane + (size_t)(y - r + u) * pw + (x - r + v)];
                 const float *fb = f->feat + (size_t)b * f->D * plane + (size_t)y * pw + x;
-                for (int d = 0; d < f->D; d++) xr[f->K * f->K + d] = fb[d * plane];
+                for (int d = 0; d < f->D; d++) xr[f->C * KK + d] = fb[d * plane];
                 xr[f->F1 - 1] = 1.0;
                 for (int c = 0; c < O; c++) f->Y[n * O + c] = tb[c * plane + (size_t)y * pw + x];
             }
@@ -362,7 +374,7 @@ static lm_status accumulate_all(fitter *f, lm_model *m, lm_ctx *c, lm_dataset *d
 {
     lm_rng r;
     lm_rng_seed(&r, seed);
-    const size_t plane = (size_t)f->ph * f->pw;
+    const size_t plane = (size_t)f->ph * f->pw * f->C; /* one sample's raw floats */
     long nbatches = (patches + batch - 1) / batch;
     int *idx = malloc(sizeof(int) * (size_t)batch);
     lm_status st = idx ? LM_OK : lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: out of memory");
@@ -432,10 +444,13 @@ lm_status lm_lmmse_fit(lm_model *m, lm_dataset *d, int ph, int pw, long patches,
     if (patches < 1 || batch < 1)
         return lm_err_set(err, LM_ERR_ARG, "lmmse fit: %ld patches in batches of %d", patches,
                           batch);
+    if (lm_dataset_buckets(d) != (lm_model_buckets(m) == 2 ? 2 : 1))
+        return lm_err_set(err, LM_ERR_ARG, "lmmse fit: model %s reads %d bucket(s), the data "
+                          "gives %d", m->preset, lm_model_buckets(m), lm_dataset_buckets(d));
     fitter f;
     double t0 = now();
     lm_status st = fitter_init(&f, m, ph, pw, batch, err);
-    float *raw = malloc(sizeof(float) * batch * ph * pw);
+    float *raw = malloc(sizeof(float) * batch * ph * pw * (lm_model_buckets(m) == 2 ? 2 : 1));
     float *tgt = malloc(sizeof(float) * batch * O * ph * pw);
     if (!st && (!raw || !tgt)) st = lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: out of memory");
     int nv = lm_dataset_eval_count(d, LM_SPLIT_VAL);

@@ -55,6 +55,7 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.sensor_bits = cfg->sensor_bits;
     dc.batch_stride = dp ? lm_dist_size() : 1; /* rank r takes every N-th batch (train.c) */
     dc.mat_key = cfg->mat_key;
+    dc.buckets = cfg->buckets;
     if (clean) { /* the fit adds noise, clipping and quantisation itself */
         dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
         dc.sensor_clip = dc.sensor_bits = 0;
@@ -270,6 +271,17 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         if (!st) st = lm_train_run(cfg, m, &src, &opts, res, err);
         if (src.user && qdo) lm_train_source_doe_close(&src);
         else if (src.user) lm_train_source_rgb_close(&src);
+    } else if (!st && cfg->motion_fraction > 0.0f && cfg->buckets == 2) {
+        st = lm_err_set(err, LM_ERR_ARG, "config: 'motion_fraction' with 'buckets' 2: moving "
+                        "samples are simulated for bucket 1 only");
+    } else if (!st && cfg->motion_fraction > 0.0f) { /* moving scenes (issue 18, item 2) */
+        lm_train_source src;
+        lm_train_motion_opts mo = {cfg->motion_fraction, cfg->motion_speed, cfg->motion_rotation,
+                                   cfg->motion_samples, cfg->sensor_clip, cfg->sensor_bits};
+        st = lm_train_source_motion_open(&src, d, &sys, &mo, cfg->patch_h, cfg->patch_w,
+                                         cfg->seed, err);
+        if (!st) st = lm_train_run(cfg, m, &src, &opts, res, err);
+        if (src.user) lm_train_source_motion_close(&src);
     } else if (!st) {
         lm_train_source src = lm_train_source_dataset(d);
         st = lm_train_run(cfg, m, &src, &opts, res, err);
@@ -298,6 +310,24 @@ static void absolute_paths(lm_train_cfg *c)
     }
 }
 
+/* The model and the loader read the same buckets: a "-b2" preset sets buckets 2; buckets 2
+ * with a one-bucket name picks the name's "-b2" preset (rt-8 -> rt-8-b2). */
+static lm_status resolve_buckets(lm_train_cfg *c, lm_err *err)
+{
+    size_t n = strlen(c->model);
+    int b2 = n > 3 && !strcmp(c->model + n - 3, "-b2");
+    if (b2) c->buckets = 2;
+    if (b2 || c->buckets != 2) return LM_OK;
+    char name[sizeof c->model + 4];
+    snprintf(name, sizeof name, "%s-b2", c->model);
+    if (strlen(name) >= sizeof c->model || !lm_model_preset_known(name))
+        return lm_err_set(err, LM_ERR_ARG, "config: field 'buckets': model %s has no two-bucket "
+                          "form (lmmse, lmmse-K, rt-8 and rt-16 have: their \"-b2\" presets)",
+                          c->model);
+    snprintf(c->model, sizeof c->model, "%s", name);
+    return LM_OK;
+}
+
 lm_status lm_train_session(const lm_train_cfg *cfg_in, const lm_train_opts *opts_in,
                            lm_train_result *res, lm_err *err)
 {
@@ -307,7 +337,8 @@ lm_status lm_train_session(const lm_train_cfg *cfg_in, const lm_train_opts *opts
     if (!cfg) return lm_err_set(err, LM_ERR_NOMEM, "train: out of memory");
     *cfg = *cfg_in;
     absolute_paths(cfg);
-    lm_status st = session(cfg, opts, res, err);
+    lm_status st = resolve_buckets(cfg, err);
+    if (!st) st = session(cfg, opts, res, err);
     free(cfg);
     return st;
 }

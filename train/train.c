@@ -121,7 +121,9 @@ static void set_noise(loop *L, int B)
     if (!m->noise_input) return;
     const int H = L->cfg->patch_h, W = L->cfg->patch_w;
     for (int b = 0; b < B; b++) {
-        float s = lm_noise_estimate_scratch(L->raw + (size_t)b * H * W, H, W, m->mosaic.ty,
+        /* bucket 1: plane 0 of the item (of in_channels planes) */
+        float s = lm_noise_estimate_scratch(L->raw + (size_t)b * m->in_channels * H * W, H, W,
+                                            m->mosaic.ty,
                                             m->mosaic.tx, L->noise_scratch);
         L->sigma[b] = s > 0.0f ? s : 0.0f;
     }

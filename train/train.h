@@ -43,6 +43,10 @@ typedef struct lm_train_cfg {
                                      * narrowband patches (paper 0.33) */
     float procedural_fraction;      /* share of procedural scenes (not in the paper); -1 (the
                                      * default): lm_train_procedural_share */
+    float motion_fraction;          /* share of real-scene samples seen moving (0; issue 18) */
+    float motion_speed;             /* their translation speed: uniform in [0, this] px/s (240) */
+    float motion_rotation;          /* their rotation: uniform in [-this, this] deg/s (0) */
+    int motion_samples;             /* instants per LED window (2) */
     int patch_h, patch_w;           /* 66 x 64 */
     int batch, accum_steps;         /* 14, 2 */
     long iterations;                /* optimizer updates (paper 50,000) */
@@ -85,6 +89,8 @@ typedef struct lm_train_cfg {
      * (elapsed time, the default) or "cpu" (CPU time of the process, every thread: a budget a
      * busy machine does not shrink; the study runs presets side by side on it) */
     char clock[8];
+    int buckets;                    /* coded-frame buckets the model reads: 1 (bucket 1) or 2
+                                     * (both; the preset's "-b2" form, which sets 2 itself) */
     char mat_key[LM_DATASET_KEY_LEN]; /* .mat cube variable of the data ("" = automatic:
                                         * cube, hsi, rad, ref, ...; data/cube_io.h) */
     /* QDO presets (LM_CAP_QDO_OPTICS) only; JSON also as one object "doe": {"file",
@@ -186,6 +192,28 @@ lm_status lm_train_source_doe_open(lm_train_source *src, lm_dataset *d,
 void lm_train_source_doe_close(lm_train_source *src);
 /* The context pads of that DOE: the PSF radius, raised until 2 pad is a multiple of the tile. */
 int lm_train_doe_pad(const char *doe_path, int ty, int tx, int *py, int *px, lm_err *err);
+/* Moving scenes (train/source_motion.c): a share `fraction` of the real-scene samples seen
+ * moving during the exposure (translation up to `speed` px/s in any direction, rotation up to
+ * `rotation` deg/s about the patch centre), each LED's pixels averaging `samples` instants of
+ * its window; the target is the scene at the ground-truth instant (data/video.h). clip / bits:
+ * as the dataset's sensor options. Close with lm_train_source_motion_close. */
+typedef struct lm_train_motion_opts {
+    float fraction, speed, rotation;
+    int samples;
+    int clip, bits;
+} lm_train_motion_opts;
+lm_status lm_train_source_motion_open(lm_train_source *src, lm_dataset *d, const lm_system *sys,
+                                      const lm_train_motion_opts *o, int patch_h, int patch_w,
+                                      uint64_t seed, lm_err *err);
+void lm_train_source_motion_close(lm_train_source *src);
+/* One moving patch as the source renders it: rows [py, py + ph) x columns [px, px + pw) of the
+ * 31-band crop c31 (tile phases from the patch's top-left), moving by m (its coordinates are
+ * the crop's), `samples` instants per LED window: raw (ph x pw, noise-free) and the 33-channel
+ * target at the ground-truth instant. Equals lm_video_frame on the crop up to float rounding. */
+typedef struct lm_motion lm_motion;
+lm_status lm_train_motion_render(const lm_system *sys, const lm_cube *c31, const lm_motion *m,
+                                 int samples, int py, int px, int ph, int pw, float *raw,
+                                 float *target, lm_err *err);
 
 /* ---- the loop --------------------------------------------------------------------------- */
 typedef struct lm_train_opts {

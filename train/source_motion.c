@@ -1,0 +1,232 @@
+/* source_motion.c — training batches with moving scenes (issue 18, item 2): the dataset's own
+ * samples (same scenes, split, tile-aligned patch positions, flips, noise level k), of which a
+ * share `fraction` of the real-scene ones is replaced by the same patch seen moving during the
+ * exposure, as the video forward model simulates it (data/video.h): each LED's pixels average
+ * the scene over that LED's own window (`samples` instants), the target is the scene at the
+ * ground-truth instant (the centre of the reference LED's window). Motion per sample: a
+ * translation at a speed uniform in [0, speed] px/s in a uniform direction, and a rotation about
+ * the patch centre uniform in [-rotation, rotation] deg/s.
+ * Cheaper than lm_video_frame on the cube, with the same result up to float rounding: the
+ * forward model is linear per band and so is bilinear warping, so the crop's 41 bins are first
+ * reduced to the LEDs' images U_l = a_l . r, and each pixel samples only its own LED's image at
+ * its LED's instants (one plane per pixel instead of 41 bands per instant).
+ * Noise: Gaussian, k x the largest clean value of the patch, as the dataset's (plus its clip /
+ * bits options), drawn from (seed, sample index). Deterministic: batch `index` is a pure function
+ * of (seed, index). Validation samples stay static (motion is scored by `eval --motion`).
+ * What it is not: multi-frame input (one coded frame per sample), or occlusion by moving regions
+ * (global motion only). */
+#include "train/train.h"
+#include "data/cube_io.h"
+#include "data/dataset.h"
+#include "data/spectra.h"
+#include "data/video.h"
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct motion_src {
+    lm_dataset *d;
+    const lm_system *sys;
+    lm_train_motion_opts o;
+    int ph, pw;
+    uint64_t seed;
+    lm_cube *scenes;       /* training scenes, loaded on first use (31 bands, / maximum) */
+    int nscenes;
+} motion_src;
+
+static lm_status scene(motion_src *s, int i, const lm_cube **out, lm_err *err)
+{
+    if (!s->scenes[i].data) {
+        lm_cube_read_opts o;
+        lm_cube_read_opts_default(&o);
+        o.keep.count = 0;
+        const char *path = lm_dataset_scene_path(s->d, LM_SPLIT_TRAIN, i);
+        lm_status st = lm_cube_read_with(path, &o, &s->scenes[i], err);
+        if (st) return st;
+        float mx = lm_cube_max(&s->scenes[i]);
+        if (s->scenes[i].bands != 31 || !(mx > 0.0f) || !isfinite(mx)) {
+            lm_cube_free(&s->scenes[i]);
+            return lm_err_set(err, LM_ERR_FORMAT, "%s: not a 31-band scene with a positive "
+                              "maximum", path);
+        }
+        size_t n = (size_t)31 * s->scenes[i].height * s->scenes[i].width;
+        for (size_t k = 0; k < n; k++) s->scenes[i].data[k] /= mx;
+    }
+    *out = &s->scenes[i];
+    return LM_OK;
+}
+
+/* Bilinear sample of plane p (H x W) at (x, y), positions clamped to the plane. */
+static float bilinear(const float *p, int H, int W, double x, double y)
+{
+    x = x < 0 ? 0 : x > W - 1 ? W - 1 : x;
+    y = y < 0 ? 0 : y > H - 1 ? H - 1 : y;
+    int x0 = (int)x, y0 = (int)y;
+    int x1 = x0 + 1 < W ? x0 + 1 : x0, y1 = y0 + 1 < H ? y0 + 1 : y0;
+    double fx = x - x0, fy = y - y0;
+    double a = p[(size_t)y0 * W + x0] * (1 - fx) + p[(size_t)y0 * W + x1] * fx;
+    double b = p[(size_t)y1 * W + x0] * (1 - fx) + p[(size_t)y1 * W + x1] * fx;
+    return (float)(a * (1 - fy) + b * fy);
+}
+
+lm_status lm_train_motion_render(const lm_system *sys, const lm_cube *c31, const lm_motion *m,
+                                 int samples, int py, int px, int ph, int pw, float *raw,
+                                 float *target, lm_err *err)
+{
+    const int L = sys->nleds, H = c31->height, W = c31->width, S = samples;
+    if (c31->bands != 31 || py < 0 || px < 0 || py + ph > H || px + pw > W || samples < 1)
+        return lm_err_set(err, LM_ERR_ARG, "motion: a %dx%d patch at (%d, %d) of a %d-band "
+                          "%dx%d crop, %d samples", ph, pw, py, px, c31->bands, H, W, samples);
+    lm_cube c41 = {0}, g31 = {0}, g41 = {0}, t33 = {0};
+    float *u = NULL;
+    lm_status st = lm_cube_mirror41(c31, &c41, err);
+    if (!st && !(u = calloc((size_t)L * H * W, sizeof *u)))
+        st = lm_err_set(err, LM_ERR_NOMEM, "motion source: out of memory");
+    for (int l = 0; !st && l < L; l++) { /* LED images of the crop */
+        const float *a = sys->leds[l].response;
+        float *ul = u + (size_t)l * H * W;
+        for (int b = 0; b < c41.bands; b++) {
+            const float *band = lm_cube_band(&c41, b);
+            for (size_t k = 0; k < (size_t)H * W; k++) ul[k] += a[b] * band[k];
+        }
+    }
+    for (int y = 0; !st && y < ph; y++) /* each pixel: its LED's image at its LED's instants */
+        for (int x = 0; x < pw; x++) {
+            const int l = lm_system_pixel_led(sys, y, x);
+            double acc = 0;
+            for (int k = 0; k < S; k++) {
+                double sx, sy, t = lm_video_led_instant_us(sys, l, k, S) * 1e-6;
+                lm_motion_source(m, H, W, t, px + x, py + y, &sx, &sy);
+                acc += bilinear(u + (size_t)l * H * W, H, W, sx, sy);
+            }
+            raw[(size_t)y * pw + x] = (float)(acc / S);
+        }
+    /* the target: the scene at the ground-truth instant */
+    if (!st) st = lm_cube_alloc(&g31, 31, ph, pw, 400.0f, 10.0f);
+    const double tg = lm_video_gt_time_us(sys) * 1e-6;
+    for (int y = 0; !st && y < ph; y++)
+        for (int x = 0; x < pw; x++) {
+            double sx, sy;
+            lm_motion_source(m, H, W, tg, px + x, py + y, &sx, &sy);
+            for (int b = 0; b < 31; b++)
+                lm_cube_band(&g31, b)[(size_t)y * pw + x] =
+                    bilinear(lm_cube_band(c31, b), H, W, sx, sy);
+        }
+    if (!st) st = lm_cube_mirror41(&g31, &g41, err);
+    if (!st) st = lm_cube_target33(&g41, &t33, err);
+    if (!st) memcpy(target, t33.data, sizeof(float) * LM_TARGET_CHANNELS * ph * pw);
+    free(u);
+    lm_cube_free(&c41), lm_cube_free(&g31), lm_cube_free(&g41), lm_cube_free(&t33);
+    return st;
+}
+
+/* One moving sample: raw (ph x pw) and target (33 x ph x pw) of sample i's patch. */
+static lm_status moving_sample(motion_src *s, long i, const lm_dataset_sample_info *info,
+                               lm_rng *r, float *raw, float *target, lm_err *err)
+{
+    const lm_system *sys = s->sys;
+    const int ph = s->ph, pw = s->pw;
+    const lm_cube *sc = NULL;
+    lm_status st = scene(s, info->scene, &sc, err);
+    if (st) return st;
+    /* the motion */
+    const double speed = s->o.speed * lm_rng_uniform(r), dir = 2 * M_PI * lm_rng_uniform(r);
+    const double rot = s->o.rotation * (2 * lm_rng_uniform(r) - 1);
+    const double t_end = sys->nsubframes * sys->subframe_us * 1e-6; /* exposure, s */
+    const double reach = 0.5 * sqrt((double)ph * ph + (double)pw * pw);
+    const int M = (int)ceil(speed * t_end + fabs(rot) * M_PI / 180 * t_end * reach) + 2;
+    /* the crop: the patch and M pixels around it, inside the scene */
+    const int y0 = info->y0 - M > 0 ? info->y0 - M : 0, x0 = info->x0 - M > 0 ? info->x0 - M : 0;
+    const int y1 = info->y0 + ph + M < sc->height ? info->y0 + ph + M : sc->height;
+    const int x1 = info->x0 + pw + M < sc->width ? info->x0 + pw + M : sc->width;
+    const int H = y1 - y0, W = x1 - x0;
+    lm_cube c31 = {0};
+    st = lm_cube_alloc(&c31, 31, H, W, 400.0f, 10.0f);
+    for (int b = 0; !st && b < 31; b++) /* flips of the whole crop, as the dataset flips */
+        for (int y = 0; y < H; y++) {
+            const float *src = lm_cube_band(sc, b) +
+                               (size_t)(y0 + (info->flip_v ? H - 1 - y : y)) * sc->width + x0;
+            float *dst = lm_cube_band(&c31, b) + (size_t)y * W;
+            for (int x = 0; x < W; x++) dst[x] = src[info->flip_h ? W - 1 - x : x];
+        }
+    /* the patch's place in the (flipped) crop */
+    const int py = info->flip_v ? y1 - (info->y0 + ph) : info->y0 - y0;
+    const int px = info->flip_h ? x1 - (info->x0 + pw) : info->x0 - x0;
+    lm_motion m = {0};
+    m.vx = speed * cos(dir), m.vy = speed * sin(dir), m.rot_deg_s = rot;
+    m.has_centre = 1, m.cx = px + (pw - 1) / 2.0, m.cy = py + (ph - 1) / 2.0;
+    if (!st) st = lm_train_motion_render(sys, &c31, &m, s->o.samples, py, px, ph, pw, raw, target,
+                                         err);
+    if (!st && (info->noise_k > 0.0f || s->o.clip || s->o.bits)) {
+        lm_noise_opts no = {0};
+        no.gauss_k = info->noise_k, no.clip = s->o.clip, no.bits = s->o.bits;
+        lm_rng nr = lm_rng_split(r, (uint64_t)i);
+        st = lm_forward_noise(raw, ph, pw, &no, &nr, 1, err);
+    }
+    lm_cube_free(&c31);
+    return st;
+}
+
+static lm_status motion_batch(void *user, long index, int B, float *raw, float *target,
+                              lm_err *err)
+{
+    motion_src *s = user;
+    lm_status st = lm_dataset_batch(s->d, index, B, raw, target, err);
+    const size_t plane = (size_t)s->ph * s->pw;
+    lm_rng base;
+    lm_rng_seed(&base, s->seed ^ 0x6d6f74696f6eULL); /* "motion" */
+    for (int j = 0; !st && j < B; j++) {
+        const long i = index * B + j;
+        lm_rng r = lm_rng_split(&base, (uint64_t)i);
+        if (!(lm_rng_uniform(&r) < s->o.fraction)) continue;
+        lm_dataset_sample_info info;
+        if ((st = lm_dataset_sample_info_get(s->d, LM_SPLIT_TRAIN, i, &info, err))) break;
+        if (info.kind != LM_SAMPLE_SCENE) continue; /* synthetic samples stay static */
+        st = moving_sample(s, i, &info, &r, raw + j * plane,
+                           target + (size_t)j * LM_TARGET_CHANNELS * plane, err);
+    }
+    return st;
+}
+
+static int motion_count(void *u)
+{
+    return lm_dataset_eval_count(((motion_src *)u)->d, LM_SPLIT_VAL);
+}
+
+static lm_status motion_eval(void *u, int i, float *raw, float *target, lm_err *err)
+{
+    return lm_dataset_eval_sample(((motion_src *)u)->d, LM_SPLIT_VAL, i, raw, target, err);
+}
+
+lm_status lm_train_source_motion_open(lm_train_source *src, lm_dataset *d, const lm_system *sys,
+                                      const lm_train_motion_opts *o, int patch_h, int patch_w,
+                                      uint64_t seed, lm_err *err)
+{
+    memset(src, 0, sizeof *src);
+    if (!d || !sys || !o || o->fraction < 0 || o->fraction > 1 || o->speed < 0 ||
+        o->rotation < 0 || o->samples < 1 || o->samples > LM_VIDEO_MAX_SAMPLES)
+        return lm_err_set(err, LM_ERR_ARG, "motion source: fraction in [0, 1], speed and "
+                          "rotation >= 0, samples 1..%d", LM_VIDEO_MAX_SAMPLES);
+    motion_src *s = calloc(1, sizeof *s);
+    int n = lm_dataset_num_scenes(d, LM_SPLIT_TRAIN);
+    if (s) s->scenes = calloc(n > 0 ? (size_t)n : 1, sizeof *s->scenes);
+    if (!s || !s->scenes) {
+        free(s);
+        return lm_err_set(err, LM_ERR_NOMEM, "motion source: out of memory");
+    }
+    s->d = d, s->sys = sys, s->o = *o, s->ph = patch_h, s->pw = patch_w, s->seed = seed;
+    s->nscenes = n;
+    *src = (lm_train_source){s, motion_batch, motion_count, motion_eval, NULL};
+    return LM_OK;
+}
+
+void lm_train_source_motion_close(lm_train_source *src)
+{
+    motion_src *s = src ? src->user : NULL;
+    if (s) {
+        for (int i = 0; i < s->nscenes; i++) lm_cube_free(&s->scenes[i]);
+        free(s->scenes);
+    }
+    free(s);
+    if (src) memset(src, 0, sizeof *src);
+}
