@@ -98,4 +98,8 @@ expect_error "unknown DOE field" 2 "extra: unknown field" "$T/b5" -- \
 cp "$T/fixed/doe.moved" "$T/hm.json"
 expect_error "height map file missing" 2 "doe_heights.png" "$T/b6" -- \
   "$LM" train "${COMMON[@]}" --iterations 1 --doe "$T/hm.json" --output "$T/b6"
+cp -r "$T/opt" "$T/corrupt"
+echo '{"version": 1}' > "$T/corrupt/doe.json"
+expect_error "eval: the run's doe.json is bad" 2 "corrupt/doe.json: aperture_mm: missing" "$T/b7" -- \
+  "$LM" eval --model "$T/corrupt" "$CAVE" --split all --noise 0 --output "$T/b7"
 finish
