@@ -18,7 +18,8 @@
  *  - PSFs with gradient for `bands` wavelengths per update (a rotating subset: update u takes
  *    bands u k .. u k + k - 1 mod 31); the other bands use the PSFs of their last computation
  *    (a cache, refreshed in full before every validation). 31 PSFs with gradient at the
- *    default grid cost ~7 s per update on one thread (bench_doe_psf); 4 cost ~1 s.
+ *    default grid cost 3.4-7 s per update on one thread (bench_doe_psf, by machine load);
+ *    4 cost 0.43 s.
  *  - Adam (own learning rate, constant) on t after the network's update.
  * Validation, the checkpoint's doe.json and eval use the fully quantised DOE. The noise: the
  * dataset's k of each sample, realised as source_rgb.c does (sigma = k x the largest clean RGB
