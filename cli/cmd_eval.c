@@ -77,6 +77,10 @@ static void help(void)
            "  --clip           clip the noisy frame to [0, 1] (full scale) as a sensor or a\n"
            "                   16-bit PNG frame holds it (default: off, negatives kept)\n"
            "  --bits N         quantise the frame to N bits (16: a PNG frame; default 0 = off)\n"
+           "  --photons P      shot noise at every level: P photo-electrons at full scale (the\n"
+           "                   brightest LED's white response), before the Gaussian k (0 = off)\n"
+           "  --read-noise E   read noise: E electrons with --photons, else a fraction of full\n"
+           "                   scale (0 = off)\n"
            "  --noise-oracle   models that read the noise level (lmmse, residuals on it) get\n"
            "                   the simulated level instead of estimating it from the frame\n"
            "  --help           this text\n", LM_EVAL_MAX_NOISE, LM_EVAL_MAX_MOTION);
@@ -94,6 +98,7 @@ typedef struct eval_opts {
     long long rainbow, batch;
     int noise_oracle, clip, align_plain;
     long long bits;
+    double photons, read_noise;
 } eval_opts;
 
 static const char *const split_names[] = {"test", "val", "train", "all", NULL};
@@ -153,7 +158,9 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_value(c, "--motion", &motion)) ||
         (r = lm_cli_flag(c, "--noise-oracle", &o->noise_oracle)) ||
         (r = lm_cli_flag(c, "--clip", &o->clip)) ||
-        (r = lm_cli_int(c, "--bits", 0, 24, &o->bits))) {
+        (r = lm_cli_int(c, "--bits", 0, 24, &o->bits)) ||
+        (r = lm_cli_real(c, "--photons", 0, 1e12, &o->photons)) ||
+        (r = lm_cli_real(c, "--read-noise", 0, 1e6, &o->read_noise))) {
         if (r < 0) return 2;
         if (noise && parse_noise(c, noise, o)) return 2;
         if (motion && parse_motion(c, motion, o)) return 2;
@@ -395,7 +402,8 @@ static void write_json(FILE *f, const eval_run *r)
     fprintf(f, ",\n  \"split\": \"%s\",\n  \"seed\": %lld,\n  \"noise_percent\": [",
             split_names[o->split], o->com.seed);
     for (int n = 0; n < o->nnoise; n++) fprintf(f, "%s%g", n ? ", " : "", 100.0 * o->k[n]);
-    fprintf(f, "],\n  \"scenes\": [\n");
+    fprintf(f, "],\n  \"photons\": %.10g,\n  \"read_noise\": %.10g", o->photons, o->read_noise);
+    fprintf(f, ",\n  \"scenes\": [\n");
     for (int i = 0; i < r->nsc; i++) {
         fprintf(f, "    {\"name\": ");
         json_str(f, r->sc[i].name);
@@ -490,6 +498,7 @@ static int run(eval_run *r)
     r->im.noise_oracle = r->o->noise_oracle;
     r->im.sensor_clip = r->o->clip;
     r->im.sensor_bits = (int)r->o->bits;
+    r->im.photons = r->o->photons, r->im.read_noise = (float)r->o->read_noise;
     int rc = list_scenes(r, &e);
     if (rc) return rc;
     if (r->o->output && (rc = lm_cli_stage_dir(r->c, r->o->output, r->tmp, sizeof r->tmp))) {

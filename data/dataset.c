@@ -437,11 +437,14 @@ lm_status lm_ds_make_sample(lm_dataset *d, lm_data_split split, long i, float *r
     const int ph = d->cfg.patch_h, pw = d->cfg.patch_w, two = d->cfg.buckets == 2;
     float *b0 = two ? raw + (size_t)ph * pw : NULL; /* raw bucket 0 until scaled below */
     if (st == LM_OK) st = lm_forward_clean(d->cfg.sys, &c41, 0, 0, raw, b0, 1, err);
-    if (st == LM_OK && (p.info.noise_k > 0.0f || d->cfg.sensor_clip || d->cfg.sensor_bits)) {
+    if (st == LM_OK && (p.info.noise_k > 0.0f || d->cfg.sensor_clip || d->cfg.sensor_bits ||
+                        d->cfg.photons > 0 || d->cfg.read_noise > 0.0f)) {
         lm_noise_opts no = {0};
         no.gauss_k = p.info.noise_k;
         no.clip = d->cfg.sensor_clip;
         no.bits = d->cfg.sensor_bits;
+        no.photons = d->cfg.photons;      /* shot and read noise (system.md section 4 options) */
+        no.read_noise = d->cfg.read_noise;
         st = lm_forward_noise(raw, ph, pw, &no, &p.noise_rng, 1, err);
         /* bucket 0 next from the same generator (lm_forward_noise advanced it), as
          * lm_forward_simulate does: bucket 1's numbers are those of a one-bucket sample */
@@ -625,6 +628,9 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
     if (c->mat_key && strlen(c->mat_key) >= LM_DATASET_KEY_LEN)
         return lm_err_set(err, LM_ERR_ARG, "dataset: .mat key longer than %d characters",
                           LM_DATASET_KEY_LEN - 1);
+    if (!(c->photons >= 0 && c->photons <= 1e12) || !(c->read_noise >= 0 && c->read_noise <= 1e6))
+        return lm_err_set(err, LM_ERR_ARG, "dataset: photons %g (0..1e12) or read noise %g "
+                          "(0..1e6) out of range", c->photons, (double)c->read_noise);
     if (c->buckets < 0 || c->buckets > 2)
         return lm_err_set(err, LM_ERR_ARG, "dataset: buckets %d (1: bucket 1 only, 2: both)",
                           c->buckets);

@@ -55,6 +55,10 @@ typedef struct lm_dataset_cfg {
     int sensor_clip;            /* 1: after the noise, clip to [0, 1] (the full scale), as a
                                  * sensor or a 16-bit PNG frame holds values (default 0) */
     int sensor_bits;            /* quantise to this many bits (0 = off, 16 = PNG) */
+    double photons;             /* > 0: shot noise, photo-electrons at full scale (the white
+                                 * response of the brightest LED), before the Gaussian k; 0 = off */
+    float read_noise;           /* read noise: electrons with photons, else a fraction of full
+                                 * scale (data/forward.h); 0 = off */
     int batch_stride;           /* the caller asks for batch index + stride after index (data-
                                  * parallel ranks take every stride-th batch): what the workers
                                  * prepare ahead (0 or 1 = the next one) */

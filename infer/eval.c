@@ -154,6 +154,7 @@ static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *tr
     no.gauss_k = k;
     no.clip = im->sensor_clip;
     no.bits = im->sensor_bits;
+    no.photons = im->photons, no.read_noise = im->read_noise; /* before the Gaussian k */
     float clean_max = 0.0f;
     const size_t npx = (size_t)truth->height * truth->width;
     lm_status st = LM_OK;

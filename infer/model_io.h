@@ -21,6 +21,8 @@ typedef struct lm_infer_model {
     int noise_oracle;     /* eval only: give noise-reading models the simulated level */
     int sensor_clip, sensor_bits; /* eval only: simulated frames clipped to [0, 1] / quantised
                                    * after the noise, as a 16-bit PNG holds them */
+    double photons;       /* eval only: shot noise (photo-electrons at full scale, 0 = off) */
+    float read_noise;     /* eval only: read noise (electrons with photons; 0 = off) */
     lm_qdocam *qdo;       /* LM_CAP_QDO_OPTICS models: the camera (NULL: eval builds one) */
 } lm_infer_model;
 

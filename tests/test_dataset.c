@@ -964,6 +964,43 @@ static void rm_tree(const char *dir)
 
 /* system.md §10: scenes are divided by their own maximum when read, so a copy of the position
  * scene at a quarter of its brightness yields the same targets and raw frames. */
+/* Shot and read noise in the loader (cfg.photons, cfg.read_noise): the added variance is
+ * mean / photons (Poisson) and read_noise^2 (a fraction of full scale without photons). */
+static void test_shot_and_read_noise(void)
+{
+    const char *pa[1] = {g_pospath};
+    lm_dataset_cfg c0 = base_cfg(pa, 1), c1 = c0, c2 = c0;
+    c1.photons = 200.0;
+    c2.read_noise = 0.02f;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *a = lm_dataset_open(&c0, &e), *b = lm_dataset_open(&c1, &e);
+    lm_dataset *r = lm_dataset_open(&c2, &e);
+    CHECK_MSG(a && b && r, "%s", e.msg);
+    enum { NB = 16 };
+    static float ra[NB * PH * PW], rb[NB * PH * PW], rr[NB * PH * PW], t[NB * 33 * PH * PW];
+    if (a && b && r) {
+        double sum = 0, d2 = 0, r2 = 0;
+        for (int k = 0; k < 8; k++) {
+            CHECK(lm_dataset_batch(a, k, NB, ra, t, &e) == LM_OK);
+            CHECK(lm_dataset_batch(b, k, NB, rb, t, &e) == LM_OK);
+            CHECK(lm_dataset_batch(r, k, NB, rr, t, &e) == LM_OK);
+            for (int i = 0; i < NB * PH * PW; i++) {
+                sum += ra[i];
+                d2 += (double)(rb[i] - ra[i]) * (rb[i] - ra[i]);
+                r2 += (double)(rr[i] - ra[i]) * (rr[i] - ra[i]);
+            }
+        }
+        double shot = d2 / sum * 200.0, rd = sqrt(r2 / (8.0 * NB * PH * PW)) / 0.02;
+        CHECK_MSG(fabs(shot - 1) < 0.1, "shot noise variance / (mean / photons) = %g", shot);
+        CHECK_MSG(fabs(rd - 1) < 0.05, "read noise sd / 0.02 = %g", rd);
+    }
+    lm_dataset_close(a), lm_dataset_close(b), lm_dataset_close(r);
+    lm_dataset_cfg bad = base_cfg(pa, 1);
+    bad.photons = -1;
+    CHECK(lm_dataset_open(&bad, &e) == NULL && e.status == LM_ERR_ARG);
+}
+
 static void test_scene_normalised(void)
 {
     char dark[1200];
@@ -1020,6 +1057,7 @@ int main(void)
     RUN(test_synthetic_share);
     RUN(test_lru_bound);
     RUN(test_scene_normalised);
+    RUN(test_shot_and_read_noise);
     RUN(test_bad_input);
     rm_tree(tmpdir);
     lm_system_free(&g_sys);

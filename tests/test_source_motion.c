@@ -80,7 +80,7 @@ static void test_source(void)
     lm_err e = {0};
     CHECK(lm_dataset_batch(d, 3, B, r0, t0, &e) == LM_OK);
     /* still: the dataset's own samples */
-    lm_train_motion_opts still = {1.0f, 0.0f, 0.0f, 2, 0, 0};
+    lm_train_motion_opts still = {1.0f, 0.0f, 0.0f, 2, 0, 0, 0.0f, 0.0f};
     lm_train_source src;
     CHECK_MSG(lm_train_source_motion_open(&src, d, &g_sys, &still, 66, 64, 1, &e) == LM_OK, "%s",
               e.msg);
@@ -91,7 +91,7 @@ static void test_source(void)
     for (long i = 0; i < (long)B * 33 * n; i++) wt = fmax(wt, fabs(t1[i] - t0[i]));
     CHECK_MSG(wr < 1e-5 && wt < 1e-6, "still moving samples: raw %g, target %g off", wr, wt);
     /* moving: every item differs from the still one; the same batch twice is the same */
-    lm_train_motion_opts mv = {1.0f, 400.0f, 30.0f, 2, 0, 0};
+    lm_train_motion_opts mv = {1.0f, 400.0f, 30.0f, 2, 0, 0, 0.0f, 0.0f};
     CHECK(lm_train_source_motion_open(&src, d, &g_sys, &mv, 66, 64, 1, &e) == LM_OK);
     CHECK(src.batch(src.user, 3, B, r1, t1, &e) == LM_OK);
     CHECK(src.batch(src.user, 3, B, r2, t2, &e) == LM_OK);
@@ -106,7 +106,7 @@ static void test_source(void)
               B);
     /* a share: about half moved over 64 samples */
     lm_train_source_motion_close(&src);
-    lm_train_motion_opts half = {0.5f, 400.0f, 0.0f, 2, 0, 0};
+    lm_train_motion_opts half = {0.5f, 400.0f, 0.0f, 2, 0, 0, 0.0f, 0.0f};
     CHECK(lm_train_source_motion_open(&src, d, &g_sys, &half, 66, 64, 1, &e) == LM_OK);
     int moved = 0;
     for (int k = 0; k < 16; k++) {
@@ -117,7 +117,7 @@ static void test_source(void)
     }
     CHECK_MSG(moved >= 20 && moved <= 44, "fraction 0.5: %d of 64 samples moved", moved);
     lm_train_source_motion_close(&src);
-    lm_train_motion_opts bad = {1.5f, 1.0f, 0.0f, 2, 0, 0};
+    lm_train_motion_opts bad = {1.5f, 1.0f, 0.0f, 2, 0, 0, 0.0f, 0.0f};
     CHECK(lm_train_source_motion_open(&src, d, &g_sys, &bad, 66, 64, 1, &e) == LM_ERR_ARG);
     free(r0), free(t0), free(r1), free(t1), free(r2), free(t2);
     lm_dataset_close(d);

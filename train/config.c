@@ -95,6 +95,10 @@ static const field fields[] = {
         "the net's output layers start at 0)", -1000, 1000),
     FLD("sensor_clip", F_INT, sensor_clip, "0|1", "clip noisy samples to [0, 1] as a 16-bit "
         "PNG frame holds them (0)", 0, 1),
+    FLD("photons", F_FLOAT, photons, "P", "shot noise: photo-electrons at full scale (the "
+        "brightest LED's white response; 0 = off), as simulate --poisson", 0, 1e12),
+    FLD("read_noise", F_FLOAT, read_noise, "E", "read noise: electrons with photons, else a "
+        "fraction of full scale (0 = off), as simulate --read-noise", 0, 1e6),
     FLD("sensor_bits", F_INT, sensor_bits, "N", "quantise samples to N bits (0 = off; 16 = PNG)",
         0, 24),
     FLD("buckets", F_INT, buckets, "1|2", "coded-frame buckets the model reads: 1 (bucket 1, the "
@@ -566,6 +570,8 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
                                "motion_rotation", (double)c->motion_rotation, "motion_samples",
                                c->motion_samples));
     if (root) json_object_set_new(root, "buckets", json_integer(c->buckets));
+    if (root) json_object_set_new(root, "photons", json_real(c->photons));
+    if (root) json_object_set_new(root, "read_noise", json_real(c->read_noise));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

@@ -56,6 +56,7 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.batch_stride = dp ? lm_dist_size() : 1; /* rank r takes every N-th batch (train.c) */
     dc.mat_key = cfg->mat_key;
     dc.buckets = cfg->buckets;
+    dc.photons = cfg->photons, dc.read_noise = cfg->read_noise;
     if (clean) { /* the fit adds noise, clipping and quantisation itself */
         dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
         dc.sensor_clip = dc.sensor_bits = 0;
@@ -229,6 +230,10 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
     if (!st && closed && opts.data_parallel && lm_dist_size() > 1)
         st = lm_err_set(err, LM_ERR_ARG, "%s is fitted in closed form in one process (seconds): "
                         "run it without mpirun", cfg->model);
+    if (!st && closed && (cfg->photons > 0.0f || cfg->read_noise > 0.0f))
+        st = lm_err_set(err, LM_ERR_ARG, "config: 'photons' / 'read_noise': the closed-form fit of "
+                        "%s models Gaussian noise only (use --fit sgd, or a network on it as a "
+                        "base)", cfg->model);
     if (!st && closed && opts.resume)
         st = lm_err_set(err, LM_ERR_ARG, "resume: %s is fitted in closed form, nothing to resume "
                         "(use --fit sgd to fine-tune)", cfg->model);
@@ -277,7 +282,8 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
     } else if (!st && cfg->motion_fraction > 0.0f) { /* moving scenes (issue 18, item 2) */
         lm_train_source src;
         lm_train_motion_opts mo = {cfg->motion_fraction, cfg->motion_speed, cfg->motion_rotation,
-                                   cfg->motion_samples, cfg->sensor_clip, cfg->sensor_bits};
+                                   cfg->motion_samples, cfg->sensor_clip, cfg->sensor_bits,
+                                   cfg->photons, cfg->read_noise};
         st = lm_train_source_motion_open(&src, d, &sys, &mo, cfg->patch_h, cfg->patch_w,
                                          cfg->seed, err);
         if (!st) st = lm_train_run(cfg, m, &src, &opts, res, err);

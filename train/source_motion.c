@@ -157,9 +157,11 @@ static lm_status moving_sample(motion_src *s, long i, const lm_dataset_sample_in
     m.has_centre = 1, m.cx = px + (pw - 1) / 2.0, m.cy = py + (ph - 1) / 2.0;
     if (!st) st = lm_train_motion_render(sys, &c31, &m, s->o.samples, py, px, ph, pw, raw, target,
                                          err);
-    if (!st && (info->noise_k > 0.0f || s->o.clip || s->o.bits)) {
+    if (!st && (info->noise_k > 0.0f || s->o.clip || s->o.bits || s->o.photons > 0.0f ||
+                s->o.read_noise > 0.0f)) {
         lm_noise_opts no = {0};
         no.gauss_k = info->noise_k, no.clip = s->o.clip, no.bits = s->o.bits;
+        no.photons = s->o.photons, no.read_noise = s->o.read_noise;
         lm_rng nr = lm_rng_split(r, (uint64_t)i);
         st = lm_forward_noise(raw, ph, pw, &no, &nr, 1, err);
     }

@@ -83,6 +83,9 @@ typedef struct lm_train_cfg {
     int sensor_clip;                /* 1: samples clipped to [0, 1] after the noise, as a 16-bit
                                      * PNG frame holds them (0) */
     int sensor_bits;                /* quantisation of the samples (0 = off; 16 = PNG) */
+    float photons;                  /* shot noise: photo-electrons at full scale (0 = off) */
+    float read_noise;               /* read noise: electrons with photons, else a fraction of
+                                     * full scale (0 = off) */
     char snapshots[128];            /* "5,15,30": weights at these minutes of training time into
                                      * <output>/snapshots/<M>min/ ("" = none) */
     /* what "training time" (minutes, snapshots, the checkpoint's seconds) counts: "wall"
@@ -201,6 +204,7 @@ typedef struct lm_train_motion_opts {
     float fraction, speed, rotation;
     int samples;
     int clip, bits;
+    float photons, read_noise; /* shot and read noise, as the dataset's */
 } lm_train_motion_opts;
 lm_status lm_train_source_motion_open(lm_train_source *src, lm_dataset *d, const lm_system *sys,
                                       const lm_train_motion_opts *o, int patch_h, int patch_w,

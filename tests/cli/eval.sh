@@ -7,7 +7,8 @@
 # exactly one of the test/val/train splits; --motion 0,240: per-scene and mean motion rows in
 # eval.json and eval_motion.csv (px/frame, static reference, aligned, unaligned), the still
 # row's unaligned score equals its static reference, aligned >= unaligned (- 0.1 dB) at 0 and
-# 240 px/s, --align plain runs and --align bogus is refused; bad input: missing model, not a model, no DATA,
+# 240 px/s, --align plain runs and --align bogus is refused; --photons / --read-noise add shot and
+# read noise (recorded in eval.json, lower PSNR); bad input: missing model, not a model, no DATA,
 # missing scene, bad noise / motion list, too small rainbow, bad split, unknown option, used output
 # folder — one line on stderr, exit 2, no output left.
 # The passive RGB baseline: a 3-iteration mst-tiny run (its saved model takes 3-channel RGB
@@ -70,6 +71,17 @@ check "rainbow 0 skips the rainbow" bash -c "! grep -q rainbow '$T/ev3/eval.json
 check "another seed, the same noise-free rows" \
   cmp -s <(grep ',0,' "$O/eval.csv") <(grep ',0,' "$T/ev3/eval.csv")
 check_not "another seed, other noise" cmp -s <(grep ',10,' "$O/eval.csv") <(grep ',10,' "$T/ev3/eval.csv")
+# shot and read noise on top of the levels: recorded, and they cost PSNR at level 0
+"$LM" eval --model "$R" "$CAVE" --split all --noise 0 --rainbow 0 --photons 50 --read-noise 2 \
+  --output "$T/ev4" > /dev/null 2> "$T/err"
+check "eval --photons: $(cat "$T/err")" [ $? -eq 0 ]
+python3 - "$O/eval.json" "$T/ev4/eval.json" <<'PY'
+import json, sys
+a, b = (json.load(open(p)) for p in sys.argv[1:])
+assert a["photons"] == 0 and b["photons"] == 50 and b["read_noise"] == 2, (a["photons"], b)
+assert b["mean"][0]["psnr"] < a["mean"][0]["psnr"] - 0.3 and b["mean"][0]["ssim"] < a["mean"][0]["ssim"] - 0.05, (b["mean"][0], a["mean"][0])
+PY
+check "eval --photons --read-noise: recorded, lower PSNR" [ $? -eq 0 ]
 
 # the scene is in exactly one split (one scene: train; the others borrow, nothing to evaluate)
 n_ok=0
