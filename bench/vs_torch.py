@@ -56,11 +56,22 @@ def find_torch_python():
     return None, tried
 
 
-def run_child(cmd):
+def c_env():
+    """The C side's environment: OpenMP threads wait as `lumosaic train` makes them wait
+    (cli/main.c: GOMP_SPINCOUNT=1000, spin briefly then sleep) unless the caller chose a policy
+    (OMP_WAIT_POLICY or GOMP_SPINCOUNT set): bench_twin is not the CLI and would otherwise run
+    with libgomp's default of ~300,000 spins, which the product does not use."""
+    env = dict(os.environ)
+    if "OMP_WAIT_POLICY" not in env and "GOMP_SPINCOUNT" not in env:
+        env["GOMP_SPINCOUNT"] = "1000"
+    return env
+
+
+def run_child(cmd, env=None):
     """Run a child, reaping it with wait4 so ru_maxrss is this child's alone; returns (the last
     JSON line of its stdout, its peak resident memory in MB)."""
     with tempfile.TemporaryFile("w+") as fo, tempfile.TemporaryFile("w+") as fe:
-        proc = subprocess.Popen(cmd, stdout=fo, stderr=fe, text=True)
+        proc = subprocess.Popen(cmd, stdout=fo, stderr=fe, text=True, env=env)
         _, status, ru = os.wait4(proc.pid, 0)
         proc.returncode = os.waitstatus_to_exitcode(status)
         fo.seek(0), fe.seek(0)
@@ -98,7 +109,7 @@ def timed_pair(a, py, preset, mode, dump, reps, warmup, extra=(), threads=None):
     side = {"c": {"t": [], "mb": 0.0}, "torch": {"t": [], "mb": 0.0}}
     for _ in range(a.rounds):
         for name, cmd in (("c", c_cmd), ("torch", t_cmd)):
-            r, mb = run_child(cmd)
+            r, mb = run_child(cmd, c_env() if name == "c" else None)
             side[name]["t"] += r["times_ms"]
             side[name]["mb"] = max(side[name]["mb"], mb)
     for s in side.values():
@@ -135,6 +146,8 @@ def main():
     print(f"# Lumosaic {a.twin_c} vs PyTorch {ver} ({py}), {a.threads} threads, "
           f"{a.rounds} interleaved runs per side; times in ms, peak RSS in MB")
     print(f"# agreement tolerances (norm-wise relative): {TOL}")
+    print("# C side's OpenMP wait policy: GOMP_SPINCOUNT=%s (as lumosaic train; OMP_WAIT_POLICY %s)"
+          % (c_env().get("GOMP_SPINCOUNT", "default"), os.environ.get("OMP_WAIT_POLICY", "unset")))
     print("# load average at start: %.1f %.1f %.1f (a shared machine: compare min columns)"
           % os.getloadavg(), flush=True)
     results, failed = {}, []
