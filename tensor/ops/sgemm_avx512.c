@@ -140,12 +140,13 @@ AVX512 static void pack_contig(float *dst, const float *src, long ld, int kc, in
 }
 
 /* dst[k*W + j] = src[j*ld + k] for a 16 x 16 block: in-register transpose (unpack within
- * 128-bit lanes, then shuffle lanes twice). */
-AVX512 static void transpose16(float *dst, long W, const float *src, long ld)
+ * 128-bit lanes, then shuffle lanes twice). Rows j >= w of src are not read (zeros); with
+ * W < 16 each output row stores its first W lanes only (a packed micro-panel of MR rows). */
+AVX512 static inline void transpose16_part(float *dst, long W, const float *src, long ld, int w)
 {
     __m512 r[16], t[16];
 #pragma GCC unroll 16
-    for (int j = 0; j < 16; j++) r[j] = _mm512_loadu_ps(src + j * ld);
+    for (int j = 0; j < 16; j++) r[j] = j < w ? _mm512_loadu_ps(src + j * ld) : _mm512_setzero_ps();
 #pragma GCC unroll 8
     for (int j = 0; j < 16; j += 2) {
         t[j] = _mm512_unpacklo_ps(r[j], r[j + 1]);
@@ -165,24 +166,44 @@ AVX512 static void transpose16(float *dst, long W, const float *src, long ld)
         t[c + 8] = _mm512_shuffle_f32x4(r[c + 8], r[c + 12], 0x88);
         t[c + 12] = _mm512_shuffle_f32x4(r[c + 8], r[c + 12], 0xDD);
     }
+    const __mmask16 mk = W < 16 ? lanes((int)W) : (__mmask16)0xFFFF;
 #pragma GCC unroll 8
     for (int c = 0; c < 8; c++) {
-        _mm512_storeu_ps(dst + c * W, _mm512_shuffle_f32x4(t[c], t[c + 8], 0x88));
-        _mm512_storeu_ps(dst + (c + 8) * W, _mm512_shuffle_f32x4(t[c], t[c + 8], 0xDD));
+        _mm512_mask_storeu_ps(dst + c * W, mk, _mm512_shuffle_f32x4(t[c], t[c + 8], 0x88));
+        _mm512_mask_storeu_ps(dst + (c + 8) * W, mk, _mm512_shuffle_f32x4(t[c], t[c + 8], 0xDD));
     }
 }
 
+
 /* dst (kc x W) with dst[k][j] = src[j*ld + k] for j < w, zeros beyond: op(A) with A not
- * transposed, op(B) with B transposed. Full 16 x 16 blocks go through transpose16. */
+ * transposed, op(B) with B transposed. 16 x 16 blocks (rows beyond w read as zeros) go through
+ * transpose16_part: for the MR-row micro-panels and for partial NR panels too (a strided scalar
+ * copy and zero fill of those took 14-18 % of a han-tiny training step). */
 AVX512 static void pack_strided(float *dst, const float *src, long ld, int kc, int w, int W)
 {
-    int j16 = W % 16 == 0 ? w / 16 * 16 : 0, k16 = kc / 16 * 16;
-    for (int j = 0; j < j16; j += 16)
-        for (int k = 0; k < k16; k += 16)
-            transpose16(dst + (long)k * W + j, W, src + (long)j * ld + k, ld);
+    int k16 = kc / 16 * 16;
+    if (W <= 16) { /* one micro-panel (W = MR): w rows, zero-padded, 16 k at a time */
+        for (int k = 0; k < k16; k += 16) transpose16_part(dst + (long)k * W, W, src + k, ld, w);
+        for (int j = 0; j < W; j++) {
+            const float *s = src + (long)j * ld;
+            for (int k = k16; k < kc; k++) dst[(long)k * W + j] = j < w ? s[k] : 0.0f;
+        }
+        return;
+    }
+    if (W % 16 == 0) { /* NR-wide panels: 16 x 16 blocks, rows j >= w zero (no strided
+                        * zeroing: a partial panel, e.g. 33 of 48 columns, is one pass) */
+        for (int j = 0; j < W; j += 16) {
+            int jw = w - j < 0 ? 0 : w - j > 16 ? 16 : w - j;
+            for (int k = 0; k < k16; k += 16)
+                transpose16_part(dst + (long)k * W + j, W, src + (long)j * ld + k, ld, jw);
+        }
+        for (int k = k16; k < kc; k++)
+            for (int j = 0; j < W; j++) dst[(long)k * W + j] = j < w ? src[(long)j * ld + k] : 0.0f;
+        return;
+    }
     for (int j = 0; j < w; j++) {
         const float *s = src + (long)j * ld;
-        for (int k = j < j16 ? k16 : 0; k < kc; k++) dst[(long)k * W + j] = s[k];
+        for (int k = 0; k < kc; k++) dst[(long)k * W + j] = s[k];
     }
     for (int j = w; j < W; j++)
         for (int k = 0; k < kc; k++) dst[(long)k * W + j] = 0.0f;
