@@ -7,6 +7,7 @@
 #include "data/doe.h"
 #include "data/forward.h"
 #include "data/spectra.h"
+#include "tensor/linalg.h"
 #include "tensor/rng.h"
 #include <cblas.h>
 #include <fftw3.h>
@@ -262,42 +263,6 @@ lm_status lm_coding_stats_compute(const lm_coding_data *d, int K, lm_coding_stat
 
 /* ---- the objective ----------------------------------------------------------------------- */
 
-/* In-place Cholesky of the n x n SPD matrix A (lower triangle); 0 on success. */
-static int cholesky(double *A, int n)
-{
-    for (int j = 0; j < n; j++) {
-        double s = A[(size_t)j * n + j];
-        for (int k = 0; k < j; k++) s -= A[(size_t)j * n + k] * A[(size_t)j * n + k];
-        if (!(s > 0)) return -1;
-        const double d = sqrt(s);
-        A[(size_t)j * n + j] = d;
-        for (int i = j + 1; i < n; i++) {
-            double t = A[(size_t)i * n + j];
-            for (int k = 0; k < j; k++) t -= A[(size_t)i * n + k] * A[(size_t)j * n + k];
-            A[(size_t)i * n + j] = t / d;
-        }
-    }
-    return 0;
-}
-
-/* X (n x m) = A^-1 B with A's Cholesky factor in Lc (lower). */
-static void chol_solve(const double *Lc, int n, const double *B, int m, double *X)
-{
-    memcpy(X, B, sizeof(double) * (size_t)n * m);
-    for (int i = 0; i < n; i++) /* L z = b */
-        for (int c = 0; c < m; c++) {
-            double s = X[(size_t)i * m + c];
-            for (int k = 0; k < i; k++) s -= Lc[(size_t)i * n + k] * X[(size_t)k * m + c];
-            X[(size_t)i * m + c] = s / Lc[(size_t)i * n + i];
-        }
-    for (int i = n - 1; i >= 0; i--) /* L^T x = z */
-        for (int c = 0; c < m; c++) {
-            double s = X[(size_t)i * m + c];
-            for (int k = i + 1; k < n; k++) s -= Lc[(size_t)k * n + i] * X[(size_t)k * m + c];
-            X[(size_t)i * m + c] = s / Lc[(size_t)i * n + i];
-        }
-}
-
 /* One tile phase (py, px): its error and (g non-NULL) gradient contributions per LED scale. */
 static int phase_objective(const lm_coding_stats *st, const lm_coding *c, const double *scale,
                            const lm_coding_noise *nz, int py, int px, double *err_out, double *g,
@@ -333,8 +298,9 @@ static int phase_objective(const lm_coding_stats *st, const lm_coding *c, const 
             A[(size_t)j * F1 + j] += s[j] * st->mu[led[j]] * inv_ph + rn * rn + st->ridge;
         for (int ch = 0; ch < NB; ch++) B[(size_t)j * NB + ch] = s[j] * Bh[(size_t)j * NB + ch];
     }
-    if (cholesky(A, F1)) return -1;
-    chol_solve(A, F1, B, NB, Wt);
+    if (lm_cholesky(A, F1)) return -1;
+    memcpy(Wt, B, sizeof(double) * (size_t)F1 * NB);
+    lm_cholesky_solve(A, F1, Wt, NB);
     double tr = 0;
     for (size_t i = 0; i < (size_t)F1 * NB; i++) tr += B[i] * Wt[i];
     *err_out = st->yy - tr;
@@ -647,13 +613,14 @@ lm_status lm_coding_validate(const lm_coding_data *d, int K, const lm_coding *c,
             Ap[(size_t)j * F1 + j] += Ap[(size_t)j * F1 + F] * inv_ph + rn * rn;
         memcpy(Ac, Ap, sizeof(double) * (size_t)F1 * F1); /* for the fit's own error */
         for (int j = 0; j < F; j++) Ap[(size_t)j * F1 + j] += 1e-6 * diag;
-        if (cholesky(Ap, F1)) {
+        if (lm_cholesky(Ap, F1)) {
             st = lm_err_set(err, LM_ERR_NUMERIC, "coding: phase %d's normal equations are "
                             "singular", p);
             break;
         }
         const double *w = Wt + (size_t)p * F1 * NB;
-        chol_solve(Ap, F1, Bp, NB, Wt + (size_t)p * F1 * NB);
+        memcpy(Wt + (size_t)p * F1 * NB, Bp, sizeof(double) * (size_t)F1 * NB);
+        lm_cholesky_solve(Ap, F1, Wt + (size_t)p * F1 * NB, NB);
         /* expected training error: E|y|^2 - 2 tr(W^T B) + tr(W^T A W) (noise included) */
         double e = yy[p] / cnt[p];
         for (int j = 0; j < F1; j++)

@@ -28,6 +28,7 @@
  * What it is not: the model (models/lmmse.c) or SGD training (train.c). */
 #include "train/fit_lmmse.h"
 #include "data/dataset.h"
+#include "tensor/linalg.h"
 #include "tensor/rng.h"
 #include <cblas.h>
 #include <math.h>
@@ -179,31 +180,9 @@ static int ridge_solve(const double *A, const double *B, int n, int m, double ad
 {
     for (int a = 0; a < n; a++)
         for (int b = a; b < n; b++) L[b * n + a] = A[a * n + b] + (a == b && a < n - 1 ? add : 0);
-    for (int j = 0; j < n; j++) { /* lower Cholesky in place */
-        double d = L[j * n + j];
-        for (int k = 0; k < j; k++) d -= L[j * n + k] * L[j * n + k];
-        if (!(d > 0)) return 0;
-        d = sqrt(d);
-        L[j * n + j] = d;
-        for (int i = j + 1; i < n; i++) {
-            double v = L[i * n + j];
-            for (int k = 0; k < j; k++) v -= L[i * n + k] * L[j * n + k];
-            L[i * n + j] = v / d;
-        }
-    }
+    if (lm_cholesky(L, n)) return 0;
     memcpy(W, B, sizeof(double) * n * m);
-    for (int c = 0; c < m; c++) {
-        for (int i = 0; i < n; i++) { /* forward */
-            double v = W[i * m + c];
-            for (int k = 0; k < i; k++) v -= L[i * n + k] * W[k * m + c];
-            W[i * m + c] = v / L[i * n + i];
-        }
-        for (int i = n - 1; i >= 0; i--) { /* backward with L^T */
-            double v = W[i * m + c];
-            for (int k = i + 1; k < n; k++) v -= L[k * n + i] * W[k * m + c];
-            W[i * m + c] = v / L[i * n + i];
-        }
-    }
+    lm_cholesky_solve(L, n, W, m);
     return 1;
 }
 
