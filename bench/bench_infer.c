@@ -30,7 +30,7 @@
 #include "data/spectra.h"
 #include "data/srgb.h"
 #include "data/video.h"
-#include "infer/align.h"
+#include "data/align.h"
 #include "infer/tile.h"
 #include "models/model.h"
 #include "data/mosaic.h"

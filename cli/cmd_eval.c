@@ -69,7 +69,7 @@ static void help(void)
            "                   camera frame blurred over the exposure, nothing to align\n"
            "                   (aligned = unaligned). Default: off\n"
            "  --align A        confident (default): a pixel keeps its unaligned value where\n"
-           "                   the flow is inconsistent forward-backward (infer/align.h);\n"
+           "                   the flow is inconsistent forward-backward (data/align.h);\n"
            "                   plain: warp every pixel\n"
            "  --device D       where the network runs: cpu or opencl (default: env LM_DEVICE,\n"
            "                   else cpu); the weights are copied to the device once;\n"

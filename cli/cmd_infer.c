@@ -5,7 +5,7 @@
  * renamed into place at the end, so a failure leaves nothing half-written. Network outputs below
  * 0 are clamped to 0 before writing (reflectance is non-negative and the EXR writer rejects
  * negative values). A sequence of >= 2 frames is temporally aligned first unless --no-align
- * (system.md §9, infer/align.h): each frame's LED sub-images are moved to its lime timestamp
+ * (system.md §9, data/align.h): each frame's LED sub-images are moved to its lime timestamp
  * with frames i-1, i, i+1 (edge frames as align.h says) and re-mosaicked before reconstruction;
  * only three frames' sub-images are held at a time (read one frame ahead). --device opencl runs
  * the network on an OpenCL device, the weights uploaded once for the run (lm_tile_device).
@@ -18,7 +18,7 @@
  * aligned in time, so such sequences are reconstructed without alignment (a warning). They run
  * in whole-frame strips of both planes like their one-bucket forms (lmmse-b2 without its
  * one-plane host path).
- * What it is not: the flow or the alignment scheme themselves (infer/flow.c, infer/align.c). */
+ * What it is not: the flow or the alignment scheme themselves (data/flow.c, data/align.c). */
 #include <omp.h>
 #include <sys/stat.h>
 #include <stdio.h>
@@ -32,7 +32,7 @@
 #include "data/frames.h"
 #include "data/image.h"
 #include "data/srgb.h"
-#include "infer/align.h"
+#include "data/align.h"
 #include "infer/auto.h"
 #include "infer/model_io.h"
 #include "infer/tile.h"

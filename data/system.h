@@ -134,7 +134,7 @@ static inline double lm_system_frame_period_us(const lm_system *s) { return s->f
  * video frame's ground truth and the time temporal alignment moves every sub-image to. The LED
  * named "Lime" (case-insensitive); a system without one uses the LED on during the sub-frame
  * that holds the exposure midpoint. The one definition shared by the video simulator
- * (data/video.h) and the alignment (infer/align.h). */
+ * (data/video.h) and the alignment (data/align.h). */
 int lm_system_reference_led(const lm_system *s);
 /* LED indices by increasing peak wavelength: the network's channel order (UV first). */
 static inline const int *lm_system_peak_order(const lm_system *s) { return s->by_peak; }

@@ -7,7 +7,7 @@
  * averaged (motion blur). Frame i starts at i * frame_period_us; its ground truth is the scene
  * at the reference instant (the centre of the Lime LED's window, see lm_video_gt_time_us).
  * Every time comes from the system description (frame_period_us, the LEDs' windows), as in
- * the alignment (infer/align.h).
+ * the alignment (data/align.h).
  * What it is not: a renderer of 3-D scenes (occlusion is only "regions are drawn on top"), or
  * temporal alignment (that undoes this motion at inference, infer/).
  *

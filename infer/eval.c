@@ -9,7 +9,7 @@
 #include "data/synth.h"
 #include "data/rgbcam.h"
 #include "data/video.h"
-#include "infer/align.h"
+#include "data/align.h"
 #include "infer/whole.h"
 
 static int is_rgb(const lm_infer_model *im) { return lm_model_has(im->model, LM_CAP_RGB_INPUT); }

@@ -7,7 +7,7 @@
  * row-averaged reconstructed spectrum) against the row's true peak.
  * Motion: the prepared cube translating at a given speed in a fixed direction is simulated as
  * a short coded video (data/video.h, §5 timing, noise-free), and its middle frame is
- * reconstructed with and without temporal alignment (infer/align.h), both scored against the
+ * reconstructed with and without temporal alignment (data/align.h), both scored against the
  * scene at that frame's lime instant, on the region that stays in view over the video, beside
  * the static reference (that scene as a still frame).
  * RGB models (in_channels 3: the passive MST++ baseline) see the same cube through an RGB
@@ -23,8 +23,8 @@
 #define LM_EVAL_H
 #include "data/cube.h"
 #include "data/forward.h"
-#include "infer/align.h"
-#include "infer/flow.h"
+#include "data/align.h"
+#include "data/flow.h"
 #include "infer/model_io.h"
 #include "infer/tile.h"
 #include "tensor/rng.h"

@@ -15,7 +15,7 @@
  * the batch). The lm_ctx passed in is used as the per-batch arena: it is lm_ctx_reset after every
  * batch (peak memory is bounded by one batch of windows, not the frame), so the caller must hold
  * no tensors in it. Grad mode is switched off for the call and restored afterwards.
- * What it is not: model loading (infer/model_io.h) or temporal alignment (infer/flow.h). */
+ * What it is not: model loading (infer/model_io.h) or temporal alignment (data/flow.h). */
 #ifndef LM_TILE_H
 #define LM_TILE_H
 #include "data/cube.h"

@@ -13,7 +13,7 @@
 #include <string.h>
 #include "tests/check.h"
 #include "data/video.h"
-#include "infer/align.h"
+#include "data/align.h"
 #include "infer/tile.h"
 #include "models/model.h"
 #include "data/mosaic.h"

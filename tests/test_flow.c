@@ -1,4 +1,4 @@
-/* test_flow.c — DIS-style optical flow (infer/flow.h) and temporal alignment (infer/align.h).
+/* test_flow.c — DIS-style optical flow (data/flow.h) and temporal alignment (data/align.h).
  * Synthetic motion of textured images with a known transform T (translation d, small rotation,
  * zoom about the centre): I0(p) = S(p), I1(q) = S(T^-1(q)), so the true F_{0->1}(p) = T(p) - p.
  * Sources: a procedural texture (sum of random sinusoids, evaluated exactly at any point) and a
@@ -15,8 +15,8 @@
 #include "data/cube_io.h"
 #include "data/system.h"
 #include "data/video.h"
-#include "infer/align.h"
-#include "infer/flow.h"
+#include "data/align.h"
+#include "data/flow.h"
 
 #define N 160
 

@@ -2,7 +2,7 @@
  * What it is: every LED sub-image of frame i has a timestamp (its window's midpoint over the
  * frame period: frames start frame_period_us apart, 33.3 ms at 30 fps, not exposure + readout =
  * 29.7 ms); each is moved to the reference (lime) timestamp of frame i with dense
- * optical flow (infer/flow.h) between the same LED's sub-images of two consecutive frames
+ * optical flow (data/flow.h) between the same LED's sub-images of two consecutive frames
  * (same LED, so brightness constancy holds):
  *   LED before the reference (tau = t_ref - t_l > 0): frames i and i+1, frame time t = tau;
  *   LED after it (tau < 0): frames i-1 and i, t = 1 + tau = (1 - t_l) + t_ref;
@@ -13,11 +13,13 @@
  * (dt = +1 for frame i+1, -1 for frame i-1); with no neighbour the sub-image is copied.
  * Sub-images are the unshuffled tile phases of a raw frame: plane t holds the pixels with
  * (y mod ty) * tx + (x mod tx) == t, each (H / ty) x (W / tx), row-major.
+ * In data/ (not infer/) so that the training loader aligns multi-frame samples with the same
+ * code inference uses (models.md, multi-frame input).
  * What it is not: demosaicking, the network, or occlusion handling. */
 #ifndef LM_ALIGN_H
 #define LM_ALIGN_H
 #include "data/system.h"
-#include "infer/flow.h"
+#include "data/flow.h"
 
 /* Trust in the warp, per pixel (issue 14 item 4: alignment that never hurts). With
  * `confidence` on, each aligned pixel is blended with the unaligned one,

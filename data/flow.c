@@ -4,7 +4,7 @@
  * propagation between patches (the pyramid initialisation replaces it for our small images).
  * Every parallel loop partitions rows (or patches) statically and writes each output value
  * from one thread with the same arithmetic, so results do not depend on the thread count. */
-#include "infer/flow.h"
+#include "data/flow.h"
 #include <float.h>
 #include <math.h>
 #include <stdlib.h>

@@ -3,7 +3,7 @@
  * the per-plane choice of frames and interpolation time, the edge-frame fallbacks, the
  * confidence blend, and tile-phase (un)shuffling of raw frames.
  * What it is not: the flow itself (flow.c). */
-#include "infer/align.h"
+#include "data/align.h"
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
