@@ -60,27 +60,46 @@ static int plane_side(const float *prev, const float *next, float tau)
     return prev ? -1 : 1;
 }
 
-/* One plane with neighbour nb (dt = +1: frame i+1, -1: frame i-1) at relative time tau: the
- * flows fc = F_{cur->nb} and (when the interpolation or the confidence needs it) fn =
- * F_{nb->cur} into f (4n floats); interpolation between the two frames when tau points towards
- * nb, else frame i's plane warped alone under linear motion, out(p) = cur(p - (tau / dt)
- * F_{i->n}(p)); then the confidence blend. */
+/* Flows of one plane against neighbour nb: fc = F_{cur->nb} always; fn = F_{nb->cur} when
+ * `both` (the interpolation or the confidence needs it). */
+static lm_status pair_flows(const float *cur, const float *nb, int h, int w, int both,
+                            const lm_flow_opts *o, float *fc, float *fn, lm_err *e)
+{
+    lm_status s = lm_flow_compute(cur, nb, h, w, o, fc, e);
+    if (!s && both) s = lm_flow_compute(nb, cur, h, w, o, fn, e);
+    return s;
+}
+
+/* One plane with neighbour nb (dt = +1: frame i+1, -1: frame i-1) at relative time tau, from
+ * the flows fc = F_{cur->nb} and fn = F_{nb->cur} (fn read only when tau points towards nb or
+ * the confidence is on): interpolation between the two frames when tau points towards nb, else
+ * frame i's plane warped alone under linear motion, out(p) = cur(p - (tau / dt) F_{i->n}(p));
+ * then the confidence blend. */
+static lm_status align_pair_flows(const float *cur, const float *nb, float dt, int h, int w,
+                                  float tau, const lm_flow_opts *o, const lm_align_opts *ao,
+                                  const float *fc, const float *fn, float *out, lm_err *e)
+{
+    int nt = o && o->nthreads > 0 ? o->nthreads : 1, towards = tau * dt > 0.0f;
+    lm_status s = LM_OK;
+    if (towards && dt > 0.0f)
+        s = lm_flow_interpolate_flows(cur, nb, h, w, tau, fc, fn, nt, out, e);
+    else if (towards)
+        s = lm_flow_interpolate_flows(nb, cur, h, w, 1.0f + tau, fn, fc, nt, out, e);
+    else
+        lm_flow_warp_cubic(cur, h, w, fc, -tau / dt, out, nt);
+    if (!s && ao->confidence) blend_confidence(cur, fc, fn, h, w, tau, ao, out);
+    return s;
+}
+
+/* The same computing the flows into f (4n floats). */
 static lm_status align_pair(const float *cur, const float *nb, float dt, int h, int w,
                             float tau, const lm_flow_opts *o, const lm_align_opts *ao, float *f,
                             float *out, lm_err *e)
 {
     long n = (long)h * w;
-    int nt = o && o->nthreads > 0 ? o->nthreads : 1, towards = tau * dt > 0.0f;
     float *fc = f, *fn = f + 2 * n;
-    lm_status s = lm_flow_compute(cur, nb, h, w, o, fc, e);
-    if (!s && (towards || ao->confidence)) s = lm_flow_compute(nb, cur, h, w, o, fn, e);
-    if (!s && towards && dt > 0.0f)
-        s = lm_flow_interpolate_flows(cur, nb, h, w, tau, fc, fn, nt, out, e);
-    else if (!s && towards)
-        s = lm_flow_interpolate_flows(nb, cur, h, w, 1.0f + tau, fn, fc, nt, out, e);
-    else if (!s)
-        lm_flow_warp_cubic(cur, h, w, fc, -tau / dt, out, nt);
-    if (!s && ao->confidence) blend_confidence(cur, fc, fn, h, w, tau, ao, out);
+    lm_status s = pair_flows(cur, nb, h, w, tau * dt > 0.0f || ao->confidence, o, fc, fn, e);
+    if (!s) s = align_pair_flows(cur, nb, dt, h, w, tau, o, ao, fc, fn, out, e);
     return s;
 }
 
@@ -109,6 +128,63 @@ lm_status lm_align_frame(const float *prev, const float *cur, const float *next,
         lm_err pe = {0};
         s = align_pair(cur + p * n, (side > 0 ? next : prev) + p * n, (float)side, h, w,
                        t[ref] - t[p], o, ao, f, out + p * n, &pe);
+        if (s) lm_err_set(e, s, "align: plane %d: %s", p, pe.msg);
+    }
+    free(f);
+    return s;
+}
+
+/* Neighbour plane nb (frame i + dt) moved onto frame i's plane at the reference instant:
+ * out(x) = nb(x + (1 - tau / dt) F_{i->nb}(x)) (bicubic), then blended towards fallback (the
+ * aligned current plane) where the flows disagree, as blend_confidence does with the warp's
+ * scale 1 - tau / dt. */
+static void warp_neighbour(const float *nb, const float *fallback, float dt, int h, int w,
+                           float tau, const float *fc, const float *fn, const lm_flow_opts *o,
+                           const lm_align_opts *ao, float *out)
+{
+    int nt = o && o->nthreads > 0 ? o->nthreads : 1;
+    float sc = 1.0f - tau / dt;
+    lm_flow_warp_cubic(nb, h, w, fc, sc, out, nt);
+    if (ao->confidence) blend_confidence(fallback, fc, fn, h, w, sc, ao, out);
+}
+
+lm_status lm_align_stack(const float *prev, const float *cur, const float *next, int np, int h,
+                         int w, const float *t, int ref, const lm_flow_opts *o,
+                         const lm_align_opts *ao, float *out, lm_err *e)
+{
+    if (!cur || !t || !out) return lm_err_set(e, LM_ERR_ARG, "align: NULL frame, times or output");
+    if (np < 1 || ref < 0 || ref >= np)
+        return lm_err_set(e, LM_ERR_ARG, "align: reference plane %d outside 0..%d", ref, np - 1);
+    if (h <= 0 || w <= 0)
+        return lm_err_set(e, LM_ERR_SHAPE, "align: empty sub-images %dx%d", h, w);
+    lm_align_opts dao;
+    if (!ao) lm_align_default_opts(&dao);
+    if (!ao) ao = &dao;
+    size_t n = (size_t)h * (size_t)w, fr = (size_t)np * n;
+    float *f = malloc(sizeof(float) * 8 * n); /* F_{i->i-1}, F_{i-1->i}, F_{i->i+1}, F_{i+1->i} */
+    if (!f) return lm_err_set(e, LM_ERR_NOMEM, "align: out of memory");
+    float *fp[2] = {f, f + 2 * n}, *fx[2] = {f + 4 * n, f + 6 * n};
+    lm_status s = LM_OK;
+    for (int p = 0; p < np && !s; p++) {
+        const float *c = cur + p * n, *nbs[2] = {prev ? prev + p * n : NULL,
+                                                 next ? next + p * n : NULL};
+        float *al = out + p * n, tau = t[ref] - t[p];
+        lm_err pe = {0};
+        for (int k = 0; k < 2 && !s; k++) /* the flows of both neighbours */
+            if (nbs[k]) s = pair_flows(c, nbs[k], h, w, 1, o, k ? fx[0] : fp[0],
+                                       k ? fx[1] : fp[1], &pe);
+        /* plane 0: frame i aligned exactly as lm_align_frame does (same side, same flows) */
+        int side = plane_side(prev, next, tau);
+        if (!s && !side) memcpy(al, c, sizeof(float) * n);
+        else if (!s)
+            s = align_pair_flows(c, side > 0 ? nbs[1] : nbs[0], (float)side, h, w, tau, o, ao,
+                                 side > 0 ? fx[0] : fp[0], side > 0 ? fx[1] : fp[1], al, &pe);
+        for (int k = 0; k < 2 && !s; k++) { /* planes 1, 2: frame i - 1, frame i + 1 */
+            float *dst = out + (size_t)(1 + k) * fr + p * n;
+            if (!nbs[k]) memcpy(dst, al, sizeof(float) * n); /* missing: the current, aligned */
+            else warp_neighbour(nbs[k], al, k ? 1.0f : -1.0f, h, w, tau, k ? fx[0] : fp[0],
+                                k ? fx[1] : fp[1], o, ao, dst);
+        }
         if (s) lm_err_set(e, s, "align: plane %d: %s", p, pe.msg);
     }
     free(f);

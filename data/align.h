@@ -61,6 +61,24 @@ lm_status lm_align_frame(const float *prev, const float *cur, const float *next,
                          int w, const float *t, int ref, const lm_flow_opts *o,
                          const lm_align_opts *ao, float *out, lm_err *e);
 
+/* The multi-frame input of a frame (models.md, LM_CAP_MULTI_FRAME): out = 3 x np x h x w,
+ *   [0] frame i aligned to t[ref], equal to lm_align_frame's output (the same side, flows and
+ *       arithmetic);
+ *   [1] frame i-1 moved onto frame i's planes at t[ref]: under linear motion the point at x at
+ *       t[ref] sat, in frame i + dt (dt = -1 here), at x + (1 - tau / dt) F_{i->i+dt}(x)
+ *       (tau = t[ref] - t[p], the flow between the same LED's planes of the two frames), so
+ *       out(x) = prev(x + (1 + tau) F_{i->i-1}(x)) (bicubic); with the confidence on, blended
+ *       towards [0] where the forward-backward check fails (scale |1 - tau / dt|);
+ *   [2] frame i+1 the same way (dt = +1: out(x) = next(x + (1 - tau) F_{i->i+1}(x))).
+ * A missing neighbour (NULL: the first or last frame of a sequence) is replaced by [0], the
+ * current frame aligned. Each plane keeps its LED (phase) in every frame: re-mosaicking each
+ * of the three gives coded frames on frame i's pixel grid. Flows per plane and neighbour:
+ * both directions (4 per plane with two neighbours, twice lm_align_frame's with the confidence
+ * on). Errors as lm_align_frame. */
+lm_status lm_align_stack(const float *prev, const float *cur, const float *next, int np, int h,
+                         int w, const float *t, int ref, const lm_flow_opts *o,
+                         const lm_align_opts *ao, float *out, lm_err *e);
+
 /* Raw frame (height x width, multiples of ty x tx) -> ty * tx planes (see above).
  * Errors: LM_ERR_SHAPE if the size is not a positive multiple of the tile. */
 lm_status lm_align_unshuffle(const float *raw, int height, int width, int ty, int tx,

@@ -426,8 +426,9 @@ static lm_status sample_cube(lm_dataset *d, sample_plan *p, lm_data_split split,
     return st;
 }
 
-lm_status lm_ds_make_sample(lm_dataset *d, lm_data_split split, long i, float *raw,
-                            float *target, lm_err *err)
+/* Sample i of a split; noisy 0: the clean frame (no noise, clipping or quantisation). */
+static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, int noisy, float *raw,
+                             float *target, lm_err *err)
 {
     sample_plan p;
     lm_status st = plan_sample(d, split, i, &p, err);
@@ -437,8 +438,9 @@ lm_status lm_ds_make_sample(lm_dataset *d, lm_data_split split, long i, float *r
     const int ph = d->cfg.patch_h, pw = d->cfg.patch_w, two = d->cfg.buckets == 2;
     float *b0 = two ? raw + (size_t)ph * pw : NULL; /* raw bucket 0 until scaled below */
     if (st == LM_OK) st = lm_forward_clean(d->cfg.sys, &c41, 0, 0, raw, b0, 1, err);
-    if (st == LM_OK && (p.info.noise_k > 0.0f || d->cfg.sensor_clip || d->cfg.sensor_bits ||
-                        d->cfg.photons > 0 || d->cfg.read_noise > 0.0f)) {
+    if (st == LM_OK && noisy && (p.info.noise_k > 0.0f || d->cfg.sensor_clip ||
+                                 d->cfg.sensor_bits || d->cfg.photons > 0 ||
+                                 d->cfg.read_noise > 0.0f)) {
         lm_noise_opts no = {0};
         no.gauss_k = p.info.noise_k;
         no.clip = d->cfg.sensor_clip;
@@ -464,6 +466,18 @@ lm_status lm_ds_make_sample(lm_dataset *d, lm_data_split split, long i, float *r
     lm_cube_free(&c41);
     lm_cube_free(&t33);
     return st;
+}
+
+lm_status lm_ds_make_sample(lm_dataset *d, lm_data_split split, long i, float *raw,
+                            float *target, lm_err *err)
+{
+    return make_sample(d, split, i, 1, raw, target, err);
+}
+
+lm_status lm_dataset_sample_clean(lm_dataset *d, long i, float *raw, float *target, lm_err *err)
+{
+    if (i < 0) return lm_err_set(err, LM_ERR_ARG, "dataset: bad sample %ld", i);
+    return make_sample(d, LM_SPLIT_TRAIN, i, 0, raw, target, err);
 }
 
 /* ---- evaluation samples, accessors ------------------------------------------------------ */

@@ -101,6 +101,11 @@ int lm_dataset_buckets(const lm_dataset *d);
  * background after each call. Call from one thread at a time. */
 lm_status lm_dataset_batch(lm_dataset *d, long index, int batch, float *raw, float *target,
                            lm_err *err);
+/* Training sample i (item i % B of batch i / B) as lm_dataset_batch makes it but noise-free:
+ * no noise, clipping or quantisation (raw and target in the batch item's layout); its noise
+ * level is lm_dataset_sample_info_get's noise_k. For loaders that draw the noise themselves
+ * (the multi-frame source: several noisy frames of one sample). Thread-safe as the workers. */
+lm_status lm_dataset_sample_clean(lm_dataset *d, long i, float *raw, float *target, lm_err *err);
 /* Fixed validation/test sample i (0 <= i < lm_dataset_eval_count), same layout as one batch
  * item: a real scene (scene i mod n of the split), a random tile-aligned position, no flip,
  * noise val_noise drawn from a fixed stream. A split without scenes has no samples (count 0). */

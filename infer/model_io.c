@@ -106,6 +106,11 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
         st = lm_err_set(err, LM_ERR_FORMAT, "%s: records %s bucket(s), its preset %s reads %d",
                         im->weights, bk, preset, lm_model_buckets(im->model));
     free(bk);
+    char *fr = st ? NULL : lm_safetensors_meta(im->weights, "frames", &e3); /* older: none */
+    if (fr && fr[0] && atoi(fr) != lm_model_frames(im->model))
+        st = lm_err_set(err, LM_ERR_FORMAT, "%s: records %s frame(s), its preset %s reads %d",
+                        im->weights, fr, preset, lm_model_frames(im->model));
+    free(fr);
     if (st) {
         lm_infer_model_free(im);
         return st;

@@ -76,6 +76,9 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     {"lmmse-b2", build_lmmse, CL | FIT | B2, {0, 0, 0, 0}, 0},
     {"rt-8-b2", build_rt, CL | B2, {0, 0, 0, 0}, 8},
     {"rt-16-b2", build_rt, CL | B2, {0, 0, 0, 0}, 16},
+    /* multi-frame: the current frame and its two neighbours aligned to it (3 input planes) */
+    {"rt-8-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0}, 8},
+    {"rt-16-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0}, 16},
 };
 #undef B2
 #undef CL
@@ -175,6 +178,7 @@ static lm_status build(lm_model *m, const char *name, lm_err *err)
     }
     m->caps = ps->caps;
     if (m->caps & LM_CAP_TWO_BUCKETS) m->in_channels = 2; /* builders may set it otherwise */
+    if (m->caps & LM_CAP_MULTI_FRAME) m->in_channels = lm_model_coded_planes(m);
     return ps->build(m, ps, err);
 }
 
@@ -233,6 +237,11 @@ lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
         st = lm_err_set(err, LM_ERR_ARG, "residual %s on %s: the net reads %d bucket(s), the "
                         "base %d; use both of one kind (\"-b2\" presets read both buckets)",
                         preset, base_preset, lm_model_buckets(m), lm_model_buckets(b));
+    if (st == LM_OK && lm_model_frames(b) != 1 && lm_model_frames(b) != lm_model_frames(m))
+        st = lm_err_set(err, LM_ERR_ARG, "residual %s on %s: the base reads %d frames, the net "
+                        "%d; a multi-frame net takes a one-frame base (it sees the current "
+                        "frame) or one of its own kind", preset, base_preset, lm_model_frames(b),
+                        lm_model_frames(m));
     int gs[1] = {m->out_channels};
     lm_tensor *g = st == LM_OK ? lm_params_add(&m->params, "res_scale", 1, gs, 1, err) : NULL;
     if (st == LM_OK && !g) st = err->status;
@@ -253,7 +262,7 @@ lm_model *lm_model_create_residual(const char *preset, const char *base_preset,
     m->noise_input |= b->noise_input;
     /* a residual is trained by gradient descent; on OpenCL only if both parts run there */
     m->caps = ((m->caps | b->caps) & LM_CAP_WHOLE_FRAME) | (m->caps & b->caps & LM_CAP_OPENCL) |
-              (m->caps & LM_CAP_TWO_BUCKETS);
+              (m->caps & (LM_CAP_TWO_BUCKETS | LM_CAP_MULTI_FRAME));
     m->res_scale = g;
     return m;
 }
@@ -271,18 +280,19 @@ lm_tensor *lm_model_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
 {
     if (!lm_check_inputs(c, m->preset, 1, raw)) return NULL;
     char sb[64];
-    const int nb = lm_model_buckets(m);
+    const int nb = lm_model_buckets(m), nf = lm_model_frames(m), np = nb * nf;
     if (nb == 0) {
         if (raw->ndim == 4 && raw->shape[1] == m->in_channels) return m->forward(c, m, raw);
         lm_ctx_fail(c, LM_ERR_SHAPE, "%s: input %s must be B x %d x H x W", m->preset,
                     lm_shape_str(raw, sb, sizeof sb), m->in_channels);
         return NULL;
     }
-    if (raw->ndim != 4 || raw->shape[1] != nb || raw->shape[2] % m->mosaic.ty ||
+    if (raw->ndim != 4 || raw->shape[1] != np || raw->shape[2] % m->mosaic.ty ||
         raw->shape[3] % m->mosaic.tx) {
         lm_ctx_fail(c, LM_ERR_SHAPE, "%s: input %s must be B x %d x H x W (%s) with H %% %d == 0 "
-                    "and W %% %d == 0", m->preset, lm_shape_str(raw, sb, sizeof sb), nb,
-                    nb == 2 ? "bucket 1, bucket 0" : "bucket 1", m->mosaic.ty, m->mosaic.tx);
+                    "and W %% %d == 0", m->preset, lm_shape_str(raw, sb, sizeof sb), np,
+                    nf > 1 ? "frame i aligned, frames i-1 and i+1 moved onto it"
+                    : nb == 2 ? "bucket 1, bucket 0" : "bucket 1", m->mosaic.ty, m->mosaic.tx);
         return NULL;
     }
     if (!m->base) return m->forward(c, m, raw);
@@ -292,5 +302,8 @@ lm_tensor *lm_model_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
     lm_tensor *y = m->forward(c, m, raw);
     int gs[4] = {1, m->out_channels, 1, 1};
     y = lm_mul(c, y, lm_reshape(c, m->res_scale, 4, gs));
-    return lm_add(c, y, b->forward(c, b, raw));
+    /* a one-frame base under a multi-frame net sees the current frame (plane 0) */
+    lm_tensor *braw = lm_model_coded_planes(b) == np ? raw
+                      : lm_contiguous(c, lm_slice(c, raw, 1, 0, lm_model_coded_planes(b)));
+    return lm_add(c, y, b->forward(c, b, braw));
 }

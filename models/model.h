@@ -25,7 +25,15 @@ typedef enum lm_model_cap {
     LM_CAP_DOE_LEARNED = 1u << 6, /* with LM_CAP_QDO_OPTICS: training also learns the DOE's
                                    * height map (as the run config's doe_optimise; the run's
                                    * doe.json then holds the learned DOE) */
+    LM_CAP_MULTI_FRAME = 1u << 7, /* input: LM_MODEL_MF_FRAMES coded frames (bucket 1) of a
+                                   * video, B x 3 x H x W: frame i aligned to its reference
+                                   * instant, then frames i-1 and i+1 moved onto frame i's pixel
+                                   * grid and instant, LED by LED (lm_align_stack, data/align.h);
+                                   * in_channels 3. Presets "<name>-mf3" */
 } lm_model_cap;
+
+/* Frames of a multi-frame model's input (the current one and its two neighbours). */
+#define LM_MODEL_MF_FRAMES 3
 
 typedef struct lm_model lm_model;
 struct lm_model {
@@ -36,7 +44,8 @@ struct lm_model {
     int out_channels;
     int in_channels;               /* channels of the input tensor: 1 = raw coded mosaic
                                     * (default); 2 = both buckets (LM_CAP_TWO_BUCKETS);
-                                    * 3 = RGB image (MST++ baseline) */
+                                    * 3 = RGB image (MST++ baseline) or three frames
+                                    * (LM_CAP_MULTI_FRAME) */
     lm_tensor *(*forward)(lm_ctx *c, lm_model *m, lm_tensor *raw);
     /* Optional whole-frame host path (no tensors, no gradients, no device): channels
      * [ch0, ch0 + nch) of the output for one H x W raw frame written straight into out (nch
@@ -96,6 +105,17 @@ static inline int lm_model_buckets(const lm_model *m)
 {
     return m->caps & LM_CAP_RGB_INPUT ? 0 : m->caps & LM_CAP_TWO_BUCKETS ? 2 : 1;
 }
+/* Coded frames the model reads per output frame: LM_MODEL_MF_FRAMES with LM_CAP_MULTI_FRAME,
+ * else 1. */
+static inline int lm_model_frames(const lm_model *m)
+{
+    return m->caps & LM_CAP_MULTI_FRAME ? LM_MODEL_MF_FRAMES : 1;
+}
+/* Planes of a coded model's input: buckets x frames (0 for an RGB-input model). */
+static inline int lm_model_coded_planes(const lm_model *m)
+{
+    return lm_model_buckets(m) * lm_model_frames(m);
+}
 /* Is name a preset (a listed name, lmmse-K, or either with "-b2")? */
 int lm_model_preset_known(const char *name);
 /* NULL-terminated list of preset names. */
@@ -139,7 +159,8 @@ lm_tensor *lm_lmmse_feature_maps(lm_ctx *c, const lm_model *m, lm_tensor *raw);
  * features, last the bias), as the fit produces it. */
 lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *coef, lm_err *err);
 /* Real-time: demosaic + raw, two 3x3 convs at `width`, 1x1 head (models/rt.c); with
- * LM_CAP_TWO_BUCKETS the branch's first conv also reads the bucket-0 plane. */
+ * LM_CAP_TWO_BUCKETS the branch's first conv also reads the bucket-0 plane, with
+ * LM_CAP_MULTI_FRAME the two neighbour frames' planes (the demosaic is of plane 0). */
 lm_status lm_rt_build(lm_model *m, int width, lm_err *err);
 
 #endif

@@ -11,6 +11,8 @@
  * reconstructs at >= 30 frames per second on two cores (bench/bench_rt.c).
  * Both buckets (LM_CAP_TWO_BUCKETS, "rt-N-b2"): the branch's first conv reads the bucket-0
  * plane beside bucket 1 (P + 2 input channels); the demosaic and the head are unchanged.
+ * Multi-frame (LM_CAP_MULTI_FRAME, "rt-N-mf3"): likewise the two neighbour frames moved onto
+ * the current one (P + 3 input channels).
  * What it is not: an attention network; nothing here depends on the frame size. */
 #include "models/model.h"
 #include <stdio.h>
@@ -21,7 +23,8 @@ typedef struct rt_net { lm_conv body0, body2, head; } rt_net;
 static lm_tensor *rt_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
 {
     rt_net *n = m->impl;
-    /* both buckets (in_channels 2): the demosaic of bucket 1; the branch reads both planes */
+    /* both buckets or three frames (in_channels 2, 3): the demosaic of plane 0 (bucket 1 of the
+     * current frame); the branch reads every plane */
     lm_tensor *b1 = m->in_channels == 1 ? raw : lm_contiguous(c, lm_slice(c, raw, 1, 0, 1));
     lm_tensor *x = lm_mosaic_demosaic(c, &m->mosaic, b1);
     lm_tensor *xr[2] = {x, raw};

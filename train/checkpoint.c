@@ -65,11 +65,13 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
     }
     char bk[8]; /* the coded-frame buckets the model reads (1, 2; 0 = RGB input) */
     snprintf(bk, sizeof bk, "%d", lm_model_buckets(m));
+    char fr[8]; /* coded frames per output frame (1; 3 = multi-frame) */
+    snprintf(fr, sizeof fr, "%d", lm_model_frames(m));
     const char *meta[] = {"format", CKPT_FORMAT, "preset", m->preset, "system", sys,
                           "system_hash", hash, "iteration", it, "seconds", secs, "buckets", bk,
-                          "base_preset", m->base ? m->base->preset : ""};
+                          "frames", fr, "base_preset", m->base ? m->base->preset : ""};
     dir_file(path, sizeof path, dir, "model.safetensors");
-    return lm_params_save(&m->params, path, meta, m->base ? 8 : 7, err);
+    return lm_params_save(&m->params, path, meta, m->base ? 9 : 8, err);
 }
 
 int lm_train_checkpoint_cpu_clock(const char *dir)

@@ -104,6 +104,8 @@ static const field fields[] = {
     FLD("buckets", F_INT, buckets, "1|2", "coded-frame buckets the model reads: 1 (bucket 1, the "
         "paper) or 2 (bucket 1 and bucket 0 / (LEDs - 1); the model's \"-b2\" preset; a -b2 "
         "preset sets 2)", 1, 2),
+    FLD("frames", F_INT, frames, "1|3", "coded frames per sample: 1, or 3 (frames i-1, i, i+1 "
+        "aligned onto frame i: the model's \"-mf3\" preset; a -mf3 preset sets 3)", 1, 3),
     FLD("snapshots", F_STR, snapshots, "M,M,...", "weights at these minutes of training into "
         "<output>/snapshots/<M>min/", 0, 0),
     FLD("minutes", F_FLOAT, minutes, "M", "time budget in minutes (0 = none; the schedule "
@@ -155,6 +157,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     c->checkpoint_interval = 1000;
     c->log_interval = 100;
     c->buckets = 1;
+    c->frames = 1;
     snprintf(c->output, sizeof c->output, "runs/train");
     snprintf(c->fit, sizeof c->fit, "auto");
     c->fit_patches = 4096;
@@ -570,6 +573,7 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
                                "motion_rotation", (double)c->motion_rotation, "motion_samples",
                                c->motion_samples));
     if (root) json_object_set_new(root, "buckets", json_integer(c->buckets));
+    if (root) json_object_set_new(root, "frames", json_integer(c->frames));
     if (root) json_object_set_new(root, "photons", json_real(c->photons));
     if (root) json_object_set_new(root, "read_noise", json_real(c->read_noise));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);

@@ -276,14 +276,16 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         if (!st) st = lm_train_run(cfg, m, &src, &opts, res, err);
         if (src.user && qdo) lm_train_source_doe_close(&src);
         else if (src.user) lm_train_source_rgb_close(&src);
-    } else if (!st && cfg->motion_fraction > 0.0f && cfg->buckets == 2) {
-        st = lm_err_set(err, LM_ERR_ARG, "config: 'motion_fraction' with 'buckets' 2: moving "
-                        "samples are simulated for bucket 1 only");
-    } else if (!st && cfg->motion_fraction > 0.0f) { /* moving scenes (issue 18, item 2) */
+    } else if (!st && (cfg->motion_fraction > 0.0f || cfg->frames == 3) && cfg->buckets == 2) {
+        st = lm_err_set(err, LM_ERR_ARG, "config: 'motion_fraction' or 'frames' 3 with "
+                        "'buckets' 2: moving and multi-frame samples are simulated for bucket 1 "
+                        "only");
+    } else if (!st && (cfg->motion_fraction > 0.0f || cfg->frames == 3)) {
+        /* moving scenes, multi-frame samples (issue 18, item 2) */
         lm_train_source src;
         lm_train_motion_opts mo = {cfg->motion_fraction, cfg->motion_speed, cfg->motion_rotation,
                                    cfg->motion_samples, cfg->sensor_clip, cfg->sensor_bits,
-                                   cfg->photons, cfg->read_noise};
+                                   cfg->photons, cfg->read_noise, cfg->frames, 1};
         st = lm_train_source_motion_open(&src, d, &sys, &mo, cfg->patch_h, cfg->patch_w,
                                          cfg->seed, err);
         if (!st) st = lm_train_run(cfg, m, &src, &opts, res, err);
@@ -334,6 +336,25 @@ static lm_status resolve_buckets(lm_train_cfg *c, lm_err *err)
     return LM_OK;
 }
 
+/* The same for frames: a "-mf3" preset sets frames 3; frames 3 with a one-frame name picks its
+ * "-mf3" preset (rt-8 -> rt-8-mf3). */
+static lm_status resolve_frames(lm_train_cfg *c, lm_err *err)
+{
+    size_t n = strlen(c->model);
+    int mf = n > 4 && !strcmp(c->model + n - 4, "-mf3");
+    if (mf) c->frames = 3;
+    if (c->frames == 2)
+        return lm_err_set(err, LM_ERR_ARG, "config: field 'frames': 1 or 3 (got 2)");
+    if (mf || c->frames != 3) return LM_OK;
+    char name[sizeof c->model + 5];
+    snprintf(name, sizeof name, "%s-mf3", c->model);
+    if (strlen(name) >= sizeof c->model || !lm_model_preset_known(name))
+        return lm_err_set(err, LM_ERR_ARG, "config: field 'frames': model %s has no multi-frame "
+                          "form (rt-8 and rt-16 have: their \"-mf3\" presets)", c->model);
+    snprintf(c->model, sizeof c->model, "%s", name);
+    return LM_OK;
+}
+
 lm_status lm_train_session(const lm_train_cfg *cfg_in, const lm_train_opts *opts_in,
                            lm_train_result *res, lm_err *err)
 {
@@ -344,6 +365,7 @@ lm_status lm_train_session(const lm_train_cfg *cfg_in, const lm_train_opts *opts
     *cfg = *cfg_in;
     absolute_paths(cfg);
     lm_status st = resolve_buckets(cfg, err);
+    if (!st) st = resolve_frames(cfg, err);
     if (!st) st = session(cfg, opts, res, err);
     free(cfg);
     return st;

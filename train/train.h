@@ -94,6 +94,8 @@ typedef struct lm_train_cfg {
     char clock[8];
     int buckets;                    /* coded-frame buckets the model reads: 1 (bucket 1) or 2
                                      * (both; the preset's "-b2" form, which sets 2 itself) */
+    int frames;                     /* coded frames per sample: 1, or 3 (the preset's "-mf3"
+                                     * form, which sets 3 itself; the multi-frame source) */
     char mat_key[LM_DATASET_KEY_LEN]; /* .mat cube variable of the data ("" = automatic:
                                         * cube, hsi, rad, ref, ...; data/cube_io.h) */
     /* QDO presets (LM_CAP_QDO_OPTICS) only; JSON also as one object "doe": {"file",
@@ -200,12 +202,28 @@ int lm_train_doe_pad(const char *doe_path, int ty, int tx, int *py, int *px, lm_
  * `rotation` deg/s about the patch centre), each LED's pixels averaging `samples` instants of
  * its window; the target is the scene at the ground-truth instant (data/video.h). clip / bits:
  * as the dataset's sensor options. Close with lm_train_source_motion_close. */
+/* frames 3 (the "-mf3" models): every sample is frames i-1, i, i+1 of one patch, B x 3 x ph x
+ * pw: real-scene samples moving (the share `fraction`, motion drawn as above) or still, each
+ * frame rendered in a window of LM_TRAIN_MF_MARGIN_Y / _X more rows / columns each side (the
+ * flow needs sub-images of lm_flow_min_size; the border repeats outside the scene), its own
+ * noise (lm_train_mf_noise_rng), then aligned by lm_align_stack (data/align.h: the medium flow,
+ * 1 thread, as inference aligns by default; no knowledge of the true motion) when `align`, and
+ * cropped to the patch: plane 0 frame i aligned, planes 1, 2 frames i-1, i+1 moved onto it.
+ * Synthetic samples: the dataset's clean patch with three noise draws, not aligned (still).
+ * Validation: the still validation sample as all three planes. Batch `index` is a pure
+ * function of (seed, index), whatever the thread count. */
 typedef struct lm_train_motion_opts {
     float fraction, speed, rotation;
     int samples;
     int clip, bits;
     float photons, read_noise; /* shot and read noise, as the dataset's */
+    int frames;                /* 1 (or 0): one coded frame per sample; 3: multi-frame */
+    int align;                 /* frames 3: 1 = align (training); 0 = raw frames (tests) */
 } lm_train_motion_opts;
+#define LM_TRAIN_MF_MARGIN_Y 15
+#define LM_TRAIN_MF_MARGIN_X 16
+/* The noise generator of frame f (0, 1, 2 = i-1, i, i+1) of multi-frame sample i. */
+void lm_train_mf_noise_rng(uint64_t seed, long i, int f, lm_rng *out);
 lm_status lm_train_source_motion_open(lm_train_source *src, lm_dataset *d, const lm_system *sys,
                                       const lm_train_motion_opts *o, int patch_h, int patch_w,
                                       uint64_t seed, lm_err *err);
