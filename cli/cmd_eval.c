@@ -34,7 +34,8 @@ static void help(void)
     printf("usage: lumosaic eval --model RUN DATA... [--split test|val|train|all]\n"
            "                     [--noise 0,5,10,15,20] [--output DIR] [--seed S]\n"
            "                     [--threads T] [--rainbow SIZE] [--batch N] [--system FILE]\n"
-           "                     [--motion 0,60,120,240] [--align confident|plain]\n"
+           "                     [--motion 0,60,120,240] [--motion-noise 0,10]\n"
+           "                     [--align confident|plain]\n"
            "                     [--device cpu|opencl] [--mat-key NAME]\n\n"
            "Score a trained model (system.md §10): each scene is cropped to the mosaic tile,\n"
            "divided by its own maximum, simulated at each noise level and reconstructed\n"
@@ -67,7 +68,12 @@ static void help(void)
            "                   over two frame periods plus two tiles), beside the static\n"
            "                   reference (that scene as a still frame). RGB models: one\n"
            "                   camera frame blurred over the exposure, nothing to align\n"
-           "                   (aligned = unaligned). Default: off\n"
+           "                   (aligned = unaligned). Multi-frame models (\"-mf3\"): the\n"
+           "                   three frames stacked, aligned onto the middle one or as\n"
+           "                   recorded. Default: off\n"
+           "  --motion-noise L the --motion rows at these noise levels too (%%, at most %d;\n"
+           "                   each frame its own draw, k x its maximum; coded models only;\n"
+           "                   default 0 = noise-free)\n"
            "  --align A        confident (default): a pixel keeps its unaligned value where\n"
            "                   the flow is inconsistent forward-backward (data/align.h);\n"
            "                   plain: warp every pixel\n"
@@ -83,7 +89,8 @@ static void help(void)
            "                   scale (0 = off)\n"
            "  --noise-oracle   models that read the noise level (lmmse, residuals on it) get\n"
            "                   the simulated level instead of estimating it from the frame\n"
-           "  --help           this text\n", LM_EVAL_MAX_NOISE, LM_EVAL_MAX_MOTION);
+           "  --help           this text\n", LM_EVAL_MAX_NOISE, LM_EVAL_MAX_MOTION,
+           LM_EVAL_MAX_MOTION_NOISE);
 }
 
 typedef struct eval_opts {
@@ -95,6 +102,8 @@ typedef struct eval_opts {
     int nnoise;
     double speed[LM_EVAL_MAX_MOTION];
     int nmotion;
+    float mk[LM_EVAL_MAX_MOTION_NOISE]; /* --motion-noise levels (fractions) */
+    int nmk;
     long long rainbow, batch;
     int noise_oracle, clip, align_plain;
     long long bits;
@@ -104,22 +113,27 @@ typedef struct eval_opts {
 static const char *const split_names[] = {"test", "val", "train", "all", NULL};
 static const char *const align_names[] = {"confident", "plain", NULL};
 
-static int parse_noise(lm_cli *c, const char *s, eval_opts *o)
+/* A list of noise levels in % into k (fractions), at most max; flag names the option. */
+static int parse_levels(lm_cli *c, const char *flag, const char *s, float *k, int *n, int max)
 {
-    o->nnoise = 0;
+    *n = 0;
     char buf[512];
-    if (strlen(s) >= sizeof buf || !*s) return lm_cli_error(c, "--noise: bad list '%s'", s);
+    if (strlen(s) >= sizeof buf || !*s) return lm_cli_error(c, "%s: bad list '%s'", flag, s);
     strcpy(buf, s);
     for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
         double v;
         if (lm_cli_parse_real(t, &v) || v < 0 || v > 100)
-            return lm_cli_error(c, "--noise: '%s' is not a level in 0..100 (%%)", t);
-        if (o->nnoise == LM_EVAL_MAX_NOISE)
-            return lm_cli_error(c, "--noise: more than %d levels", LM_EVAL_MAX_NOISE);
-        o->k[o->nnoise++] = (float)(v / 100.0);
+            return lm_cli_error(c, "%s: '%s' is not a level in 0..100 (%%)", flag, t);
+        if (*n == max) return lm_cli_error(c, "%s: more than %d levels", flag, max);
+        k[(*n)++] = (float)(v / 100.0);
     }
-    if (!o->nnoise) return lm_cli_error(c, "--noise: bad list '%s'", s);
+    if (!*n) return lm_cli_error(c, "%s: bad list '%s'", flag, s);
     return 0;
+}
+
+static int parse_noise(lm_cli *c, const char *s, eval_opts *o)
+{
+    return parse_levels(c, "--noise", s, o->k, &o->nnoise, LM_EVAL_MAX_NOISE);
 }
 
 static int parse_motion(lm_cli *c, const char *s, eval_opts *o)
@@ -142,7 +156,7 @@ static int parse_motion(lm_cli *c, const char *s, eval_opts *o)
 
 static int parse_opt(lm_cli *c, eval_opts *o)
 {
-    const char *noise = NULL, *motion = NULL;
+    const char *noise = NULL, *motion = NULL, *mnoise = NULL;
     int r;
     if ((r = lm_cli_value(c, "--model", &o->model)) ||
         (r = lm_cli_value(c, "--output", &o->output)) ||
@@ -156,6 +170,7 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
         (r = lm_cli_value(c, "--noise", &noise)) ||
         (r = lm_cli_value(c, "--motion", &motion)) ||
+        (r = lm_cli_value(c, "--motion-noise", &mnoise)) ||
         (r = lm_cli_flag(c, "--noise-oracle", &o->noise_oracle)) ||
         (r = lm_cli_flag(c, "--clip", &o->clip)) ||
         (r = lm_cli_int(c, "--bits", 0, 24, &o->bits)) ||
@@ -164,6 +179,9 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         if (r < 0) return 2;
         if (noise && parse_noise(c, noise, o)) return 2;
         if (motion && parse_motion(c, motion, o)) return 2;
+        if (mnoise && parse_levels(c, "--motion-noise", mnoise, o->mk, &o->nmk,
+                                   LM_EVAL_MAX_MOTION_NOISE))
+            return 2;
         return 1;
     }
     return 0;
@@ -173,7 +191,7 @@ static int parse_opt(lm_cli *c, eval_opts *o)
 static int parse(lm_cli *c, eval_opts *o)
 {
     *o = (eval_opts){.com.seed = 1, .rainbow = 256, .batch = 8, .nnoise = 5,
-                     .k = {0.0f, 0.05f, 0.10f, 0.15f, 0.20f}};
+                     .k = {0.0f, 0.05f, 0.10f, 0.15f, 0.20f}, .nmk = 1};
     o->data = calloc((size_t)c->argc + 1, sizeof *o->data);
     if (!o->data) return lm_cli_error(c, "out of memory");
     while (!lm_cli_done(c)) {
@@ -201,7 +219,7 @@ typedef struct scene_res {
     lm_data_split split; /* the dataset's split of the scene (never a borrowed one) */
     int height, width;
     lm_metrics m[LM_EVAL_MAX_NOISE];
-    lm_eval_motion mo[LM_EVAL_MAX_MOTION];
+    lm_eval_motion mo[LM_EVAL_MAX_MOTION * LM_EVAL_MAX_MOTION_NOISE]; /* noise-major */
 } scene_res;
 
 typedef struct eval_run {
@@ -214,7 +232,7 @@ typedef struct eval_run {
     scene_res *sc;
     int nsc;
     lm_metrics mean[LM_EVAL_MAX_NOISE];
-    lm_eval_motion mo_mean[LM_EVAL_MAX_MOTION];
+    lm_eval_motion mo_mean[LM_EVAL_MAX_MOTION * LM_EVAL_MAX_MOTION_NOISE];
     lm_eval_rainbow rb;
     char tmp[1100]; /* staging folder of --output ("" until created) */
 } eval_run;
@@ -260,9 +278,13 @@ static int list_scenes(eval_run *r, lm_err *e)
     return 0;
 }
 
-/* The --motion speeds on one prepared scene. */
+/* Motion rows: every --motion-noise level by every --motion speed, noise-major. */
+static int motion_rows(const eval_opts *o) { return o->nmotion * o->nmk; }
+
+/* The --motion speeds (at each --motion-noise level) on one prepared scene; rng: the scene's
+ * noise generator. */
 static lm_status scene_motion(eval_run *r, scene_res *s, const lm_cube *cube,
-                              const lm_tile_opts *to, lm_err *e)
+                              const lm_tile_opts *to, const lm_rng *rng, lm_err *e)
 {
     lm_status st = LM_OK;
     lm_err me;
@@ -271,17 +293,19 @@ static lm_status scene_motion(eval_run *r, scene_res *s, const lm_cube *cube,
     lm_align_default_opts(&ao);
     ao.confidence = !r->o->align_plain;
     int k = 0;
-    for (; k < r->o->nmotion && !st; k++)
-        st = lm_eval_motion_run(&r->ctx, &r->im, cube, r->o->speed[k], to, NULL, &ao, &s->mo[k],
-                                &me);
-    if (st) lm_err_set(e, st, "--motion %g px/s: %s", r->o->speed[k - 1], me.msg);
+    lm_rng mr = lm_rng_split(rng, 0x6d6f74696f6eULL); /* "motion": apart from the still rows' */
+    for (; k < motion_rows(r->o) && !st; k++)
+        st = lm_eval_motion_run_noise(&r->ctx, &r->im, cube, r->o->speed[k % r->o->nmotion],
+                                      r->o->mk[k / r->o->nmotion], &mr, to, NULL, &ao,
+                                      &s->mo[k], &me);
+    if (st) lm_err_set(e, st, "--motion %g px/s: %s", r->o->speed[(k - 1) % r->o->nmotion], me.msg);
     return st;
 }
 
 /* Means over the scenes of the motion rows. */
 static void motion_means(eval_run *r)
 {
-    for (int k = 0; k < r->o->nmotion; k++) {
+    for (int k = 0; k < motion_rows(r->o); k++) {
         lm_metrics_acc a, u, st;
         memset(&a, 0, sizeof a);
         memset(&u, 0, sizeof u);
@@ -291,7 +315,8 @@ static void motion_means(eval_run *r)
             lm_metrics_acc_add(&u, &r->sc[i].mo[k].unaligned);
             lm_metrics_acc_add(&st, &r->sc[i].mo[k].still);
         }
-        r->mo_mean[k].speed = r->o->speed[k];
+        r->mo_mean[k].speed = r->o->speed[k % r->o->nmotion];
+        r->mo_mean[k].noise = r->o->mk[k / r->o->nmotion];
         r->mo_mean[k].px_per_frame = r->nsc ? r->sc[0].mo[k].px_per_frame : 0.0;
         r->mo_mean[k].aligned = lm_metrics_acc_mean(&a);
         r->mo_mean[k].unaligned = lm_metrics_acc_mean(&u);
@@ -318,7 +343,7 @@ static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
         lm_rng rs = lm_rng_split(&base, lm_fnv1a_str(LM_FNV1A_BASIS_SHORT, s->name));
         if (!st) st = lm_eval_scene(&r->ctx, &r->im, &cube, r->o->k, r->o->nnoise, to, &rs,
                                     s->m, e);
-        if (!st) st = scene_motion(r, s, &cube, to, e);
+        if (!st) st = scene_motion(r, s, &cube, to, &rs, e);
         s->height = cube.height;
         s->width = cube.width;
         lm_cube_free(&cube);
@@ -343,16 +368,17 @@ static void print_table(const eval_run *r)
         printf("%9g %10.3f %8.4f %9.5f %9.3f\n", 100.0 * r->o->k[n], r->mean[n].psnr,
                r->mean[n].ssim, r->mean[n].mae, r->mean[n].sam);
     if (r->o->nmotion) {
-        printf("motion (3-frame video, middle frame, no noise, in-view region; means over "
-               "scenes; alignment %s)\n", align_names[r->o->align_plain]);
-        printf("%11s %8s %11s %12s %14s %8s %10s %11s %13s\n", "motion px/s", "px/frame",
-               "PSNR static", "PSNR aligned", "PSNR unaligned", "SSIM al", "SSIM unal",
-               "SAM aligned", "SAM unaligned");
-        for (int k = 0; k < r->o->nmotion; k++) {
+        printf("motion (3-frame video, middle frame, in-view region; means over scenes; "
+               "alignment %s)\n", align_names[r->o->align_plain]);
+        printf("%7s %11s %8s %11s %12s %14s %8s %10s %11s %13s\n", "noise %", "motion px/s",
+               "px/frame", "PSNR static", "PSNR aligned", "PSNR unaligned", "SSIM al",
+               "SSIM unal", "SAM aligned", "SAM unaligned");
+        for (int k = 0; k < motion_rows(r->o); k++) {
             const lm_eval_motion *m = &r->mo_mean[k];
-            printf("%11g %8.3g %11.3f %12.3f %14.3f %8.4f %10.4f %11.3f %13.3f\n", m->speed,
-                   m->px_per_frame, m->still.psnr, m->aligned.psnr, m->unaligned.psnr,
-                   m->aligned.ssim, m->unaligned.ssim, m->aligned.sam, m->unaligned.sam);
+            printf("%7g %11g %8.3g %11.3f %12.3f %14.3f %8.4f %10.4f %11.3f %13.3f\n",
+                   100.0 * m->noise, m->speed, m->px_per_frame, m->still.psnr, m->aligned.psnr,
+                   m->unaligned.psnr, m->aligned.ssim, m->unaligned.ssim, m->aligned.sam,
+                   m->unaligned.sam);
         }
     }
     if (r->o->rainbow > 0)
@@ -383,15 +409,17 @@ static void json_metrics(FILE *f, const eval_opts *o, const lm_metrics *m, const
 
 static void json_motion(FILE *f, const eval_opts *o, const lm_eval_motion *m, const char *ind)
 {
-    for (int k = 0; k < o->nmotion; k++)
-        fprintf(f, "%s{\"speed_px_s\": %g, \"px_per_frame\": %.6f, \"psnr_static\": %.6f, "
+    for (int k = 0; k < motion_rows(o); k++)
+        fprintf(f, "%s{\"noise_percent\": %g, \"speed_px_s\": %g, \"px_per_frame\": %.6f, "
+                   "\"psnr_static\": %.6f, "
                    "\"psnr_aligned\": %.6f, \"psnr_unaligned\": %.6f, "
                    "\"ssim_aligned\": %.6f, \"ssim_unaligned\": %.6f, \"mae_aligned\": %.8f, "
                    "\"mae_unaligned\": %.8f, \"sam_aligned\": %.6f, \"sam_unaligned\": %.6f}%s\n",
-                ind, m[k].speed, m[k].px_per_frame, m[k].still.psnr, m[k].aligned.psnr,
+                ind, 100.0 * m[k].noise, m[k].speed, m[k].px_per_frame, m[k].still.psnr,
+                m[k].aligned.psnr,
                 m[k].unaligned.psnr, m[k].aligned.ssim,
                 m[k].unaligned.ssim, m[k].aligned.mae, m[k].unaligned.mae, m[k].aligned.sam,
-                m[k].unaligned.sam, k + 1 < o->nmotion ? "," : "");
+                m[k].unaligned.sam, k + 1 < motion_rows(o) ? "," : "");
 }
 
 static void write_json(FILE *f, const eval_run *r)
@@ -426,6 +454,8 @@ static void write_json(FILE *f, const eval_run *r)
     if (o->nmotion) {
         fprintf(f, ",\n  \"motion_speeds_px_s\": [");
         for (int k = 0; k < o->nmotion; k++) fprintf(f, "%s%g", k ? ", " : "", o->speed[k]);
+        fprintf(f, "],\n  \"motion_noise_percent\": [");
+        for (int k = 0; k < o->nmk; k++) fprintf(f, "%s%g", k ? ", " : "", 100.0 * o->mk[k]);
         fprintf(f, "],\n  \"motion_mean\": [\n");
         json_motion(f, o, r->mo_mean, "    ");
         fprintf(f, "  ]");
@@ -454,15 +484,16 @@ static void write_motion_csv(FILE *f, const eval_run *r)
 {
     fprintf(f, "scene,motion_px_s,px_per_frame,psnr_static,psnr_aligned,psnr_unaligned,"
                "ssim_aligned,ssim_unaligned,"
-               "mae_aligned,mae_unaligned,sam_aligned,sam_unaligned\n");
+               "mae_aligned,mae_unaligned,sam_aligned,sam_unaligned,noise_percent\n");
     for (int i = 0; i <= r->nsc; i++) {
         const lm_eval_motion *m = i < r->nsc ? r->sc[i].mo : r->mo_mean;
-        for (int k = 0; k < r->o->nmotion; k++)
-            fprintf(f, "%s,%g,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.8f,%.8f,%.6f,%.6f\n",
+        for (int k = 0; k < motion_rows(r->o); k++)
+            fprintf(f, "%s,%g,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.8f,%.8f,%.6f,%.6f,%g\n",
                     i < r->nsc ? r->sc[i].name : "mean", m[k].speed, m[k].px_per_frame,
                     m[k].still.psnr, m[k].aligned.psnr,
                     m[k].unaligned.psnr, m[k].aligned.ssim, m[k].unaligned.ssim,
-                    m[k].aligned.mae, m[k].unaligned.mae, m[k].aligned.sam, m[k].unaligned.sam);
+                    m[k].aligned.mae, m[k].unaligned.mae, m[k].aligned.sam, m[k].unaligned.sam,
+                    100.0 * m[k].noise);
     }
 }
 

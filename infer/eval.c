@@ -14,10 +14,46 @@
 
 static int is_rgb(const lm_infer_model *im) { return lm_model_has(im->model, LM_CAP_RGB_INPUT); }
 
-/* Planes of the frame the model takes: 3 (RGB), 2 (both buckets) or 1 (bucket 1). */
+/* Planes of the frame the model takes: 3 (RGB), 2 (both buckets), 3 (three frames) or 1
+ * (bucket 1). */
 static int planes_of(const lm_infer_model *im)
 {
-    return is_rgb(im) ? 3 : lm_model_buckets(im->model) == 2 ? 2 : 1;
+    return is_rgb(im) ? 3 : lm_model_coded_planes(im->model);
+}
+
+/* The multi-frame input of frames fr[0..2] (i-1, i, i+1; each H x W) into out (3 x H x W):
+ * aligned (lm_align_stack, re-mosaicked; fo NULL = the medium flow with nthreads) or, with
+ * aligned 0 or sub-images below the flow's minimum size, frames i, i-1, i+1 as recorded. */
+static lm_status mf_input(const lm_system *sys, float *const fr[3], int H, int W, int aligned,
+                          const lm_flow_opts *fo, const lm_align_opts *ao, int nthreads,
+                          float *out, lm_err *err)
+{
+    const int ty = sys->tile_rows, tx = sys->tile_cols, np = ty * tx, h = H / ty, w = W / tx;
+    const size_t n = (size_t)H * W;
+    lm_flow_opts dfo;
+    if (!fo) {
+        lm_flow_default_opts(&dfo, LM_FLOW_MEDIUM);
+        dfo.nthreads = nthreads > 0 ? nthreads : 1;
+        fo = &dfo;
+    }
+    int small = h < lm_flow_min_size(fo) || w < lm_flow_min_size(fo);
+    if (!aligned || small) {
+        const int order[3] = {1, 0, 2};
+        for (int q = 0; q < 3; q++) memcpy(out + q * n, fr[order[q]], sizeof(float) * n);
+        return LM_OK;
+    }
+    int ref;
+    float t[LM_SYSTEM_MAX_TILE];
+    float *pl = malloc(sizeof(float) * 6 * n);
+    if (!pl) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    lm_status st = lm_align_phase_times(sys, t, &ref, err);
+    for (int f = 0; f < 3 && !st; f++) st = lm_align_unshuffle(fr[f], H, W, ty, tx, pl + f * n, err);
+    if (!st) st = lm_align_stack(pl, pl + n, pl + 2 * n, np, h, w, t, ref, fo, ao, pl + 3 * n,
+                                 err);
+    for (int q = 0; q < 3 && !st; q++)
+        st = lm_align_remosaic(pl + (3 + q) * n, h, w, ty, tx, out + q * n, err);
+    free(pl);
+    return st;
 }
 
 /* lm_eval_simulate with an explicit thread count and a mutable rng (advanced). */
@@ -49,7 +85,7 @@ static lm_status simulate(const lm_infer_model *im, const lm_cube *truth,
                                   noise ? noise : &none, rng, frame, nthreads, err);
     }
     const int two = lm_model_buckets(im->model) == 2;
-    if (im->model->in_channels != (two ? 2 : 1))
+    if (im->model->in_channels != lm_model_coded_planes(im->model))
         return lm_err_set(err, LM_ERR_ARG, "eval: model %s takes %d input channels (need 1, 2 "
                           "or 3)", im->model->preset, im->model->in_channels);
     lm_forward_opts fo;
@@ -57,6 +93,19 @@ static lm_status simulate(const lm_infer_model *im, const lm_cube *truth,
     if (noise) fo.noise = *noise;
     fo.nthreads = nthreads;
     const size_t npx = (size_t)truth->height * truth->width;
+    if (lm_model_frames(im->model) == 3) { /* a still video: frames i-1, i, i+1, own noise */
+        float *fr = malloc(sizeof(float) * 3 * npx), *f3[3];
+        if (!fr) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+        lm_status st = LM_OK;
+        for (int f = 0; f < 3 && !st; f++) {
+            f3[f] = fr + f * npx;
+            st = lm_forward_simulate31(&im->sys, truth, &fo, rng, f3[f], NULL, err);
+        }
+        if (!st) st = mf_input(&im->sys, f3, truth->height, truth->width, 1, NULL, NULL,
+                               nthreads, frame, err);
+        free(fr);
+        return st;
+    }
     /* both buckets: the same noise model on each (bucket 0's own maximum and full scale),
      * bucket 0 then stored / (LEDs - 1) as simulate --bucket0 writes it */
     lm_status st = lm_forward_simulate31(&im->sys, truth, &fo, rng, frame, two ? frame + npx
@@ -110,7 +159,7 @@ lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *
         if (st) lm_cube_free(out);
         return st;
     }
-    if (m->in_channels != (lm_model_buckets(m) == 2 ? 2 : 1))
+    if (m->in_channels != lm_model_coded_planes(m))
         return lm_err_set(err, LM_ERR_ARG, "eval: model %s takes %d input channels and is not "
                           "MST++", m->preset, m->in_channels);
     if (whole && lm_whole_halo(m) > 0) return lm_whole_infer(c, m, frame, height, width, out, err);
@@ -206,6 +255,7 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
 /* Buffers of one motion run: frames, their sub-images, the aligned frame. */
 typedef struct motion_buf {
     float *raw[MOTION_FRAMES], *planes[MOTION_FRAMES], *aligned, *remos;
+    float *mf;      /* multi-frame models: their 3 x H x W input */
     lm_cube truth;  /* frame 1's lime-instant scene, 31 bands */
 } motion_buf;
 
@@ -217,6 +267,7 @@ static void motion_buf_free(motion_buf *b)
     }
     free(b->aligned);
     free(b->remos);
+    free(b->mf);
     lm_cube_free(&b->truth);
 }
 
@@ -311,14 +362,16 @@ static lm_status score_region(lm_ctx *c, const lm_infer_model *im, const float *
     return st;
 }
 
-/* The static reference: truth as a still frame (noise-free), reconstructed, scored. */
+/* The static reference: truth as a still frame (a multi-frame model: three still frames),
+ * with the noise no (NULL = none) from rng, reconstructed, scored. */
 static lm_status score_still(lm_ctx *c, const lm_infer_model *im, const lm_tile_opts *to,
-                             const lm_cube *truth, lm_eval_motion *r, lm_err *err)
+                             const lm_cube *truth, const lm_noise_opts *no, lm_rng *rng,
+                             lm_eval_motion *r, lm_err *err)
 {
     size_t n = (size_t)planes_of(im) * truth->height * truth->width;
     float *frame = malloc(sizeof(float) * n);
     if (!frame) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
-    lm_status st = simulate(im, truth, NULL, NULL, lm_nthreads(c), frame, err);
+    lm_status st = simulate(im, truth, no, no ? rng : NULL, lm_nthreads(c), frame, err);
     if (!st) st = score_region(c, im, frame, to, truth, r, &r->still, err);
     free(frame);
     return st;
@@ -366,7 +419,7 @@ static lm_status motion_rgb(lm_ctx *c, const lm_infer_model *im, const lm_cube *
     if (!st) st = lm_video_warp(cube, mo, tg, &gt, nt, err);
     if (!st) st = score_region(c, im, frame, to, &gt, out, &out->unaligned, err);
     out->aligned = out->unaligned; /* one camera frame, nothing to align */
-    if (!st) st = score_still(c, im, to, &gt, out, err);
+    if (!st) st = score_still(c, im, to, &gt, NULL, NULL, out, err);
     lm_cube_free(&gt);
     lm_cube_free(&acc);
     free(frame);
@@ -385,7 +438,8 @@ static lm_status motion_alloc(motion_buf *b, size_t n, lm_err *err)
     }
     b->aligned = malloc(sizeof(float) * n);
     b->remos = malloc(sizeof(float) * n);
-    return ok && b->aligned && b->remos ? LM_OK
+    b->mf = malloc(sizeof(float) * 3 * n);
+    return ok && b->aligned && b->remos && b->mf ? LM_OK
                                         : lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
 }
 
@@ -393,10 +447,21 @@ lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube 
                              double speed, const lm_tile_opts *to, const lm_flow_opts *fo,
                              const lm_align_opts *ao, lm_eval_motion *out, lm_err *err)
 {
+    return lm_eval_motion_run_noise(c, im, truth, speed, 0.0f, NULL, to, fo, ao, out, err);
+}
+
+lm_status lm_eval_motion_run_noise(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
+                                   double speed, float k, const lm_rng *rng,
+                                   const lm_tile_opts *to, const lm_flow_opts *fo,
+                                   const lm_align_opts *ao, lm_eval_motion *out, lm_err *err)
+{
     memset(out, 0, sizeof *out);
     out->speed = speed;
+    out->noise = k;
     if (!(speed >= 0.0) || !isfinite(speed))
         return lm_err_set(err, LM_ERR_ARG, "eval: motion speed %g px/s (need >= 0)", speed);
+    if (!(k >= 0.0f) || !isfinite(k))
+        return lm_err_set(err, LM_ERR_ARG, "eval: motion noise level %g (need >= 0)", (double)k);
     int H = truth->height, W = truth->width;
     out->px_per_frame = speed * 1e-6 * lm_system_frame_period_us(&im->sys);
     lm_eval_motion_region(&im->sys, speed, H, W, &out->y0, &out->x0, &out->height, &out->width);
@@ -407,6 +472,9 @@ lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube 
     if (lm_model_buckets(im->model) == 2)
         return lm_err_set(err, LM_ERR_ARG, "eval: the motion test aligns bucket 1's LED "
                           "sub-images only: not for the two-bucket model %s", im->model->preset);
+    if (is_rgb(im) && k > 0.0f)
+        return lm_err_set(err, LM_ERR_ARG, "eval: motion rows with noise are for coded models "
+                          "(not %s)", im->model->preset);
     if (is_rgb(im)) {
         lm_motion mo;
         memset(&mo, 0, sizeof mo);
@@ -420,13 +488,31 @@ lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube 
         dfo.nthreads = lm_nthreads(c);
         fo = &dfo;
     }
+    /* noise (k > 0): each frame its own draw, in frame order, then the still reference's */
+    lm_noise_opts no;
+    memset(&no, 0, sizeof no);
+    no.gauss_k = k, no.clip = im->sensor_clip, no.bits = im->sensor_bits;
+    no.photons = im->photons, no.read_noise = im->read_noise;
+    lm_rng r0, r;
+    if (rng) r0 = *rng;
+    else lm_rng_seed(&r0, 0);
+    r = lm_rng_split(&r0, (uint64_t)llround((double)k * 1e6));
     motion_buf b;
     lm_status st = motion_alloc(&b, (size_t)H * W, err);
     if (!st) st = motion_simulate(im, truth, speed, lm_nthreads(c), &b, err);
-    if (!st) st = motion_align(&im->sys, H, W, fo, ao, &b, err);
-    if (!st) st = score_region(c, im, b.raw[1], to, &b.truth, out, &out->unaligned, err);
-    if (!st) st = score_region(c, im, b.remos, to, &b.truth, out, &out->aligned, err);
-    if (!st) st = score_still(c, im, to, &b.truth, out, err);
+    for (int i = 0; i < MOTION_FRAMES && !st && k > 0.0f; i++)
+        st = lm_forward_noise(b.raw[i], H, W, &no, &r, lm_nthreads(c), err);
+    if (lm_model_frames(im->model) == 3) { /* the stacked input, aligned or as recorded */
+        if (!st) st = mf_input(&im->sys, b.raw, H, W, 0, fo, ao, lm_nthreads(c), b.mf, err);
+        if (!st) st = score_region(c, im, b.mf, to, &b.truth, out, &out->unaligned, err);
+        if (!st) st = mf_input(&im->sys, b.raw, H, W, 1, fo, ao, lm_nthreads(c), b.mf, err);
+        if (!st) st = score_region(c, im, b.mf, to, &b.truth, out, &out->aligned, err);
+    } else {
+        if (!st) st = motion_align(&im->sys, H, W, fo, ao, &b, err);
+        if (!st) st = score_region(c, im, b.raw[1], to, &b.truth, out, &out->unaligned, err);
+        if (!st) st = score_region(c, im, b.remos, to, &b.truth, out, &out->aligned, err);
+    }
+    if (!st) st = score_still(c, im, to, &b.truth, k > 0.0f ? &no : NULL, &r, out, err);
     motion_buf_free(&b);
     return st;
 }

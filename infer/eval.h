@@ -79,6 +79,7 @@ double lm_eval_peak_nm(const float *spec, int n, double wl0, double step);
 #define LM_EVAL_MOTION_DIR_X 0.8
 #define LM_EVAL_MOTION_DIR_Y 0.6
 #define LM_EVAL_MAX_MOTION 16
+#define LM_EVAL_MAX_MOTION_NOISE 4
 /* Frames of the motion test's video; the middle one is scored. */
 #define LM_EVAL_MOTION_FRAMES 3
 /* Mosaic tiles added to the motion margin for the filters' support (one for the bilinear
@@ -98,6 +99,7 @@ void lm_eval_motion_region(const lm_system *sys, double speed, int height, int w
 
 typedef struct lm_eval_motion {
     double speed;          /* px/s along (LM_EVAL_MOTION_DIR_X, LM_EVAL_MOTION_DIR_Y) */
+    double noise;          /* noise level k of the frames (0 = none) */
     double px_per_frame;   /* speed x frame period: the displacement between frames */
     int y0, x0, height, width; /* the scored region (lm_eval_motion_region) */
     lm_metrics still;      /* the static reference: the still scene that frame 1's truth shows,
@@ -122,6 +124,18 @@ typedef struct lm_eval_motion {
 lm_status lm_eval_motion_run(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
                              double speed, const lm_tile_opts *to, const lm_flow_opts *fo,
                              const lm_align_opts *ao, lm_eval_motion *out, lm_err *err);
+
+/* The same with noise level k (a fraction, as lm_eval_scene's; k = 0 is lm_eval_motion_run):
+ * each of frames 0, 1, 2 gets its own Gaussian draw, k x its own maximum (with the model's
+ * sensor options, as eval_one), from lm_rng_split(rng, round(k * 1e6)) in frame order, then the
+ * still reference (a still frame, or for a multi-frame model three still frames) from the same
+ * generator. rng NULL = seed 0. Multi-frame models (LM_CAP_MULTI_FRAME): "aligned" reads
+ * lm_align_stack's input (frame 1 aligned, frames 0 and 2 moved onto it), "unaligned" frames
+ * 1, 0, 2 as recorded. RGB models: k must be 0. */
+lm_status lm_eval_motion_run_noise(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
+                                   double speed, float k, const lm_rng *rng,
+                                   const lm_tile_opts *to, const lm_flow_opts *fo,
+                                   const lm_align_opts *ao, lm_eval_motion *out, lm_err *err);
 
 typedef struct lm_eval_rainbow {
     int size;                 /* the scene simulated: size x size */

@@ -60,7 +60,7 @@ void lm_tile_kernel_1d(int n, float *k)
 /* Per-fold state: window grid, kernel, host buffers. */
 typedef struct fold {
     int H, W, wh, ww, ny, nx, nwin, out_ch;
-    int planes;   /* input planes of the frame (2: both buckets) */
+    int planes;   /* input planes of the frame (2: both buckets, 3: three frames) */
     int *ys, *xs;
     float *K;     /* wh * ww */
     float *in;    /* batch * wh * ww: windows of the frame */
@@ -202,7 +202,7 @@ lm_status lm_tile_fold_planes(lm_ctx *c, const float *frame, int planes, int hei
 {
     if (lm_tile_check(o, height, width, ty, tx, err)) return err->status;
     if (out_ch <= 0) return lm_err_set(err, LM_ERR_ARG, "tile: %d output channels", out_ch);
-    if (planes < 1 || planes > 2) return lm_err_set(err, LM_ERR_ARG, "tile: %d input planes", planes);
+    if (planes < 1 || planes > 3) return lm_err_set(err, LM_ERR_ARG, "tile: %d input planes", planes);
     fold f;
     if (fold_init(&f, height, width, o, out_ch, planes, err)) return err->status;
     const size_t plane = (size_t)height * width;
@@ -259,7 +259,7 @@ lm_status lm_tile_infer(lm_ctx *c, lm_model *m, const float *frame, int height, 
     float *full = malloc(sizeof(float) * plane * LM_MODEL_OUT_CHANNELS);
     if (!full) return lm_err_set(err, LM_ERR_NOMEM, "tile: out of memory (%dx%d frame)", height,
                                  width);
-    const int planes = lm_model_buckets(m) == 2 ? 2 : 1;
+    const int planes = lm_model_coded_planes(m);
     lm_status st = lm_tile_fold_planes(c, frame, planes, height, width, m->mosaic.ty,
                                        m->mosaic.tx, o, model_fn, m, LM_MODEL_OUT_CHANNELS, full,
                                        NULL, err);

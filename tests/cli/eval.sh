@@ -100,12 +100,12 @@ check "the scene is in exactly one split ($n_ok)" [ $n_ok -eq 1 ]
 check "eval --motion: $(cat "$T/merr")" [ $? -eq 0 ]
 cat "$T/mtable"
 check "motion table has a row per speed" \
-  [ "$(grep -cE '^ +(0|240) +[0-9.]+( +[0-9.]+){7}$' "$T/mtable")" -eq 2 ]
+  [ "$(grep -cE '^ +0 +(0|240) +[0-9.]+( +[0-9.]+){7}$' "$T/mtable")" -eq 2 ]
 python3 - "$T/evm/eval.json" <<'PY'
 import json, math, sys
 j = json.load(open(sys.argv[1]))
 assert j["motion_speeds_px_s"] == [0, 240], j
-keys = ["speed_px_s", "px_per_frame", "psnr_static", "psnr_aligned", "psnr_unaligned", "ssim_aligned", "ssim_unaligned",
+keys = ["noise_percent", "speed_px_s", "px_per_frame", "psnr_static", "psnr_aligned", "psnr_unaligned", "ssim_aligned", "ssim_unaligned",
         "mae_aligned", "mae_unaligned", "sam_aligned", "sam_unaligned"]
 for rows in (j["scenes"][0]["motion"], j["motion_mean"]):
     assert [r["speed_px_s"] for r in rows] == [0, 240], rows
@@ -123,10 +123,26 @@ for rows in (j["scenes"][0]["motion"], j["motion_mean"]):
 PY
 check "eval.json motion fields, still = static, aligned >= unaligned at 240 px/s" [ $? -eq 0 ]
 check "motion csv header" [ "$(head -1 "$T/evm/eval_motion.csv")" = \
-  "scene,motion_px_s,px_per_frame,psnr_static,psnr_aligned,psnr_unaligned,ssim_aligned,ssim_unaligned,mae_aligned,mae_unaligned,sam_aligned,sam_unaligned" ]
+  "scene,motion_px_s,px_per_frame,psnr_static,psnr_aligned,psnr_unaligned,ssim_aligned,ssim_unaligned,mae_aligned,mae_unaligned,sam_aligned,sam_unaligned,noise_percent" ]
 check "motion csv rows: scene and mean per speed" \
   [ "$(grep -cE '^(balloons_crop100|mean),(0|240),' "$T/evm/eval_motion.csv")" -eq 4 ]
 check "no motion csv without --motion" [ ! -e "$O/eval_motion.csv" ]
+"$LM" eval --model "$R" "$CAVE" --split all --noise 0 --rainbow 0 --motion 0,240 \
+  --motion-noise 0,10 --output "$T/evn" > "$T/ntable" 2> "$T/nerr"
+check "eval --motion-noise: $(cat "$T/nerr")" [ $? -eq 0 ]
+python3 - "$T/evn/eval.json" "$T/evm/eval.json" <<'PY'
+import json, sys
+j, j0 = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+assert j["motion_noise_percent"] == [0, 10], j
+rows = j["motion_mean"]
+assert [(r["noise_percent"], r["speed_px_s"]) for r in rows] == [(0, 0), (0, 240), (10, 0), (10, 240)], rows
+assert rows[:2] == j0["motion_mean"], (rows, j0["motion_mean"])  # noise-free rows unchanged
+for clean, noisy in zip(rows[:2], rows[2:]):
+    assert noisy["psnr_aligned"] < clean["psnr_aligned"] - 0.3, (clean, noisy)
+    assert noisy["psnr_static"] < clean["psnr_static"] - 0.3, (clean, noisy)
+PY
+check "motion rows at 0 and 10 % noise (noise-free rows as without the flag)" [ $? -eq 0 ]
+expect_error "bad motion noise" 2 "--motion-noise" "$T/e13" -- "$LM" eval --model "$R" "$CAVE" --motion 0 --motion-noise 0,x --output "$T/e13"
 "$LM" eval --model "$R" "$CAVE" --split all --noise 0 --rainbow 0 --motion 240 --align plain \
   > "$T/ptable" 2> "$T/perr"
 check "eval --align plain: $(cat "$T/perr")" [ $? -eq 0 ]
