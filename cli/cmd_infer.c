@@ -18,6 +18,12 @@
  * aligned in time, so such sequences are reconstructed without alignment (a warning). They run
  * in whole-frame strips of both planes like their one-bucket forms (lmmse-b2 without its
  * one-plane host path).
+ * Multi-frame models ("-mf3" presets) read frame i with its neighbours: lm_align_stack_frames
+ * (data/align.h, the path eval and the training loader use) stacks frame i aligned and frames
+ * i-1, i+1 moved onto it; the first (last) frame has no frame i-1 (i+1) and gets frame i
+ * aligned in that plane instead (as align.h's edge rule). With --no-align, or sub-images below
+ * the flow's minimum, the frames are stacked as recorded (the same duplicates at the ends).
+ * They need a sequence of at least two frames (a single frame is refused, exit 2).
  * What it is not: the flow or the alignment scheme themselves (data/flow.c, data/align.c). */
 #include <omp.h>
 #include <sys/stat.h>
@@ -147,6 +153,8 @@ typedef struct infer_align {
     float *prev, *cur, *next; /* np * ph * pw each; prev / next NULL-able views */
     float *buf[3];           /* the storage behind prev / cur / next */
     float *aligned, *raw;    /* aligned planes, re-mosaicked frame */
+    int mf;                  /* multi-frame model: raw frames below, the stacked input in mf3 */
+    float *fr[3], *mf3;      /* frames i-1, i, i+1 (H x W each); 3 x H x W */
 } infer_align;
 
 typedef struct infer_run {
@@ -188,11 +196,62 @@ static int write_frame(infer_run *r, lm_cube *cube, int number, lm_err *e)
 
 static void align_free(infer_align *a)
 {
-    for (int k = 0; k < 3; k++) free(a->buf[k]);
+    for (int k = 0; k < 3; k++) free(a->buf[k]), free(a->fr[k]);
+    free(a->mf3);
     free(a->t);
     free(a->aligned);
     free(a->raw);
     memset(a, 0, sizeof *a);
+}
+
+/* Multi-frame models: the stacking buffers and checks. 0 ok, else an exit status (printed). */
+static int mf_init(infer_run *r)
+{
+    infer_align *a = &r->al;
+    if (r->o->is_auto || lm_model_frames(r->im.model) == 1) return 0;
+    if (r->seq.count < 2)
+        return lm_cli_error(r->c, "%s: model %s reads three frames (the current one and its "
+                            "neighbours): give a sequence of at least 2 frames", r->o->input,
+                            r->im.model->preset);
+    size_t n = (size_t)r->seq.height * r->seq.width;
+    for (int k = 0; k < 3; k++) a->fr[k] = malloc(sizeof(float) * n);
+    a->mf3 = malloc(sizeof(float) * 3 * n);
+    if (!a->fr[0] || !a->fr[1] || !a->fr[2] || !a->mf3) {
+        lm_cli_error(r->c, "out of memory (multi-frame buffers)");
+        return 1;
+    }
+    a->mf = 1;
+    lm_flow_default_opts(&a->fo, LM_FLOW_MEDIUM);
+    a->fo.nthreads = r->o->com.threads > 0 ? (int)r->o->com.threads : omp_get_max_threads();
+    const lm_system *s = &r->im.sys;
+    int need = lm_flow_min_size(&a->fo);
+    if (!r->o->no_align && (r->seq.height / s->tile_rows < need || r->seq.width / s->tile_cols < need))
+        fprintf(stderr, "lumosaic infer: warning: sub-images %dx%d are smaller than %dx%d: "
+                "the frames are stacked without temporal alignment\n", r->seq.width /
+                s->tile_cols, r->seq.height / s->tile_rows, need, need);
+    return 0;
+}
+
+/* Multi-frame models: frame i's stacked input in al.mf3 (frames read as needed). */
+static lm_status mf_step(infer_run *r, int i, lm_err *e)
+{
+    infer_align *a = &r->al;
+    const float *fr[3] = {NULL, NULL, NULL};
+    for (int k = 0; k < 3; k++) {
+        int j = i - 1 + k;
+        if (j < 0 || j >= r->seq.count) continue;
+        lm_frame f;
+        if (lm_frame_seq_read(&r->seq, j, &f, e)) return e->status;
+        memcpy(a->fr[k], f.data, sizeof(float) * (size_t)f.height * f.width);
+        lm_frame_free(&f);
+        fr[k] = a->fr[k];
+    }
+    lm_err ae;
+    lm_err_clear(&ae);
+    if (lm_align_stack_frames(&r->im.sys, fr[0], fr[1], fr[2], r->seq.height, r->seq.width,
+                              !r->o->no_align, &a->fo, NULL, a->mf3, &ae))
+        return lm_err_set(e, ae.status, "%s: %s", r->seq.paths[i], ae.msg);
+    return LM_OK;
 }
 
 /* Decide whether to align and allocate its buffers. 0 ok, else an exit status (printed). */
@@ -200,7 +259,7 @@ static int align_init(infer_run *r, lm_err *e)
 {
     infer_align *a = &r->al;
     const lm_system *s = &r->im.sys;
-    if (r->o->no_align || r->seq.count < 2 || r->seq0.count) return 0;
+    if (a->mf || r->o->no_align || r->seq.count < 2 || r->seq0.count) return 0;
     a->ty = s->tile_rows;
     a->tx = s->tile_cols;
     a->np = a->ty * a->tx;
@@ -269,6 +328,11 @@ static lm_status align_step(infer_run *r, int i, lm_err *e)
 static lm_status frame_input(infer_run *r, int i, lm_frame *f, const float **data, lm_err *e)
 {
     memset(f, 0, sizeof *f);
+    if (r->al.mf) {
+        if (mf_step(r, i, e)) return e->status;
+        *data = r->al.mf3;
+        return LM_OK;
+    }
     if (r->al.on) {
         if (align_step(r, i, e)) return e->status;
         *data = r->al.raw;
@@ -396,7 +460,8 @@ static int run_frames(infer_run *r)
         }
         double t2 = omp_get_wtime();
         char al[48] = "alignment off";
-        if (r->al.on) snprintf(al, sizeof al, "alignment %.2f s", ta - t0);
+        if (r->al.on || (r->al.mf && !r->o->no_align))
+            snprintf(al, sizeof al, "alignment %.2f s", ta - t0);
         fprintf(stderr, "frame %d/%d %s: %.2f s (%s, reconstruction %.2f s, writing %.2f s)\n",
                 i + 1, r->seq.count, r->seq.paths[i], t2 - t0, al, t1 - ta, t2 - t1);
     }
@@ -418,6 +483,9 @@ static int open_auto(infer_run *r, lm_err *e)
         if (lm_model_buckets(im->model) == 2)
             return lm_cli_error(r->c, "%s: model '%s' reads both buckets: --model auto takes "
                                 "one-bucket models only", r->o->auto_file, a->models[m].path);
+        if (lm_model_frames(im->model) != 1)
+            return lm_cli_error(r->c, "%s: model '%s' reads three frames: --model auto takes "
+                                "one-frame models only", r->o->auto_file, a->models[m].path);
         if (im->model->mosaic.ty != r->im.model->mosaic.ty ||
             im->model->mosaic.tx != r->im.model->mosaic.tx ||
             im->model->out_channels != LM_MODEL_OUT_CHANNELS)
@@ -457,7 +525,8 @@ static int open_inputs(infer_run *r, lm_err *e)
         lm_cli_error(r->c, "out of memory (%d x %d frame)", r->seq.width, r->seq.height);
         return 1;
     }
-    return align_init(r, e);
+    rc = mf_init(r);
+    return rc ? rc : align_init(r, e);
 }
 
 /* The bucket0/ folder (or file, or pattern) beside the input's frames/: the input path with

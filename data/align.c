@@ -191,6 +191,43 @@ lm_status lm_align_stack(const float *prev, const float *cur, const float *next,
     return s;
 }
 
+lm_status lm_align_stack_frames(const lm_system *sys, const float *prev, const float *cur,
+                                const float *next, int height, int width, int aligned,
+                                const lm_flow_opts *o, const lm_align_opts *ao, float *out,
+                                lm_err *e)
+{
+    if (!sys || !cur || !out) return lm_err_set(e, LM_ERR_ARG, "align: NULL system, frame or output");
+    const int ty = sys->tile_rows, tx = sys->tile_cols, np = ty * tx;
+    if (ty <= 0 || tx <= 0 || height <= 0 || width <= 0 || height % ty || width % tx)
+        return lm_err_set(e, LM_ERR_SHAPE,
+                          "align: frame %dx%d is not a positive multiple of the %dx%d tile",
+                          height, width, ty, tx);
+    const int h = height / ty, w = width / tx;
+    const size_t n = (size_t)height * width;
+    lm_flow_opts dfo;
+    if (!o) lm_flow_default_opts(&dfo, LM_FLOW_MEDIUM);
+    if (!o) o = &dfo;
+    if (!aligned || h < lm_flow_min_size(o) || w < lm_flow_min_size(o)) {
+        const float *src[3] = {cur, prev ? prev : cur, next ? next : cur};
+        for (int q = 0; q < 3; q++) memcpy(out + q * n, src[q], sizeof(float) * n);
+        return LM_OK;
+    }
+    int ref;
+    float t[LM_SYSTEM_MAX_TILE];
+    float *pl = malloc(sizeof(float) * 6 * n);
+    if (!pl) return lm_err_set(e, LM_ERR_NOMEM, "align: out of memory");
+    lm_status s = lm_align_phase_times(sys, t, &ref, e);
+    const float *fr[3] = {prev, cur, next};
+    for (int f = 0; f < 3 && !s; f++)
+        if (fr[f]) s = lm_align_unshuffle(fr[f], height, width, ty, tx, pl + f * n, e);
+    if (!s) s = lm_align_stack(prev ? pl : NULL, pl + n, next ? pl + 2 * n : NULL, np, h, w, t,
+                               ref, o, ao, pl + 3 * n, e);
+    for (int q = 0; q < 3 && !s; q++)
+        s = lm_align_remosaic(pl + (3 + q) * n, h, w, ty, tx, out + q * n, e);
+    free(pl);
+    return s;
+}
+
 lm_status lm_align_unshuffle(const float *raw, int height, int width, int ty, int tx,
                              float *planes, lm_err *e)
 {

@@ -79,6 +79,19 @@ lm_status lm_align_stack(const float *prev, const float *cur, const float *next,
                          int w, const float *t, int ref, const lm_flow_opts *o,
                          const lm_align_opts *ao, float *out, lm_err *e);
 
+/* The multi-frame model input of raw frame cur (height x width, bucket 1) with its raw
+ * neighbours prev / next (NULL at a sequence's ends): out = 3 x height x width, the three
+ * planes of lm_align_stack re-mosaicked (frame i aligned, frame i-1 and frame i+1 moved onto
+ * it; a missing neighbour = frame i aligned). With aligned 0, or sub-images smaller than
+ * lm_flow_min_size(o) (the flow cannot run: a still sample is assumed), the frames as
+ * recorded: cur, prev (else cur), next (else cur). o NULL = medium preset, 1 thread. The one
+ * path of `infer` and `eval` for multi-frame models (the training loader crops the same planes
+ * from its windows). Errors: LM_ERR_SHAPE (not whole tiles), those of lm_align_stack. */
+lm_status lm_align_stack_frames(const lm_system *sys, const float *prev, const float *cur,
+                                const float *next, int height, int width, int aligned,
+                                const lm_flow_opts *o, const lm_align_opts *ao, float *out,
+                                lm_err *e);
+
 /* Raw frame (height x width, multiples of ty x tx) -> ty * tx planes (see above).
  * Errors: LM_ERR_SHAPE if the size is not a positive multiple of the tile. */
 lm_status lm_align_unshuffle(const float *raw, int height, int width, int ty, int tx,

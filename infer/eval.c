@@ -22,38 +22,18 @@ static int planes_of(const lm_infer_model *im)
 }
 
 /* The multi-frame input of frames fr[0..2] (i-1, i, i+1; each H x W) into out (3 x H x W):
- * aligned (lm_align_stack, re-mosaicked; fo NULL = the medium flow with nthreads) or, with
- * aligned 0 or sub-images below the flow's minimum size, frames i, i-1, i+1 as recorded. */
+ * lm_align_stack_frames (fo NULL = the medium flow with nthreads). */
 static lm_status mf_input(const lm_system *sys, float *const fr[3], int H, int W, int aligned,
                           const lm_flow_opts *fo, const lm_align_opts *ao, int nthreads,
                           float *out, lm_err *err)
 {
-    const int ty = sys->tile_rows, tx = sys->tile_cols, np = ty * tx, h = H / ty, w = W / tx;
-    const size_t n = (size_t)H * W;
     lm_flow_opts dfo;
     if (!fo) {
         lm_flow_default_opts(&dfo, LM_FLOW_MEDIUM);
         dfo.nthreads = nthreads > 0 ? nthreads : 1;
         fo = &dfo;
     }
-    int small = h < lm_flow_min_size(fo) || w < lm_flow_min_size(fo);
-    if (!aligned || small) {
-        const int order[3] = {1, 0, 2};
-        for (int q = 0; q < 3; q++) memcpy(out + q * n, fr[order[q]], sizeof(float) * n);
-        return LM_OK;
-    }
-    int ref;
-    float t[LM_SYSTEM_MAX_TILE];
-    float *pl = malloc(sizeof(float) * 6 * n);
-    if (!pl) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
-    lm_status st = lm_align_phase_times(sys, t, &ref, err);
-    for (int f = 0; f < 3 && !st; f++) st = lm_align_unshuffle(fr[f], H, W, ty, tx, pl + f * n, err);
-    if (!st) st = lm_align_stack(pl, pl + n, pl + 2 * n, np, h, w, t, ref, fo, ao, pl + 3 * n,
-                                 err);
-    for (int q = 0; q < 3 && !st; q++)
-        st = lm_align_remosaic(pl + (3 + q) * n, h, w, ty, tx, out + q * n, err);
-    free(pl);
-    return st;
+    return lm_align_stack_frames(sys, fr[0], fr[1], fr[2], H, W, aligned, fo, ao, out, err);
 }
 
 /* lm_eval_simulate with an explicit thread count and a mutable rng (advanced). */

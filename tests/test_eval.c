@@ -19,13 +19,21 @@
  * (noise 0 and 20 % against plain-loop PSNRs of independently simulated and reconstructed
  * frames), lm_eval_motion_run on a 48 x 64 cube (still scene = static reference, aligned =
  * unaligned, motion changes the score; the 24 x 32 cube keeps nothing in view at 400 px/s and
- * fails) and lm_eval_rainbow_run. */
+ * fails) and lm_eval_rainbow_run.
+ * Multi-frame models (rt-8-mf3): lm_eval_motion_run_noise's aligned and unaligned scores equal
+ * a reconstruction of lm_align_stack_frames's input (the path `infer` takes on a sequence) of
+ * the same three video frames and noise draws, scored by hand over the in-view region; the
+ * noise-free rows of a one-frame model equal lm_eval_motion_run's; the still rows of a
+ * multi-frame model run; a one-frame input to it fails with a shape error. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include "tests/check.h"
+#include "data/align.h"
 #include "data/forward.h"
+#include "data/spectra.h"
+#include "data/video.h"
 #include "data/rgbcam.h"
 #include "infer/eval.h"
 #include "infer/whole.h"
@@ -585,6 +593,105 @@ static void test_rgb_model(void)
     lm_model_free(im.model);
 }
 
+/* PSNR over the motion test's region (31 bands) by lm_metrics_compute on copies. */
+static double region_psnr(const float *pred, const float *truth, int H, int W,
+                          const lm_eval_motion *r)
+{
+    size_t n = (size_t)31 * r->height * r->width;
+    float *a = malloc(sizeof(float) * n), *b = malloc(sizeof(float) * n);
+    for (int k = 0; k < 31; k++)
+        for (int y = 0; y < r->height; y++) {
+            memcpy(a + ((size_t)k * r->height + y) * r->width,
+                   pred + ((size_t)k * H + r->y0 + y) * W + r->x0, sizeof(float) * r->width);
+            memcpy(b + ((size_t)k * r->height + y) * r->width,
+                   truth + ((size_t)k * H + r->y0 + y) * W + r->x0, sizeof(float) * r->width);
+        }
+    lm_metrics m;
+    lm_err e;
+    lm_err_clear(&e);
+    CHECK(lm_metrics_compute(a, b, 31, r->height, r->width, 0, 31, &m, &e) == LM_OK);
+    free(a), free(b);
+    return m.psnr;
+}
+
+static void test_multi_frame(void)
+{
+    if (!g_ok) return;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_infer_model im;
+    memset(&im, 0, sizeof im);
+    im.sys = g_sys;
+    im.model = make_model("rt-8-mf3", 5);
+    if (!im.model) return;
+    CHECK(im.model->in_channels == 3 && lm_model_frames(im.model) == 3);
+    lm_cube truth;
+    small_scene(&truth);
+    const int H = truth.height, W = truth.width;
+    const size_t n = (size_t)H * W;
+    lm_ctx c;
+    CHECK(lm_ctx_init(&c, 1) == 0);
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    const double speed = 200.0;
+    const float k = 0.05f;
+    lm_rng rng;
+    lm_rng_seed(&rng, 9);
+    lm_eval_motion mo;
+    CHECK_MSG(lm_eval_motion_run_noise(&c, &im, &truth, speed, k, &rng, &to, NULL, NULL, &mo,
+                                       &e) == LM_OK, "%s", e.msg);
+    /* by hand: the video's frames as eval simulates them, the documented noise draws */
+    lm_cube c41, gt;
+    CHECK(lm_cube_mirror41(&truth, &c41, &e) == LM_OK);
+    lm_video_opts vo;
+    memset(&vo, 0, sizeof vo);
+    vo.motion.vx = speed * LM_EVAL_MOTION_DIR_X, vo.motion.vy = speed * LM_EVAL_MOTION_DIR_Y;
+    vo.nthreads = 1;
+    float *fr = malloc(sizeof(float) * 3 * n), *in = malloc(sizeof(float) * 3 * n);
+    lm_noise_opts no;
+    memset(&no, 0, sizeof no);
+    no.gauss_k = k;
+    lm_rng r = lm_rng_split(&rng, (uint64_t)llround(k * 1e6));
+    for (int i = 0; i < 3; i++) {
+        CHECK_MSG(lm_video_frame(&g_sys, &c41, &vo, i, NULL, fr + i * n, NULL, i == 1 ? &gt : NULL,
+                                 &e) == LM_OK, "%s", e.msg);
+        CHECK(lm_forward_noise(fr + i * n, H, W, &no, &r, 1, &e) == LM_OK);
+    }
+    lm_flow_opts fo;
+    lm_flow_default_opts(&fo, LM_FLOW_MEDIUM);
+    double got[2];
+    for (int al = 0; al < 2; al++) {
+        CHECK_MSG(lm_align_stack_frames(&g_sys, fr, fr + n, fr + 2 * n, H, W, al, &fo, NULL, in,
+                                        &e) == LM_OK, "%s", e.msg);
+        lm_cube pred;
+        CHECK_MSG(lm_eval_reconstruct(&c, &im, in, H, W, &to, 0, &pred, &e) == LM_OK, "%s", e.msg);
+        got[al] = region_psnr(pred.data, lm_cube_band(&gt, 2), H, W, &mo);
+        lm_cube_free(&pred);
+    }
+    printf("  rt-8-mf3 (random) at %g px/s, %g %%: eval aligned %.4f / unaligned %.4f dB, by "
+           "hand %.4f / %.4f dB\n", speed, 100.0 * k, mo.aligned.psnr, mo.unaligned.psnr,
+           got[1], got[0]);
+    CHECK(mo.aligned.psnr == got[1] && mo.unaligned.psnr == got[0]);
+    CHECK(mo.aligned.psnr != mo.unaligned.psnr);
+    /* the still rows run (three still frames with their own noise) */
+    float kk[2] = {0.0f, 0.1f};
+    lm_metrics ms[2];
+    CHECK_MSG(lm_eval_scene(&c, &im, &truth, kk, 2, &to, &rng, ms, &e) == LM_OK, "%s", e.msg);
+    CHECK(isfinite(ms[0].psnr) && ms[1].psnr < ms[0].psnr);
+    /* a one-frame input: a shape error naming the three planes */
+    lm_ctx_reset(&c);
+    lm_tensor *one = lm_tensor_from(&c, 4, (int[]){1, 1, 24, 32}, fr);
+    CHECK(one && lm_model_forward(&c, im.model, one) == NULL);
+    CHECK(lm_ctx_status(&c) == LM_ERR_SHAPE);
+    CHECK_MSG(strstr(lm_ctx_message(&c), "frames i-1 and i+1") != NULL, "%s", lm_ctx_message(&c));
+    lm_ctx_clear_error(&c);
+    lm_ctx_reset(&c);
+    free(fr), free(in);
+    lm_cube_free(&c41), lm_cube_free(&gt), lm_cube_free(&truth);
+    lm_ctx_free(&c);
+    lm_model_free(im.model);
+}
+
 int main(void)
 {
     lm_err e;
@@ -602,5 +709,6 @@ int main(void)
     RUN(test_simulate_coded);
     RUN(test_reconstruct_linear);
     RUN(test_rgb_model);
+    RUN(test_multi_frame);
     return check_summary();
 }

@@ -302,6 +302,11 @@ static void test_gradients(void)
     CHECK_MSG(rm != NULL, "%s", e.msg);
     if (rm) gradcheck(rm, sig, 1);
     lm_model_free(rm);
+    /* an rt-8-mf3 residual on a trainable one-frame lmmse-3 (the base reads plane 0) */
+    rm = lm_model_create_residual("rt-8-mf3", "lmmse-3", NULL, 7, 1, 0.5f, &e);
+    CHECK_MSG(rm && rm->in_channels == 3 && lm_model_frames(rm) == 3, "%s", e.msg);
+    if (rm) gradcheck(rm, sig, 1);
+    lm_model_free(rm);
 }
 
 /* A residual starts as its base exactly (the net's output layer is zero); the base's parameters
@@ -335,6 +340,32 @@ static void test_residual_starts_at_base(void)
     lm_tensor *y1 = lm_model_forward(&c, rm, x), *y2 = lm_model_forward(&c, b, x);
     CHECK_MSG(y1 && y2, "%s", c.msg);
     if (y1 && y2) CHECK_ARRAY_CLOSE(y1->data, y2->data, lm_tensor_numel(y2), 0.0, 0.0);
+    lm_ctx_free(&c);
+    lm_model_free(rm);
+    lm_model_free(b);
+    /* a multi-frame net on a one-frame base starts at the base applied to plane 0 (frame i) */
+    rm = lm_model_create_residual("rt-8-mf3", "lmmse-5", NULL, 3, 0, 1.0f, &e);
+    b = lm_model_create("lmmse-5", NULL, 9, &e);
+    CHECK_MSG(rm && b, "%s", e.msg);
+    if (!rm || !b) return lm_model_free(rm), lm_model_free(b);
+    for (int i = 0; i < b->params.n; i++) {
+        char nm[LM_PARAM_NAME_MAX + 8];
+        snprintf(nm, sizeof nm, "base.%s", b->params.items[i]->name);
+        lm_param *dst = lm_params_find(&rm->params, nm);
+        if (dst) memcpy(dst->t.data, b->params.items[i]->t.data,
+                        sizeof(float) * lm_tensor_numel(&dst->t));
+    }
+    lm_ctx_init(&c, 2);
+    lm_rng_seed(&r, 5);
+    lm_tensor *x3 = lm_tensor_uniform(&c, 4, (int[]){2, 3, 12, 16}, &r, 0.0f, 1.0f);
+    lm_tensor *x1 = lm_tensor_zeros(&c, 4, (int[]){2, 1, 12, 16});
+    for (int k = 0; k < 2; k++) /* plane 0 of each item */
+        memcpy(x1->data + k * 192, x3->data + k * 3 * 192, sizeof(float) * 192);
+    rm->noise_sigma = b->noise_sigma = 0.02f;
+    lm_ctx_set_grad(&c, 0);
+    lm_tensor *z1 = lm_model_forward(&c, rm, x3), *z2 = lm_model_forward(&c, b, x1);
+    CHECK_MSG(z1 && z2, "%s", c.msg);
+    if (z1 && z2) CHECK_ARRAY_CLOSE(z1->data, z2->data, lm_tensor_numel(z2), 0.0, 0.0);
     lm_ctx_free(&c);
     lm_model_free(rm);
     lm_model_free(b);

@@ -39,6 +39,15 @@ static void test_parameter_counts(void)
         check_count(nm, one + 9L * w, one + 9L * w);
     }
     check_count("rt-8-b2", 2293, 2293); /* as lumosaic info prints it */
+    /* the -mf3 form reads the two neighbour frames' planes in body.0 */
+    for (int w = 8; w <= 16; w += 8) {
+        long one = (13L * w * 9 + w) + ((long)w * w * 9 + w) + ((12L + w) * 33 + 33);
+        char nm[16];
+        snprintf(nm, sizeof nm, "rt-%d-mf3", w);
+        check_count(nm, one + 18L * w, one + 18L * w);
+    }
+    check_count("rt-8-mf3", 2365, 2365);
+    check_count("rt-16-mf3", 5453, 5453);
 }
 
 static void test_paper_han_count(void)
@@ -111,6 +120,25 @@ static void forward_shape(const char *preset, int B, int H, int W)
         for (long i = 0; y && y2 && i < n; i++) diff += fabs(y->data[i] - y2->data[i]);
         CHECK_MSG(diff > 1e-3, "%s: bucket 0 does not reach the output (%g)", preset, diff);
     }
+    if (lm_model_frames(m) == 3) {
+        /* one frame to a multi-frame model: refused; each neighbour plane changes the output */
+        lm_ctx_clear_error(&c);
+        CHECK(m->in_channels == 3 && lm_model_buckets(m) == 1);
+        lm_tensor *one = lm_tensor_zeros(&c, 4, (int[]){B, 1, H, W});
+        CHECK(lm_model_forward(&c, m, one) == NULL && strstr(c.msg, "B x 3 x H x W"));
+        CHECK_CTX_FAILED(&c, LM_ERR_SHAPE);
+        for (int q = 1; q < 3; q++) {
+            lm_ctx_clear_error(&c);
+            lm_tensor *x3 = lm_tensor_uniform(&c, 4, (int[]){B, 3, H, W}, &r, 0, 1);
+            memcpy(x3->data, x->data, sizeof(float) * (size_t)B * 3 * H * W);
+            for (int b = 0; b < B; b++)
+                for (long i = 0; i < (long)H * W; i++) x3->data[((size_t)b * 3 + q) * H * W + i] *= 0.5f;
+            lm_tensor *y3 = lm_model_forward(&c, m, x3);
+            double diff = 0;
+            for (long i = 0; y && y3 && i < n; i++) diff += fabs(y->data[i] - y3->data[i]);
+            CHECK_MSG(diff > 1e-3, "%s: plane %d does not reach the output (%g)", preset, q, diff);
+        }
+    }
     lm_ctx_free(&c);
     lm_model_free(m);
 }
@@ -124,6 +152,8 @@ static void test_forward_shapes(void)
     forward_shape("rt-8", 2, 12, 16);
     forward_shape("rt-8-b2", 2, 12, 16);
     forward_shape("rt-16-b2", 1, 66, 64);
+    forward_shape("rt-8-mf3", 2, 12, 16);
+    forward_shape("rt-16-mf3", 1, 66, 64);
 }
 
 typedef struct gc_user { lm_model *m; } gc_user;
@@ -190,6 +220,7 @@ static void test_gradcheck_models(void)
     gradcheck_model("mcan-tiny", 6, 8);
     gradcheck_model("srnet-tiny", 12, 16);
     gradcheck_model("rt-8-b2", 6, 8);
+    gradcheck_model("rt-8-mf3", 6, 8);
 }
 
 /* A training step (forward, loss, backward) allocates nothing from the system after the
