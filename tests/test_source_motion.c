@@ -137,7 +137,10 @@ static void test_source(void)
  * out = the patch (ph x pw) of it. */
 static void simulate_mf_frame(lm_dataset *d, long i, int f, uint64_t seed, float *out)
 {
-    const int ph = 66, pw = 64, my = LM_TRAIN_MF_MARGIN_Y, mx = LM_TRAIN_MF_MARGIN_X;
+    const int ph = 66, pw = 64;
+    int my, mx;
+    lm_train_mf_margins(&g_sys, ph, pw, &my, &mx);
+    CHECK(my == LM_TRAIN_MF_MARGIN_Y && mx == LM_TRAIN_MF_MARGIN_X);
     const int wh = ph + 2 * my, ww = pw + 2 * mx;
     lm_err e = {0};
     lm_dataset_sample_info in;

@@ -287,7 +287,9 @@ static lm_status mf_scene_sample(motion_src *s, long i, const lm_dataset_sample_
                                  float *target, lm_err *err)
 {
     const lm_system *sys = s->sys;
-    const int ph = s->ph, pw = s->pw, my = LM_TRAIN_MF_MARGIN_Y, mx = LM_TRAIN_MF_MARGIN_X;
+    const int ph = s->ph, pw = s->pw;
+    int my, mx;
+    lm_train_mf_margins(sys, ph, pw, &my, &mx);
     const int wh = ph + 2 * my, ww = pw + 2 * mx;
     const lm_cube *sc = NULL;
     lm_status st = scene(s, info->scene, &sc, err);
@@ -371,6 +373,16 @@ static lm_status mf_batch(void *user, long index, int B, float *raw, float *targ
         st = mf_scene_sample(s, i, &info, speed, dir, rot, rj, tj, err);
     }
     return st;
+}
+
+void lm_train_mf_margins(const lm_system *sys, int ph, int pw, int *my, int *mx)
+{
+    lm_flow_opts o;
+    lm_flow_default_opts(&o, LM_FLOW_MEDIUM);
+    const int ty = sys->tile_rows, tx = sys->tile_cols, need = lm_flow_min_size(&o);
+    *my = LM_TRAIN_MF_MARGIN_Y, *mx = LM_TRAIN_MF_MARGIN_X;
+    while ((ph + 2 * *my) / ty < need) *my += ty; /* whole tiles: phases kept */
+    while ((pw + 2 * *mx) / tx < need) *mx += tx;
 }
 
 void lm_train_mf_noise_rng(uint64_t seed, long i, int f, lm_rng *out)

@@ -204,8 +204,8 @@ int lm_train_doe_pad(const char *doe_path, int ty, int tx, int *py, int *px, lm_
  * as the dataset's sensor options. Close with lm_train_source_motion_close. */
 /* frames 3 (the "-mf3" models): every sample is frames i-1, i, i+1 of one patch, B x 3 x ph x
  * pw: real-scene samples moving (the share `fraction`, motion drawn as above) or still, each
- * frame rendered in a window of LM_TRAIN_MF_MARGIN_Y / _X more rows / columns each side (the
- * flow needs sub-images of lm_flow_min_size; the border repeats outside the scene), its own
+ * frame rendered in a window of lm_train_mf_margins more rows / columns each side (the flow
+ * needs sub-images of lm_flow_min_size; the border repeats outside the scene), its own
  * noise (lm_train_mf_noise_rng), then aligned by lm_align_stack (data/align.h: the medium flow,
  * 1 thread, as inference aligns by default; no knowledge of the true motion) when `align`, and
  * cropped to the patch: plane 0 frame i aligned, planes 1, 2 frames i-1, i+1 moved onto it.
@@ -222,6 +222,11 @@ typedef struct lm_train_motion_opts {
 } lm_train_motion_opts;
 #define LM_TRAIN_MF_MARGIN_Y 15
 #define LM_TRAIN_MF_MARGIN_X 16
+/* The window margins of a multi-frame sample of a ph x pw patch: LM_TRAIN_MF_MARGIN_Y / _X
+ * rows / columns each side (whole tiles of the default system), raised by whole tiles until
+ * the window's sub-images reach the medium flow's minimum size (15 / 16 for 66 x 64 patches:
+ * a 96 x 96 window, 32 x 24 sub-images). */
+void lm_train_mf_margins(const lm_system *sys, int ph, int pw, int *my, int *mx);
 /* The noise generator of frame f (0, 1, 2 = i-1, i, i+1) of multi-frame sample i. */
 void lm_train_mf_noise_rng(uint64_t seed, long i, int f, lm_rng *out);
 lm_status lm_train_source_motion_open(lm_train_source *src, lm_dataset *d, const lm_system *sys,
