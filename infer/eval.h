@@ -41,7 +41,10 @@ lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err);
 /* The sensor frame a model takes, simulated from a prepared 31-band cube (lm_eval_prepare):
  * coded models (in_channels 1): the coded frame of im->sys (H x W, lm_forward_simulate31);
  * RGB models (in_channels 3): the RGB camera image (3 x H x W planar, data/rgbcam.h, bundled
- * Nikon D5100 under D65). noise: NULL = none; rng: the noise stream (copied, not advanced; NULL
+ * Nikon D5100 under D65); multi-frame models (LM_CAP_MULTI_FRAME): the cube as a still video
+ * of three frames, each with its own noise (drawn in frame order from rng), stacked by
+ * lm_align_stack_frames (data/align.h: the medium flow, the frames as recorded when the
+ * sub-images are below its minimum), 3 x H x W. noise: NULL = none; rng: the noise stream (copied, not advanced; NULL
  * only without noise). *frame is malloc'ed (NULL on error), *n its element count. OpenMP
  * default thread count. Errors: LM_ERR_SHAPE (not 31 bands), LM_ERR_ARG (other in_channels),
  * those of the forward / camera models, LM_ERR_NOMEM. */
