@@ -218,6 +218,9 @@ static const cfg WINO[] = {
     {2, 64, 22, 16, 64, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 1, "winograd 64->64"},
     {4, 16, 40, 44, 16, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 0, "winograd several chunks"},
     {2, 13, 12, 40, 8, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 1, "winograd 13->8 (rt-8's first conv)"},
+    /* a tile group spans 4 x 16 output columns with AVX-512 (4 x 8 without): full groups */
+    {2, 16, 10, 70, 16, 3, 3, {1, 1, 1, 1, 1, 1, 1}, 1, "winograd 70 wide (full + partial group)"},
+    {1, 8, 9, 130, 12, 3, 3, {1, 1, 0, 1, 1, 1, 1}, 1, "winograd 130 wide, pad (0,1)"},
 };
 #define NWINO ((int)(sizeof WINO / sizeof WINO[0]))
 
