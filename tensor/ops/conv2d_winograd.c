@@ -11,10 +11,13 @@
  *   input grad   dx += conv(dy, w') with w'[ci][co] = w[co][ci] rotated 180 degrees and
  *                padding 2 - p (the same forward code, accumulating)
  *   weight grad  dw += G^T [sum over tiles (A dY A^T) (.) (B^T d B)] G: per chunk the 36
- *                products dU_xi += Mdy_xi V_xi^T go into per-thread partials, added in
- *                thread order.
- * The transforms run on VL tiles at a time (one per vector lane: 16 with AVX-512, else 8). Every output element is
- * computed by one thread in a fixed order, so results depend only on the thread count.
+ *                products dU_xi += Mdy_xi V_xi^T go into the partial of the chunk's group
+ *                (up to 4 per thread), the partials added in group order.
+ * The transforms run on VL tiles at a time (one per vector lane: 16 with AVX-512, else 8).
+ * Chunks (and the weight gradient's groups of chunks) are handed out to threads as they come
+ * free, so a thread that shares its core with another process takes fewer; every output
+ * element is still computed by one thread in a fixed order, so results depend only on the
+ * thread count.
  * Accuracy: a few 1e-6 relative to the magnitude of the sums (tested against the reference).
  * What it is not: strided, dilated, grouped or non-3x3 convolution (conv2d_tiled.c). */
 #include "tensor/ops/gemm_internal.h"
@@ -401,22 +404,22 @@ static int winograd_run(lm_ctx *c, const wgrid *gi, const wgrid *go, const float
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
     float *buf = lm_ctx_alloc(c, sizeof(float) * per * (size_t)nt);
     if (!buf) return c->status;
+    /* chunks handed out as threads come free: a thread slowed by another process on its core
+     * takes fewer. Each chunk's outputs are computed whole by one thread, the same way
+     * whichever thread it is, so the result does not depend on the hand-out. */
 #pragma omp parallel num_threads(nt)
     {
-        int nthr = omp_get_num_threads();
-        for (int th = omp_get_thread_num(); th < nt; th += nthr) {
-            float *V = buf + per * (size_t)th, *M = V + 36 * (size_t)Cin * (size_t)tc;
-            float *st = M + 36 * (size_t)Cout * (size_t)tc;
-            long c0 = nchunks * th / nt, c1 = nchunks * (th + 1) / nt;
-            for (long ch = c0; ch < c1; ch++) {
-                long t0 = ch * tc;
-                int n = T - t0 < tc ? (int)(T - t0) : tc;
-                input_transform(gi, x, t0, n, V, tc, st);
-                for (int xi = 0; xi < 36; xi++)
-                    lm_sgemm_panel(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc, NULL, 0,
-                                   M + (long)xi * Cout * tc, tc);
-                output_transform(go, M, tc, t0, n, bias, accumulate, y);
-            }
+        float *V = buf + per * (size_t)omp_get_thread_num();
+        float *M = V + 36 * (size_t)Cin * (size_t)tc, *st = M + 36 * (size_t)Cout * (size_t)tc;
+#pragma omp for schedule(dynamic, 1)
+        for (long ch = 0; ch < nchunks; ch++) {
+            long t0 = ch * tc;
+            int n = T - t0 < tc ? (int)(T - t0) : tc;
+            input_transform(gi, x, t0, n, V, tc, st);
+            for (int xi = 0; xi < 36; xi++)
+                lm_sgemm_panel(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc, NULL, 0,
+                               M + (long)xi * Cout * tc, tc);
+            output_transform(go, M, tc, t0, n, bias, accumulate, y);
         }
     }
     lm_arena_rewind(&c->arena, mk);
@@ -489,21 +492,25 @@ int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
     int tc = chunk_tiles(Cin, Cout, T, nt);
     long nchunks = (T + tc - 1) / tc;
     if (nchunks < nt) nt = (int)nchunks;
-    size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + 36 * (size_t)nw +
-                 (size_t)Cin * 6 * (size_t)gi.wp;
+    /* the chunks fall into ng fixed groups (a function of the thread count and the shape), each
+     * summed by one thread in chunk order into its own partial; groups are handed out as
+     * threads come free (a thread slowed by another process takes fewer), and the partials are
+     * added in group order: the result depends on the thread count only */
+    long ng = nchunks < 4L * nt ? nchunks : 4L * nt;
+    size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + (size_t)Cin * 6 * (size_t)gi.wp;
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
-    float *buf = lm_ctx_alloc(c, sizeof(float) * per * (size_t)nt);
-    if (!buf) return c->status;
+    float *dUs = lm_ctx_alloc(c, sizeof(float) * (36 * (size_t)nw * (size_t)ng + per * (size_t)nt));
+    if (!dUs) return c->status;
+    float *scratch = dUs + 36 * (size_t)nw * (size_t)ng;
 #pragma omp parallel num_threads(nt)
     {
-        int nthr = omp_get_num_threads();
-        for (int th = omp_get_thread_num(); th < nt; th += nthr) {
-            float *dU = buf + per * (size_t)th, *V = dU + 36 * (size_t)nw;
-            float *Md = V + 36 * (size_t)Cin * (size_t)tc;
-            float *st = Md + 36 * (size_t)Cout * (size_t)tc;
+        float *V = scratch + per * (size_t)omp_get_thread_num();
+        float *Md = V + 36 * (size_t)Cin * (size_t)tc, *st = Md + 36 * (size_t)Cout * (size_t)tc;
+#pragma omp for schedule(dynamic, 1)
+        for (long gr = 0; gr < ng; gr++) {
+            float *dU = dUs + 36 * (size_t)nw * (size_t)gr;
             memset(dU, 0, sizeof(float) * 36 * (size_t)nw);
-            long c0 = nchunks * th / nt, c1 = nchunks * (th + 1) / nt;
-            for (long ch = c0; ch < c1; ch++) {
+            for (long ch = nchunks * gr / ng; ch < nchunks * (gr + 1) / ng; ch++) {
                 long t0 = ch * tc;
                 int n = T - t0 < tc ? (int)(T - t0) : tc;
                 input_transform(&gi, x, t0, n, V, tc, st);
@@ -513,15 +520,15 @@ int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
                                 V + (long)xi * Cin * tc, tc, 1.0f, dU + (long)xi * nw, Cin);
             }
         }
-#pragma omp barrier
-        /* partials added in thread order, then dw += G^T dU G; weights split over threads */
-        int me = omp_get_thread_num();
+        /* (the implicit barrier of the loop) partials added in group order, then dw += G^T dU
+         * G; weights split over threads */
+        int me = omp_get_thread_num(), nthr = omp_get_num_threads();
         long k0 = nw * me / nthr, k1 = nw * (me + 1) / nthr;
         for (long k = k0; k < k1; k++) {
             float u[36];
             for (int xi = 0; xi < 36; xi++) {
                 float s = 0.0f;
-                for (int th = 0; th < nt; th++) s += buf[per * (size_t)th + (size_t)xi * nw + k];
+                for (long gr = 0; gr < ng; gr++) s += dUs[36 * (size_t)nw * (size_t)gr + (size_t)xi * nw + k];
                 u[xi] = s;
             }
             weight_transform_adjoint(u, dw + k * 9, 3, 1);
