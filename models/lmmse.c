@@ -44,6 +44,9 @@ typedef struct lmmse_net {
     lm_tensor *rw;             /* D > 0: readout L x P x 33 x D */
     int K, P, D, C;            /* C: input planes (1, or 2 = both buckets) */
     int lo_y, hi_y, lo_x, hi_x; /* tile offsets the windows reach (lo <= 0 <= hi) */
+    float sig[LM_LMMSE_LEVELS]; /* the levels' noise sd: lm_lmmse_sigmas unless a measurement
+                                 * set others (lm_lmmse_set_sigmas) */
+    int custom_sig;             /* 1: sig is not lm_lmmse_sigmas (no checkpoint holds it) */
     float *scratch;            /* whole-frame host path: packed filters and padded frame */
     size_t scratch_cap;        /* floats */
 } lmmse_net;
@@ -51,15 +54,15 @@ typedef struct lmmse_net {
 static int floor_div(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 /* Level pair and weight for noise sd s: filter = (1 - t) level[i] + t level[i + 1]. */
-static void level_pair(float s, int *i, float *t)
+static void level_pair(const float *sig, float s, int *i, float *t)
 {
     const int L = LM_LMMSE_LEVELS;
-    if (!(s > 0.0f)) { *i = 0; *t = 0.0f; return; }
-    if (s >= lm_lmmse_sigmas[L - 1]) { *i = L - 2; *t = 1.0f; return; }
+    if (!(s > sig[0])) { *i = 0; *t = 0.0f; return; }
+    if (s >= sig[L - 1]) { *i = L - 2; *t = 1.0f; return; }
     int k = 0;
-    while (k + 2 < L && s >= lm_lmmse_sigmas[k + 1]) k++;
+    while (k + 2 < L && s >= sig[k + 1]) k++;
     *i = k;
-    *t = (s - lm_lmmse_sigmas[k]) / (lm_lmmse_sigmas[k + 1] - lm_lmmse_sigmas[k]);
+    *t = (s - sig[k]) / (sig[k + 1] - sig[k]);
 }
 
 /* Parameters of one level (or the blend of two) as views: w P x 33 x K x K, b P x 33; *w0 the
@@ -69,7 +72,7 @@ static void blend(lm_ctx *c, const lmmse_net *n, float s, lm_tensor **w, lm_tens
 {
     int i;
     float t;
-    level_pair(s, &i, &t);
+    level_pair(n->sig, s, &i, &t);
     int ws[4] = {n->P, LM_MODEL_OUT_CHANNELS, n->K, n->K}, bs[2] = {n->P, LM_MODEL_OUT_CHANNELS};
     *wz = NULL;
     if (n->C == 2) {
@@ -129,7 +132,7 @@ static lm_tensor *feature_branch(lm_ctx *c, const lm_model *m, const lmmse_net *
     hu = lm_reshape(c, lm_permute(c, lm_reshape(c, hu, 5, s5), pm), 4, s4); /* p D + d */
     int i;
     float t;
-    level_pair(s, &i, &t);
+    level_pair(n->sig, s, &i, &t);
     int rs[4] = {P * O, D, 1, 1};
     lm_tensor *rw = lm_reshape(c, lm_slice(c, n->rw, 0, i, 1), 4, rs);
     if (t > 0.0f) {
@@ -207,7 +210,7 @@ static void pack_filters(const lmmse_net *n, float s, int ch0, int nch, int lane
     const int O = LM_MODEL_OUT_CHANNELS, K = n->K, P = n->P, C = n->C;
     int li;
     float t;
-    level_pair(s, &li, &t);
+    level_pair(n->sig, s, &li, &t);
     memset(wt, 0, sizeof(float) * (size_t)P * packed_floats(C, K, lanes));
     for (int p = 0; p < P; p++)
         for (int c = 0; c < nch; c++) {
@@ -460,6 +463,7 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
     n->K = K;
     n->D = D;
     n->P = ty * tx;
+    memcpy(n->sig, lm_lmmse_sigmas, sizeof n->sig);
     n->C = m->in_channels == 2 ? 2 : 1;
     if (D > 0 && n->C == 2)
         return lm_err_set(err, LM_ERR_ARG, "lmmse: random features read one plane: no "
@@ -495,6 +499,34 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
 int lm_lmmse_window(const lm_model *m)
 {
     return m && m->forward == lmmse_forward ? ((const lmmse_net *)m->impl)->K : 0;
+}
+
+const float *lm_lmmse_levels(const lm_model *m)
+{
+    return lm_lmmse_window(m) ? ((const lmmse_net *)m->impl)->sig : lm_lmmse_sigmas;
+}
+
+int lm_lmmse_custom_levels(const lm_model *m)
+{
+    return lm_lmmse_window(m) ? ((const lmmse_net *)m->impl)->custom_sig : 0;
+}
+
+lm_status lm_lmmse_set_levels(lm_model *m, const float *sig, lm_err *err)
+{
+    if (!lm_lmmse_window(m))
+        return lm_err_set(err, LM_ERR_ARG, "lmmse: model %s is not an lmmse model",
+                          m ? m->preset : "(null)");
+    if (!sig || sig[0] != 0.0f)
+        return lm_err_set(err, LM_ERR_ARG, "lmmse: the first noise level must be 0");
+    for (int l = 1; l < LM_LMMSE_LEVELS; l++)
+        if (!(sig[l] > sig[l - 1]) || !isfinite(sig[l]))
+            return lm_err_set(err, LM_ERR_ARG, "lmmse: noise levels must be finite and strictly "
+                              "increasing (level %d: %g after %g)", l, (double)sig[l],
+                              (double)sig[l - 1]);
+    lmmse_net *n = m->impl;
+    memcpy(n->sig, sig, sizeof n->sig);
+    n->custom_sig = memcmp(sig, lm_lmmse_sigmas, sizeof n->sig) != 0;
+    return LM_OK;
 }
 
 int lm_lmmse_features(const lm_model *m)

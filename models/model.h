@@ -148,6 +148,14 @@ extern const float lm_lmmse_sigmas[LM_LMMSE_LEVELS];
 lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err);
 /* K of an lmmse model, 0 for any other model. */
 int lm_lmmse_window(const lm_model *m);
+/* The noise sd of each level of an lmmse model (lm_lmmse_sigmas for any other model). */
+const float *lm_lmmse_levels(const lm_model *m);
+/* For measurements only (bench_lmmse_levels: a filter fitted for exactly the noise a frame
+ * has): replace the levels' sd by sig (sig[0] = 0, strictly increasing, finite) before a fit.
+ * Checkpoints hold the default levels only: saving a model with other levels fails. */
+lm_status lm_lmmse_set_levels(lm_model *m, const float *sig, lm_err *err);
+/* 1 when lm_lmmse_set_levels gave m levels other than lm_lmmse_sigmas. */
+int lm_lmmse_custom_levels(const lm_model *m);
 /* D > 0 ("lmmse-rf"): also D random ReLU features of the window (a K x K conv 1 -> D, ReLU),
  * read out per phase and level (readout.weight L x P x 33 x D): a nonlinear model whose readout
  * is still fitted in closed form (random-features ridge regression). 0 for plain lmmse. */

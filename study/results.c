@@ -185,9 +185,15 @@ static void md_detail_table(FILE *f, const lm_study_cfg *cfg, const json_t *runs
                " final loss | validation PSNR |\n|---|---:|---:|---:|---:|---:|\n");
     for (size_t i = 0; i < json_array_size(runs); i++) {
         const json_t *r = json_array_get(runs, i), *t = json_object_get(r, "train");
-        fprintf(f, "| %s | %.0f | %.1f | %.5f | %.5f | ", str(r, "preset"),
-                num(t, "iterations"), num(t, "seconds"), num(t, "first_loss"),
-                num(t, "final_loss"));
+        fprintf(f, "| %s | ", str(r, "preset")); /* n/a: not recorded (closed form: no loss) */
+        fmt_or_na(f, 0, num(t, "iterations"));
+        fprintf(f, " | ");
+        fmt_or_na(f, 1, num(t, "seconds"));
+        fprintf(f, " | ");
+        fmt_or_na(f, 5, num(t, "first_loss"));
+        fprintf(f, " | ");
+        fmt_or_na(f, 5, num(t, "final_loss"));
+        fprintf(f, " | ");
         fmt_or_na(f, 3, num(json_object_get(t, "val"), "psnr")); /* null: no val split */
         fprintf(f, " |\n");
     }

@@ -415,6 +415,61 @@ static int schedule_done(const char *rundir)
     return total > 0 && done >= total;
 }
 
+/* The "train" record of a run trained before (by a --jobs worker, or an earlier invocation),
+ * from its folder: iterations, first and final loss and the last validation metrics from
+ * log.csv, the training seconds from the checkpoint; closed form when fit.json is there. NULL
+ * when the log cannot be read (the table then shows n/a). */
+static json_t *train_record_from_run(const char *rundir)
+{
+    char path[PATH_MAX_LEN + 32];
+    snprintf(path, sizeof path, "%s/log.csv", rundir);
+    FILE *f = fopen(path, "r");
+    if (!f) return NULL;
+    char line[512];
+    long it = -1;
+    double first = NAN, last = NAN;
+    lm_metrics val = {NAN, NAN, NAN, NAN, 0};
+    int have_val = 0;
+    if (!fgets(line, sizeof line, f)) line[0] = 0; /* header */
+    while (fgets(line, sizeof line, f)) {
+        char *fld[7] = {0}, *p = line;
+        int n = 0;
+        while (n < 7) { /* empty fields stay empty: split on every comma */
+            fld[n++] = p;
+            char *c = strchr(p, ',');
+            if (!c) break;
+            *c = 0;
+            p = c + 1;
+        }
+        if (n < 7) continue;
+        char *end;
+        long i = strtol(fld[0], &end, 10);
+        if (end == fld[0]) continue;
+        it = i;
+        double l = strtod(fld[1], &end);
+        if (end != fld[1] && isfinite(l)) {
+            if (first != first) first = l;
+            last = l;
+        }
+        double v = strtod(fld[3], &end);
+        if (end != fld[3] && isfinite(v)) {
+            val.psnr = v, have_val = 1;
+            val.ssim = strtod(fld[4], NULL), val.mae = strtod(fld[5], NULL);
+            val.sam = strtod(fld[6], NULL);
+        }
+    }
+    fclose(f);
+    if (it < 0) return NULL;
+    snprintf(path, sizeof path, "%s/fit.json", rundir);
+    int closed = access(path, F_OK) == 0;
+    json_t *t = json_pack("{s:I, s:f, s:b, s:o, s:o, s:b, s:b}", "iterations", (json_int_t)it,
+                          "seconds", closed ? 0.0 : lm_train_checkpoint_seconds(rundir),
+                          "resumed", 1, "first_loss", jnum(first), "final_loss", jnum(last),
+                          "closed_form", closed, "from_log", 1);
+    json_object_set_new(t, "val", have_val ? metrics_json(&val, -1) : json_null());
+    return t;
+}
+
 /* Train (or continue) one run; stop_s > 0 stops it at that much training time (the early-drop
  * phase). A closed-form fit, or a run whose checkpoint is past stop_s, is not trained again. */
 static lm_status train_preset(const lm_study_cfg *cfg, const char *dir, const run_spec *rs,
@@ -448,6 +503,8 @@ static lm_status train_preset(const lm_study_cfg *cfg, const char *dir, const ru
                                        schedule_done(rundir))))) {
         fprintf(o->log, "study: %s: trained before (%.1f min), not trained again\n", preset,
                 run_minutes(rundir));
+        json_t *t = train_record_from_run(rundir);
+        if (t) json_object_set_new(rec, "train", t);
         return LM_OK;
     }
     lm_train_opts to = {.resume = resume ? rundir : NULL, .progress = o->progress,

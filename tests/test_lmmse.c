@@ -10,9 +10,14 @@
 #include "tests/check.h"
 #include "tests/model_fixture.h"
 #include "train/fit_lmmse.h"
+#include "train/train.h"
 #include "data/mosaic.h"
 #include "infer/whole.h"
+#include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
 
 #define O LM_MODEL_OUT_CHANNELS
 
@@ -68,6 +73,8 @@ static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y
 }
 
 /* grad 1: the tile-unit conv gradients flow through; 0: the direct no-gradient path */
+static const float *g_levels; /* non-NULL: the levels check_forward_mode gives its model */
+
 static void check_forward_mode(const char *preset, int H, int W, float sigma, int l, double t,
                                int grad)
 {
@@ -77,6 +84,7 @@ static void check_forward_mode(const char *preset, int H, int W, float sigma, in
     lm_model *m = lm_model_create(preset, &mo, 3, &e);
     CHECK_MSG(m != NULL, "%s", e.msg);
     if (!m) return;
+    if (g_levels) CHECK_MSG(lm_lmmse_set_levels(m, g_levels, &e) == LM_OK, "%s", e.msg);
     lm_ctx c;
     lm_ctx_init(&c, 2);
     lm_rng r;
@@ -461,6 +469,49 @@ static void test_fit_is_least_squares(void)
     fit_least_squares("lmmse-5-b2");  /* both buckets: two windows per pixel */
 }
 
+/* Levels other than the bundled ones (bench_lmmse_levels' exact-level filters): checked,
+ * interpolated between the model's own levels, and refused by checkpoints. */
+static void test_custom_levels(void)
+{
+    float lv[LM_LMMSE_LEVELS];
+    for (int l = 0; l < LM_LMMSE_LEVELS; l++) lv[l] = 0.003f * (float)(l * l);
+    lm_mosaic mo;
+    test_mosaic(&mo);
+    lm_err e = {0};
+    lm_model *m = lm_model_create("lmmse-3", &mo, 3, &e);
+    CHECK(m && !lm_lmmse_custom_levels(m) && lm_lmmse_levels(m)[5] == lm_lmmse_sigmas[5]);
+    float bad[LM_LMMSE_LEVELS];
+    memcpy(bad, lv, sizeof bad);
+    bad[0] = 0.001f;
+    CHECK(lm_lmmse_set_levels(m, bad, &e) == LM_ERR_ARG && strstr(e.msg, "first"));
+    memcpy(bad, lv, sizeof bad);
+    bad[7] = bad[6];
+    e = (lm_err){0};
+    CHECK(lm_lmmse_set_levels(m, bad, &e) == LM_ERR_ARG && strstr(e.msg, "increasing"));
+    bad[7] = NAN;
+    CHECK(lm_lmmse_set_levels(m, bad, &e) == LM_ERR_ARG);
+    e = (lm_err){0};
+    CHECK(!lm_lmmse_custom_levels(m));
+    CHECK(lm_lmmse_set_levels(m, lv, &e) == LM_OK && lm_lmmse_custom_levels(m) &&
+          lm_lmmse_levels(m)[5] == lv[5]);
+    lm_train_cfg cfg;
+    lm_train_cfg_default(&cfg);
+    char dir[] = "/tmp/lm_test_lmmse_XXXXXX";
+    CHECK(mkdtemp(dir) != NULL);
+    CHECK(lm_train_save_checkpoint(dir, m, NULL, 0, 0, NULL, &cfg, &e) == LM_ERR_ARG &&
+          strstr(e.msg, "noise levels"));
+    char path[64];
+    snprintf(path, sizeof path, "%s/model.safetensors", dir);
+    CHECK(access(path, F_OK) != 0); /* nothing written */
+    rmdir(dir);
+    CHECK(lm_lmmse_set_levels(m, lm_lmmse_sigmas, &e) == LM_OK && !lm_lmmse_custom_levels(m));
+    lm_model_free(m);
+    g_levels = lv; /* the forward blends the model's own levels: halfway between 4 and 5 */
+    check_forward("lmmse-3", 9, 12, 0.5f * (lv[4] + lv[5]), 4, 0.5);
+    check_forward("lmmse-3", 9, 12, lv[6], 6, 0.0);
+    g_levels = NULL;
+}
+
 int main(void)
 {
     RUN(test_forward_matches_direct_loop);
@@ -470,5 +521,6 @@ int main(void)
     RUN(test_gradients);
     RUN(test_residual_starts_at_base);
     RUN(test_fit_is_least_squares);
+    RUN(test_custom_levels);
     return check_summary();
 }

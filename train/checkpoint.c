@@ -43,6 +43,10 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
 {
     char path[LM_TRAIN_PATH_LEN + 64], it[32], nb[32], step[32], seed[32], thr[16], hash[32];
     char secs[32], ranks[16];
+    if (lm_lmmse_custom_levels(m) || (m->base && lm_lmmse_custom_levels(m->base)))
+        return lm_err_set(err, LM_ERR_ARG, "checkpoint: model %s has noise levels other than "
+                          "lm_lmmse_sigmas (a measurement's): checkpoints hold the default "
+                          "levels only", m->preset);
     snprintf(ranks, sizeof ranks, "%d", opts && opts->data_parallel ? lm_dist_size() : 1);
     snprintf(secs, sizeof secs, "%.3f", opts ? opts->elapsed : 0.0);
     snprintf(it, sizeof it, "%ld", iteration);

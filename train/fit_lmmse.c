@@ -271,9 +271,10 @@ static lm_status fit_levels(fitter *f, lm_model *m, int have_val, int level, dou
     long nval = 0, nr = 0, ns = 0;
     for (int p = 0; p < f->P; p++) nval += f->va[p].n, nr += f->tr[p].n, ns += f->ts[p].n;
     const double natural = nr + ns > 0 ? (double)ns / (double)(nr + ns) : 0;
+    const float *sig = lm_lmmse_levels(m);
     for (int l = 0; l < LM_LMMSE_LEVELS && !st; l++) {
         if (level >= 0 && l != level) continue;
-        const double s = level >= 0 ? 0.0 : lm_lmmse_sigmas[l];
+        const double s = level >= 0 ? 0.0 : sig[l];
         double lam = RIDGE_DEFAULT, w = f->synth >= 0 ? f->synth : natural, best_sse = INFINITY;
         /* coordinate descent: ridge at the natural share, share at that ridge, ridge again */
         for (int pass = 0; have_val && pass < 3; pass++) {
@@ -390,18 +391,19 @@ static lm_status fit_features(fitter *f, lm_model *m, lm_dataset *d, long patche
     double *coef = malloc(sizeof(double) * per * N_RF_LEVELS);
     lm_status st = fbuf && coef ? LM_OK : lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: no memory");
     int nv = lm_dataset_eval_count(d, LM_SPLIT_VAL);
+    const float *sig = lm_lmmse_levels(m);
     for (int q = 0; q < N_RF_LEVELS && !st; q++) {
         const int l = rf_levels[q];
         stats_clear(f);
-        st = accumulate_all(f, m, &c, d, patches, batch, lm_lmmse_sigmas[l], 0x5eed0000u + l,
+        st = accumulate_all(f, m, &c, d, patches, batch, sig[l], 0x5eed0000u + l,
                             raw, tgt, fbuf, err);
         if (!st) st = fit_levels(f, m, nv > 0, l, coef + per * q, rep, err);
     }
     double *w = st ? NULL : malloc(sizeof(double) * f->F1 * O);
     for (int q = 0; w && q + 1 < N_RF_LEVELS && !st; q++)
         for (int l = rf_levels[q] + 1; l < rf_levels[q + 1] && !st; l++) {
-            double s0 = lm_lmmse_sigmas[rf_levels[q]], s1 = lm_lmmse_sigmas[rf_levels[q + 1]];
-            double t = (lm_lmmse_sigmas[l] - s0) / (s1 - s0);
+            double s0 = sig[rf_levels[q]], s1 = sig[rf_levels[q + 1]];
+            double t = (sig[l] - s0) / (s1 - s0);
             rep->ridge[l] = NAN, rep->val_psnr[l] = NAN, rep->synth_weight[l] = NAN;
             for (int p = 0; p < f->P && !st; p++) {
                 const double *a = coef + per * q + (size_t)p * f->F1 * O, *b = a + per;

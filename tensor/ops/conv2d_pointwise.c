@@ -2,9 +2,9 @@
  * (SRNet's and MST++'s projections, the heads of the real-time models): per image, y = bias
  * + W x is a product of the Cout x Cin weights with the Cin x H*W image read in place, done
  * by lm_sgemm_panel on column blocks (weights packed once per call). Work items (image,
- * column block) are split statically over the threads; each output element is one sum in a
- * fixed order (bias, then input channels ascending), so results do not depend on the thread
- * count. The input gradient is the same product with the transposed weights, added into dx.
+ * column block) are handed to threads as they come free (a thread slowed by another process
+ * on its core takes fewer); each output element is one sum in a fixed order (bias, then input
+ * channels ascending) by whichever thread, so results do not depend on the thread count. The input gradient is the same product with the transposed weights, added into dx.
  * What it is not: the weight gradient (the tiled path's pointwise GEMM does it: its
  * reduction runs over the pixels, a shape OpenBLAS handles well). */
 #include "tensor/ops/gemm_internal.h"
@@ -20,23 +20,19 @@ int lm_conv2d_pointwise_applies(const lm_conv_geom *g)
 }
 
 /* Per image b and column block: out_b (M x hw) = bias + Ap in_b or += Ap in_b, with in_b
- * (K x hw) read in place; work items split statically over the threads. */
+ * (K x hw) read in place; work items handed out dynamically. */
 static void run_blocks(lm_ctx *c, int B, long hw, int M, int K, const float *Ap,
                        const float *in, const float *bias, int accumulate, float *out)
 {
     long nblk = (hw + NB - 1) / NB, items = B * nblk;
     int nt = lm_nthreads(c);
     if (items < nt) nt = (int)items;
-#pragma omp parallel num_threads(nt)
-    {
-        int nthr = omp_get_num_threads();
-        for (int t = omp_get_thread_num(); t < nt; t += nthr)
-            for (long it = items * t / nt; it < items * (t + 1) / nt; it++) {
-                long b = it / nblk, j0 = it % nblk * NB;
-                int n = hw - j0 < NB ? (int)(hw - j0) : NB;
-                lm_sgemm_panel(M, n, K, Ap, in + b * K * hw + j0, hw, bias, accumulate,
-                               out + b * M * hw + j0, hw);
-            }
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
+    for (long it = 0; it < items; it++) {
+        long b = it / nblk, j0 = it % nblk * NB;
+        int n = hw - j0 < NB ? (int)(hw - j0) : NB;
+        lm_sgemm_panel(M, n, K, Ap, in + b * K * hw + j0, hw, bias, accumulate,
+                       out + b * M * hw + j0, hw);
     }
 }
 

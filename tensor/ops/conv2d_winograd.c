@@ -11,23 +11,54 @@
  *   input grad   dx += conv(dy, w') with w'[ci][co] = w[co][ci] rotated 180 degrees and
  *                padding 2 - p (the same forward code, accumulating)
  *   weight grad  dw += G^T [sum over tiles (A dY A^T) (.) (B^T d B)] G: per chunk the 36
- *                products dU_xi += Mdy_xi V_xi^T go into per-thread partials, added in
- *                thread order.
- * The transforms run on 8 tiles at a time (one per vector lane). Every output element is
- * computed by one thread in a fixed order, so results depend only on the thread count.
+ *                products dU_xi += Mdy_xi V_xi^T go into the partial of the chunk's group
+ *                (up to 4 per thread), the partials added in group order.
+ * The transforms run on VL tiles at a time (one per vector lane: 16 with AVX-512, else 8).
+ * Chunks (and the weight gradient's groups of chunks) are handed out to threads as they come
+ * free, so a thread that shares its core with another process takes fewer; every output
+ * element is still computed by one thread in a fixed order, so results depend only on the
+ * thread count.
  * Accuracy: a few 1e-6 relative to the magnitude of the sums (tested against the reference).
  * What it is not: strided, dilated, grouped or non-3x3 convolution (conv2d_tiled.c). */
 #include "tensor/ops/gemm_internal.h"
 #include "tensor/ops/simd.h"
 #include <omp.h>
+#include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
-#define VL 8
+/* Lanes: one tile per lane, as wide as the machine's vectors (16 with AVX-512, else 8). */
+#define VL LM_VLN
+typedef lm_vfn wv;
+#if LM_VLN == 16
+typedef int wvi __attribute__((vector_size(16 * sizeof(int))));
+#else
+typedef int wvi __attribute__((vector_size(8 * sizeof(int))));
+#endif
+#if defined(__clang__)
+#define WSHUF(a, b, ...) __builtin_shufflevector(a, b, __VA_ARGS__)
+#else
+#define WSHUF(a, b, ...) __builtin_shuffle(a, b, (wvi){__VA_ARGS__})
+#endif
+
+static inline wv wsplat(float x)
+{
+    wv v;
+    for (int i = 0; i < VL; i++) v[i] = x;
+    return v;
+}
+
+static inline void wstore(float *p, wv v) { memcpy(p, &v, sizeof v); }
 
 /* Tiles per chunk: the transformed input and output of a chunk take 36 x (Cin + Cout) x TC
- * floats. Measured (build/bench_conv, 1 thread, Zen 3 with 512 KiB L2 + 32 MiB L3): 2.5 MB
- * chunks beat 0.3-1.3 MB ones (wider GEMMs amortise their packing) and 10 MB ones (L3). */
+ * floats (chunk_bytes). Measured with build/bench_conv / bench_train at 1 thread: on Zen 3
+ * (512 KiB L2 + 32 MiB L3) 2.5 MB chunks beat 0.3-1.3 MB ones (wider GEMMs amortise their
+ * packing; the chunk lives in L3 either way) and 10 MB ones; on a Xeon with 2 MiB of L2 per core,
+ * chunks of half the L2 (1 MB, held in L2 with the packed weights) beat 2.5 MB ones by 8-20 %
+ * per training step (han-tiny, mcan). So: half the L2 when the L2 holds at least 1 MiB, else
+ * 2.5 MB. LM_WINOGRAD_CHUNK_KB overrides it (for tuning on another machine). */
 #define CHUNK_BYTES (2560 * 1024)
+#define CHUNK_L2_MIN (1024 * 1024)
 #define TC_MIN 32
 #define TC_MAX 1024
 
@@ -88,7 +119,7 @@ static void weight_transform_adjoint(const float dU[36], float *dg, int si, int 
 /* A^T m along one axis: 6 values in, 4 out. */
 #define AT4(o, m)                                                                               \
     do {                                                                                        \
-        lm_vf8 s12 = m[1] + m[2], d12 = m[1] - m[2], s34 = m[3] + m[4], d34 = m[3] - m[4];          \
+        wv s12 = m[1] + m[2], d12 = m[1] - m[2], s34 = m[3] + m[4], d34 = m[3] - m[4];          \
         o[0] = m[0] + s12 + s34;                                                                \
         o[1] = d12 + 2 * d34;                                                                   \
         o[2] = s12 + 4 * s34;                                                                   \
@@ -107,11 +138,11 @@ static void weight_transform_adjoint(const float dU[36], float *dg, int si, int 
     } while (0)
 
 /* Geometry of the tile grid of one convolution. Tiles are numbered row by row, each row
- * padded to a multiple of 8 tiles (txp), so that a group of 8 tiles (one per vector lane)
+ * padded to a multiple of VL tiles (txp), so that a group of VL tiles (one per vector lane)
  * always lies in one tile row; tiles past the output's right edge are computed and dropped
- * (they read zeros). Within a group, lane l holds tile LANE_TILE(l) = 0,2,4,6,1,3,5,7: the
- * order an in-register 4 x 4 transpose per 128-bit half produces; every transform and the
- * GEMM columns use the same order. */
+ * (they read zeros). Within a group, lane l holds tile LANE_TILE(l) (8 lanes: 0,2,4,6,1,3,5,7;
+ * 16: 0,4,8,12,1,5,...): the order an in-register 4 x 4 transpose per 128-bit quarter
+ * produces; every transform and the GEMM columns use the same order. */
 typedef struct wgrid {
     int C, H, W;        /* input channels and size (the one the patches are read from) */
     int Ho, Wo, ph, pw; /* output size and padding */
@@ -120,7 +151,7 @@ typedef struct wgrid {
     long T;             /* tiles in all (B * ty * txp) */
 } wgrid;
 
-#define LANE_TILE(l) ((l) < 4 ? 2 * (l) : 2 * ((l) - 4) + 1)
+#define LANE_TILE(l) ((VL / 4) * ((l) % 4) + (l) / 4)
 
 static wgrid make_grid(int C, int H, int W, int Ho, int Wo, int ph, int pw, int B)
 {
@@ -131,7 +162,7 @@ static wgrid make_grid(int C, int H, int W, int Ho, int Wo, int ph, int pw, int 
     return r;
 }
 
-/* Image, tile row and first tile column of the group of 8 tiles starting at tile t. */
+/* Image, tile row and first tile column of the group of VL tiles starting at tile t. */
 static inline void group_of(const wgrid *g, long t, int *b, int *ty, int *tx0)
 {
     long row = t / g->txp;
@@ -140,18 +171,25 @@ static inline void group_of(const wgrid *g, long t, int *b, int *ty, int *tx0)
     *ty = (int)(row % g->ty);
 }
 
-/* 4 x 4 transpose inside each 128-bit half of (a, b, c, d): r[q] half h = element q of the
- * four 4-float groups a, b, c, d of half h. Its own inverse. */
-static inline void transpose4x2(lm_vf8 a, lm_vf8 b, lm_vf8 c, lm_vf8 d, lm_vf8 r[4])
+/* 4 x 4 transpose inside each 128-bit quarter of (a, b, c, d): r[q] quarter h = element q of
+ * the four 4-float groups a, b, c, d of quarter h (in-lane permutes only). Its own inverse. */
+static inline void transpose4q(wv a, wv b, wv c, wv d, wv r[4])
 {
+#if LM_VLN == 16
+#define LO 0, 16, 1, 17, 4, 20, 5, 21, 8, 24, 9, 25, 12, 28, 13, 29
+#define HI 2, 18, 3, 19, 6, 22, 7, 23, 10, 26, 11, 27, 14, 30, 15, 31
+#define ML 0, 1, 16, 17, 4, 5, 20, 21, 8, 9, 24, 25, 12, 13, 28, 29
+#define MH 2, 3, 18, 19, 6, 7, 22, 23, 10, 11, 26, 27, 14, 15, 30, 31
+#else
 #define LO 0, 8, 1, 9, 4, 12, 5, 13
 #define HI 2, 10, 3, 11, 6, 14, 7, 15
 #define ML 0, 1, 8, 9, 4, 5, 12, 13
 #define MH 2, 3, 10, 11, 6, 7, 14, 15
-    lm_vf8 t0 = LM_SHUFFLE8(a, b, LO), t1 = LM_SHUFFLE8(a, b, HI);
-    lm_vf8 t2 = LM_SHUFFLE8(c, d, LO), t3 = LM_SHUFFLE8(c, d, HI);
-    r[0] = LM_SHUFFLE8(t0, t2, ML), r[1] = LM_SHUFFLE8(t0, t2, MH);
-    r[2] = LM_SHUFFLE8(t1, t3, ML), r[3] = LM_SHUFFLE8(t1, t3, MH);
+#endif
+    wv t0 = WSHUF(a, b, LO), t1 = WSHUF(a, b, HI);
+    wv t2 = WSHUF(c, d, LO), t3 = WSHUF(c, d, HI);
+    r[0] = WSHUF(t0, t2, ML), r[1] = WSHUF(t0, t2, MH);
+    r[2] = WSHUF(t1, t3, ML), r[3] = WSHUF(t1, t3, MH);
 #undef LO
 #undef HI
 #undef ML
@@ -193,12 +231,14 @@ static void input_transform(const wgrid *g, const float *x, long t0, int n, floa
         if (b != sb || ty != sty) stage_rows(g, x, b, ty, st), sb = b, sty = ty;
         for (int c = 0; c < g->C; c++) {
             const float *p = st + (long)c * 6 * g->wp + 4 * tx0;
-            lm_vf8 d[6][6], o[6], t[6][6], col[6];
+            wv d[6][6], o[6], t[6][6], col[6];
             #pragma GCC unroll 6
             for (int r = 0; r < 6; r++, p += g->wp) {
-                lm_vf8 q4[4];
-                transpose4x2(lm_load8(p), lm_load8(p + 8), lm_load8(p + 16), lm_load8(p + 24), d[r]);
-                transpose4x2(lm_load8(p + 4), lm_load8(p + 12), lm_load8(p + 20), lm_load8(p + 28), q4);
+                wv q4[4];
+                transpose4q(lm_loadn(p), lm_loadn(p + VL), lm_loadn(p + 2 * VL),
+                            lm_loadn(p + 3 * VL), d[r]);
+                transpose4q(lm_loadn(p + 4), lm_loadn(p + 4 + VL), lm_loadn(p + 4 + 2 * VL),
+                            lm_loadn(p + 4 + 3 * VL), q4);
                 d[r][4] = q4[0], d[r][5] = q4[1];
             }
             #pragma GCC unroll 6
@@ -214,7 +254,7 @@ static void input_transform(const wgrid *g, const float *x, long t0, int n, floa
             for (int r = 0; r < 6; r++) { /* rows: V[r][.] = t[r][.] B */
                 BT6(o, t[r]);
                 #pragma GCC unroll 6
-                for (int q = 0; q < 6; q++) lm_store8(dst + (r * 6 + q) * xis, o[q]);
+                for (int q = 0; q < 6; q++) wstore(dst + (r * 6 + q) * xis, o[q]);
             }
         }
     }
@@ -234,11 +274,11 @@ static void output_transform(const wgrid *g, const float *M, int ldm, long t0, i
         int full = ox + 4 * VL <= g->Wo;
         for (int c = 0; c < g->C; c++) {
             const float *src = M + (long)c * ldm + j0;
-            lm_vf8 t[6][4], m[6], o[4], out[4][4];
+            wv t[6][4], m[6], o[4], out[4][4];
             #pragma GCC unroll 6
             for (int r = 0; r < 6; r++) { /* rows: t[r][.] = M[r][.] A */
                 #pragma GCC unroll 6
-                for (int q = 0; q < 6; q++) m[q] = lm_load8(src + (r * 6 + q) * xis);
+                for (int q = 0; q < 6; q++) m[q] = lm_loadn(src + (r * 6 + q) * xis);
                 AT4(o, m);
                 #pragma GCC unroll 6
                 for (int q = 0; q < 4; q++) t[r][q] = o[q];
@@ -252,23 +292,23 @@ static void output_transform(const wgrid *g, const float *M, int ldm, long t0, i
                 for (int r = 0; r < 4; r++) out[r][q] = o[r];
             }
             float bv = bias ? bias[c] : 0.0f;
-            lm_vf8 bvv = LM_SPLAT8(bv);
+            wv bvv = wsplat(bv);
             float *yc = y + ((long)b * g->C + c) * cs + (long)oy * g->Wo + ox;
             #pragma GCC unroll 6
             for (int r = 0; r < rh; r++) {
                 float *yr = yc + (long)r * g->Wo;
-                lm_vf8 row[4]; /* row[k]: output columns 8k .. 8k+7 of the group, in order */
-                transpose4x2(out[r][0], out[r][1], out[r][2], out[r][3], row);
+                wv row[4]; /* row[k]: output columns VL k .. VL k + VL - 1 of the group, in order */
+                transpose4q(out[r][0], out[r][1], out[r][2], out[r][3], row);
                 if (full) {
                     #pragma GCC unroll 6
                     for (int k = 0; k < 4; k++) {
-                        lm_vf8 v = row[k] + (accumulate ? lm_load8(yr + 8 * k) : bvv);
-                        lm_store8(yr + 8 * k, v);
+                        wv v = row[k] + (accumulate ? lm_loadn(yr + VL * k) : bvv);
+                        wstore(yr + VL * k, v);
                     }
                 } else {
                     float tmp[4 * VL];
                     #pragma GCC unroll 6
-                    for (int k = 0; k < 4; k++) lm_store8(tmp + 8 * k, row[k]);
+                    for (int k = 0; k < 4; k++) wstore(tmp + VL * k, row[k]);
                     int nw = g->Wo - ox;
                     for (int u = 0; u < nw; u++) yr[u] = tmp[u] + (accumulate ? yr[u] : bv);
                 }
@@ -290,22 +330,22 @@ static void grad_transform(const wgrid *g, const float *dy, long t0, int n, floa
         if (nw < 0) nw = 0;
         for (int c = 0; c < C; c++) {
             const float *yc = dy + ((long)b * C + c) * cs + (long)oy * g->Wo + ox;
-            lm_vf8 e[4][4];
+            wv e[4][4];
             #pragma GCC unroll 6
             for (int r = 0; r < 4; r++) {
-                lm_vf8 row[4];
+                wv row[4];
                 if (r < rh && nw == 4 * VL) {
                     #pragma GCC unroll 6
-                    for (int k = 0; k < 4; k++) row[k] = lm_load8(yc + (long)r * g->Wo + 8 * k);
+                    for (int k = 0; k < 4; k++) row[k] = lm_loadn(yc + (long)r * g->Wo + VL * k);
                 } else {
                     float tmp[4 * VL] = {0};
                     for (int u = 0; r < rh && u < nw; u++) tmp[u] = yc[(long)r * g->Wo + u];
                     #pragma GCC unroll 6
-                    for (int k = 0; k < 4; k++) row[k] = lm_load8(tmp + 8 * k);
+                    for (int k = 0; k < 4; k++) row[k] = lm_loadn(tmp + VL * k);
                 }
-                transpose4x2(row[0], row[1], row[2], row[3], e[r]);
+                transpose4q(row[0], row[1], row[2], row[3], e[r]);
             }
-            lm_vf8 t[6][4], m[4], o[6];
+            wv t[6][4], m[4], o[6];
             #pragma GCC unroll 6
             for (int q = 0; q < 4; q++) { /* columns: t[.][q] = A e[.][q] */
                 #pragma GCC unroll 6
@@ -319,7 +359,7 @@ static void grad_transform(const wgrid *g, const float *dy, long t0, int n, floa
             for (int r = 0; r < 6; r++) { /* rows: Mdy[r][.] = t[r][.] A^T */
                 A6(o, t[r]);
                 #pragma GCC unroll 6
-                for (int q = 0; q < 6; q++) lm_store8(dst + (r * 6 + q) * xis, o[q]);
+                for (int q = 0; q < 6; q++) wstore(dst + (r * 6 + q) * xis, o[q]);
             }
         }
     }
@@ -328,9 +368,18 @@ static void grad_transform(const wgrid *g, const float *dy, long t0, int n, floa
 /* ---- drivers ----------------------------------------------------------------------------- */
 /* Tiles per chunk: at most the cache-sized count, and the chunks a multiple of the thread
  * count (all threads get equal work) when there are enough tiles. */
+static long chunk_bytes(void)
+{
+    const char *e = getenv("LM_WINOGRAD_CHUNK_KB");
+    long kb = e ? atol(e) : 0;
+    if (kb >= 16 && kb <= 1L << 20) return kb * 1024;
+    long l2 = sysconf(_SC_LEVEL2_CACHE_SIZE);
+    return l2 >= CHUNK_L2_MIN ? l2 / 2 : CHUNK_BYTES;
+}
+
 static int chunk_tiles(int Cin, int Cout, long T, int nt)
 {
-    long tc = CHUNK_BYTES / (36L * (Cin + Cout) * (long)sizeof(float));
+    long tc = chunk_bytes() / (36L * (Cin + Cout) * (long)sizeof(float));
     tc = tc / VL * VL;
     if (tc < TC_MIN) tc = TC_MIN;
     if (tc > TC_MAX) tc = TC_MAX;
@@ -355,22 +404,22 @@ static int winograd_run(lm_ctx *c, const wgrid *gi, const wgrid *go, const float
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
     float *buf = lm_ctx_alloc(c, sizeof(float) * per * (size_t)nt);
     if (!buf) return c->status;
+    /* chunks handed out as threads come free: a thread slowed by another process on its core
+     * takes fewer. Each chunk's outputs are computed whole by one thread, the same way
+     * whichever thread it is, so the result does not depend on the hand-out. */
 #pragma omp parallel num_threads(nt)
     {
-        int nthr = omp_get_num_threads();
-        for (int th = omp_get_thread_num(); th < nt; th += nthr) {
-            float *V = buf + per * (size_t)th, *M = V + 36 * (size_t)Cin * (size_t)tc;
-            float *st = M + 36 * (size_t)Cout * (size_t)tc;
-            long c0 = nchunks * th / nt, c1 = nchunks * (th + 1) / nt;
-            for (long ch = c0; ch < c1; ch++) {
-                long t0 = ch * tc;
-                int n = T - t0 < tc ? (int)(T - t0) : tc;
-                input_transform(gi, x, t0, n, V, tc, st);
-                for (int xi = 0; xi < 36; xi++)
-                    lm_sgemm_panel(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc, NULL, 0,
-                                   M + (long)xi * Cout * tc, tc);
-                output_transform(go, M, tc, t0, n, bias, accumulate, y);
-            }
+        float *V = buf + per * (size_t)omp_get_thread_num();
+        float *M = V + 36 * (size_t)Cin * (size_t)tc, *st = M + 36 * (size_t)Cout * (size_t)tc;
+#pragma omp for schedule(dynamic, 1)
+        for (long ch = 0; ch < nchunks; ch++) {
+            long t0 = ch * tc;
+            int n = T - t0 < tc ? (int)(T - t0) : tc;
+            input_transform(gi, x, t0, n, V, tc, st);
+            for (int xi = 0; xi < 36; xi++)
+                lm_sgemm_panel(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc, NULL, 0,
+                               M + (long)xi * Cout * tc, tc);
+            output_transform(go, M, tc, t0, n, bias, accumulate, y);
         }
     }
     lm_arena_rewind(&c->arena, mk);
@@ -443,21 +492,25 @@ int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
     int tc = chunk_tiles(Cin, Cout, T, nt);
     long nchunks = (T + tc - 1) / tc;
     if (nchunks < nt) nt = (int)nchunks;
-    size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + 36 * (size_t)nw +
-                 (size_t)Cin * 6 * (size_t)gi.wp;
+    /* the chunks fall into ng fixed groups (a function of the thread count and the shape), each
+     * summed by one thread in chunk order into its own partial; groups are handed out as
+     * threads come free (a thread slowed by another process takes fewer), and the partials are
+     * added in group order: the result depends on the thread count only */
+    long ng = nchunks < 4L * nt ? nchunks : 4L * nt;
+    size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + (size_t)Cin * 6 * (size_t)gi.wp;
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
-    float *buf = lm_ctx_alloc(c, sizeof(float) * per * (size_t)nt);
-    if (!buf) return c->status;
+    float *dUs = lm_ctx_alloc(c, sizeof(float) * (36 * (size_t)nw * (size_t)ng + per * (size_t)nt));
+    if (!dUs) return c->status;
+    float *scratch = dUs + 36 * (size_t)nw * (size_t)ng;
 #pragma omp parallel num_threads(nt)
     {
-        int nthr = omp_get_num_threads();
-        for (int th = omp_get_thread_num(); th < nt; th += nthr) {
-            float *dU = buf + per * (size_t)th, *V = dU + 36 * (size_t)nw;
-            float *Md = V + 36 * (size_t)Cin * (size_t)tc;
-            float *st = Md + 36 * (size_t)Cout * (size_t)tc;
+        float *V = scratch + per * (size_t)omp_get_thread_num();
+        float *Md = V + 36 * (size_t)Cin * (size_t)tc, *st = Md + 36 * (size_t)Cout * (size_t)tc;
+#pragma omp for schedule(dynamic, 1)
+        for (long gr = 0; gr < ng; gr++) {
+            float *dU = dUs + 36 * (size_t)nw * (size_t)gr;
             memset(dU, 0, sizeof(float) * 36 * (size_t)nw);
-            long c0 = nchunks * th / nt, c1 = nchunks * (th + 1) / nt;
-            for (long ch = c0; ch < c1; ch++) {
+            for (long ch = nchunks * gr / ng; ch < nchunks * (gr + 1) / ng; ch++) {
                 long t0 = ch * tc;
                 int n = T - t0 < tc ? (int)(T - t0) : tc;
                 input_transform(&gi, x, t0, n, V, tc, st);
@@ -467,15 +520,15 @@ int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
                                 V + (long)xi * Cin * tc, tc, 1.0f, dU + (long)xi * nw, Cin);
             }
         }
-#pragma omp barrier
-        /* partials added in thread order, then dw += G^T dU G; weights split over threads */
-        int me = omp_get_thread_num();
+        /* (the implicit barrier of the loop) partials added in group order, then dw += G^T dU
+         * G; weights split over threads */
+        int me = omp_get_thread_num(), nthr = omp_get_num_threads();
         long k0 = nw * me / nthr, k1 = nw * (me + 1) / nthr;
         for (long k = k0; k < k1; k++) {
             float u[36];
             for (int xi = 0; xi < 36; xi++) {
                 float s = 0.0f;
-                for (int th = 0; th < nt; th++) s += buf[per * (size_t)th + (size_t)xi * nw + k];
+                for (long gr = 0; gr < ng; gr++) s += dUs[36 * (size_t)nw * (size_t)gr + (size_t)xi * nw + k];
                 u[xi] = s;
             }
             weight_transform_adjoint(u, dw + k * 9, 3, 1);

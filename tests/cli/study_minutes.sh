@@ -103,8 +103,14 @@ assert set(runs) == {"lmmse-5", "linear", "rt-8+lmmse-5"}, set(runs)
 for name, r in runs.items():
     assert r["seconds_per_frame"] > 0 and "drop_check" in r, name
     if name != "lmmse-5": assert len(r["curve"]) >= 2, (name, r["curve"])
+    # trained by a worker: the training figures come from the run's log and checkpoint
+    t = r["train"]
+    assert t["iterations"] >= (0 if name == "lmmse-5" else 1), (name, t)
+    if name != "lmmse-5":
+        assert t["seconds"] > 0 and t["first_loss"] > 0 and t["final_loss"] > 0, (name, t)
 PY
 check "--jobs records" [ $? -eq 0 ]
+check "--jobs: no nan in the training table" [ -z "$(grep -A 6 '### Training' "$T/sj/results.md" | grep nan)" ]
 "$LM" study --config "$T/mj.json" --output "$T/sj" --worker nosuch 2> "$T/ej"
 check "worker of an unknown preset: exit 2, one line" [ $? -eq 2 -a "$(wc -l < "$T/ej")" -eq 1 ]
 "$LM" train --resume "$T/sj/runs/linear" --clock wall 2> "$T/ej"
