@@ -119,8 +119,14 @@ int lm_cmd_train(int argc, char **argv)
     }
     if (r != 1) return r;
     if (a.resume) snprintf(cfg.output, sizeof cfg.output, "%s", a.resume);
+    const lm_train_recipe *rec = lm_train_cfg_apply_recipe(&cfg);
     lm_err e = {0};
     if (lm_train_cfg_validate(&cfg, &e)) return lm_cli_error(&c, "%s", e.msg);
+    if (rec && !a.resume && !a.com.quiet && rank == 0) /* stdout: errors stay one line */
+        fprintf(stdout, "train: %s%s: the preset's recipe where not given: lr %g, batch %d x %d, "
+                "%s schedule to %g after %ld warm-up updates (--recipe paper: the paper's)\n",
+                cfg.model, cfg.base[0] ? " on a base" : "", (double)cfg.lr, cfg.batch,
+                cfg.accum_steps, cfg.schedule, (double)cfg.lr_min, cfg.warmup);
     char ck[LM_TRAIN_PATH_LEN + 32];
     snprintf(ck, sizeof ck, "%s/model.safetensors", cfg.output);
     if (!a.resume && access(ck, F_OK) == 0)

@@ -491,6 +491,8 @@ static lm_status train_preset(const lm_study_cfg *cfg, const char *dir, const ru
         (rs->base && snprintf(tc.base, sizeof tc.base, "%s/runs/%s", dir, rs->base) >=
                          (int)sizeof tc.base))
         return lm_err_set(err, LM_ERR_ARG, "%s: path too long", rundir);
+    lm_train_cfg_apply_recipe(&tc); /* what the config does not set: the preset's recipe */
+    if (rs->synth >= 0.0f) tc.synth_fraction = rs->synth;
     tc.threads = o->threads;
     char ck[PATH_MAX_LEN + 32];
     snprintf(ck, sizeof ck, "%s/model.safetensors", rundir);

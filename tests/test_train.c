@@ -348,6 +348,42 @@ static void test_config_validation(void)
     CHECK(lm_train_cfg_has("val-interval") && !lm_train_cfg_has("nope"));
 }
 
+/* Measured recipes (train/recipe.c): fields not given take the preset's values; given ones,
+ * recipe "paper", presets without a recipe and resumed configs keep theirs. */
+static void test_recipes(void)
+{
+    lm_train_cfg c;
+    lm_err e = {0};
+    lm_train_cfg_default(&c);
+    CHECK(!strcmp(c.recipe, "preset"));
+    CHECK(lm_train_cfg_set(&c, "model", "rt-8", &e) == LM_OK &&
+          lm_train_cfg_set(&c, "data", "/d/cave", &e) == LM_OK);
+    const lm_train_recipe *r = lm_train_cfg_apply_recipe(&c);
+    CHECK(r && r == lm_train_recipe_find("rt-8", 0) && c.lr == r->lr && c.batch == r->batch &&
+          c.accum_steps == r->accum_steps && !strcmp(c.schedule, r->schedule) &&
+          c.lr_min == r->lr_min && c.warmup == r->warmup && c.synth_fraction == 0.33f);
+    CHECK_MSG(lm_train_cfg_validate(&c, &e) == LM_OK, "%s", e.msg);
+    lm_train_cfg_default(&c); /* given fields stay; a residual takes its own recipe */
+    CHECK(lm_train_cfg_set(&c, "model", "rt-8-b2", &e) == LM_OK &&
+          lm_train_cfg_set(&c, "lr", "3e-4", &e) == LM_OK &&
+          lm_train_cfg_set(&c, "base", "runs/fit", &e) == LM_OK &&
+          lm_train_cfg_set(&c, "iterations", "200", &e) == LM_OK);
+    r = lm_train_cfg_apply_recipe(&c);
+    CHECK(r && r->residual && c.lr == 3e-4f && c.batch == r->batch && c.warmup == 20 &&
+          c.synth_fraction == r->synth_fraction && c.lr_min <= c.lr);
+    lm_train_cfg_default(&c); /* the paper's protocol */
+    CHECK(lm_train_cfg_set(&c, "model", "rt-8", &e) == LM_OK &&
+          lm_train_cfg_set(&c, "recipe", "paper", &e) == LM_OK);
+    CHECK(!lm_train_cfg_apply_recipe(&c) && c.lr == 1e-4f && c.batch == 14);
+    lm_train_cfg_default(&c); /* no recipe for a paper-size preset, nor "rt-80" for rt-8 */
+    CHECK(lm_train_cfg_set(&c, "model", "mcan", &e) == LM_OK &&
+          lm_train_cfg_set(&c, "data", "/d/cave", &e) == LM_OK);
+    CHECK(!lm_train_cfg_apply_recipe(&c) && c.lr == 1e-4f);
+    CHECK(!lm_train_recipe_find("rt-80", 0) && !lm_train_recipe_find("lmmse", 0));
+    CHECK(lm_train_cfg_set(&c, "recipe", "best", &e) == LM_OK);
+    CHECK(lm_train_cfg_validate(&c, &e) == LM_ERR_ARG && strstr(e.msg, "'recipe'"));
+}
+
 static void test_config_round_trip(void)
 {
     lm_train_cfg a, b;
@@ -367,6 +403,9 @@ static void test_config_round_trip(void)
     CHECK_MSG(lm_train_cfg_save(&a, path, &e) == LM_OK, "%s", e.msg);
     lm_train_cfg_default(&b);
     CHECK_MSG(lm_train_cfg_load(&b, path, &e) == LM_OK, "%s", e.msg);
+    CHECK(lm_train_cfg_given(&b, "lr") && lm_train_cfg_given(&b, "warmup") &&
+          !lm_train_cfg_given(&a, "warmup")); /* a saved config gives every field */
+    memset(a.given, 0, sizeof a.given), memset(b.given, 0, sizeof b.given);
     CHECK(!memcmp(&a, &b, sizeof a)); /* every field, floats bit-exact */
     /* relative data paths in a file are relative to the file's folder */
     FILE *f = fopen(path, "w");
@@ -459,6 +498,7 @@ int main(void)
     RUN(test_mosaic_from_system);
     RUN(test_config_validation);
     RUN(test_config_round_trip);
+    RUN(test_recipes);
     RUN(test_patch_not_on_tile);
     RUN(test_overfit_one_batch);
     RUN(test_resume_bitwise);

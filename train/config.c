@@ -122,8 +122,13 @@ static const field fields[] = {
         "(quantisation to the DOE's levels in training)", 0, 0),
     FLD("doe_bands", F_INT, doe_bands, "N", "DOE optimisation: wavelengths whose PSFs get a "
         "gradient per update (4)", 1, 31),
+    FLD("recipe", F_STR, recipe, "R", "preset | paper: what lr, batch, accum_steps, schedule, "
+        "lr_min, warmup and synth_fraction default to: the model preset's measured recipe "
+        "(README \"Training recipes\"; presets without one: the paper's values shown here) or "
+        "the paper's protocol", 0, 0),
 };
 #define NFIELDS (int)(sizeof fields / sizeof fields[0])
+_Static_assert(sizeof fields / sizeof fields[0] <= 64 * 2, "lm_train_cfg.given holds 128 bits");
 
 float lm_train_procedural_share(const lm_train_cfg *c)
 {
@@ -167,6 +172,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     c->doe_lr = 0.01f;
     snprintf(c->doe_quantise, sizeof c->doe_quantise, "progressive");
     c->doe_bands = 4;
+    snprintf(c->recipe, sizeof c->recipe, "preset");
 }
 
 static const field *find_field(const char *key)
@@ -181,6 +187,14 @@ static const field *find_field(const char *key)
 }
 
 int lm_train_cfg_has(const char *key) { return find_field(key) != NULL; }
+
+int lm_train_cfg_given(const lm_train_cfg *c, const char *key)
+{
+    const field *f = find_field(key);
+    if (!f) return 0;
+    int idx = (int)(f - fields);
+    return (int)(c->given[idx / 64] >> (idx % 64) & 1);
+}
 
 static int parse_long(const char *s, long long *v)
 {
@@ -258,6 +272,8 @@ static lm_status set_text(lm_train_cfg *c, const field *f, const char *v, const 
                           lm_err *err)
 {
     void *dst = (char *)c + f->off;
+    int idx = (int)(f - fields);
+    c->given[idx / 64] |= 1ull << (idx % 64);
     double a = 0, b = 0;
     int ok = 0;
     switch (f->type) {
@@ -510,6 +526,8 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
         BAD("'fit': must be auto, closed or sgd (got '%s')", c->fit);
     if (strcmp(c->clock, "wall") && strcmp(c->clock, "cpu"))
         BAD("'clock': must be wall or cpu (got '%s')", c->clock);
+    if (strcmp(c->recipe, "preset") && strcmp(c->recipe, "paper"))
+        BAD("'recipe': must be preset or paper (got '%s')", c->recipe);
     if (!(c->fit_synth == -1.0f || (c->fit_synth >= 0.0f && c->fit_synth <= 1.0f)))
         BAD("'fit_synth': must be -1 (chosen on validation) or in [0, 1] (got %g)",
             (double)c->fit_synth);
@@ -574,6 +592,7 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
                                c->motion_samples));
     if (root) json_object_set_new(root, "buckets", json_integer(c->buckets));
     if (root) json_object_set_new(root, "frames", json_integer(c->frames));
+    if (root) json_object_set_new(root, "recipe", json_string(c->recipe));
     if (root) json_object_set_new(root, "photons", json_real(c->photons));
     if (root) json_object_set_new(root, "read_noise", json_real(c->read_noise));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);

@@ -106,7 +106,38 @@ typedef struct lm_train_cfg {
                                      * maximum height; 0.01) */
     char doe_quantise[16];          /* progressive | ste | none (train/doe_opt.c) */
     int doe_bands;                  /* wavelengths whose PSFs get a gradient per update (4) */
+    char recipe[16];                /* "preset" (default): the fields a file or flag did not
+                                     * give take the model preset's measured recipe
+                                     * (lm_train_recipe_find; none: the defaults above);
+                                     * "paper": the paper's protocol (the defaults above) */
+    uint64_t given[2];              /* bit i: field i of the table was given by a file or a
+                                     * flag (internal, not a JSON field) */
 } lm_train_cfg;
+
+/* A training recipe measured for a preset on this project's machines (issue 13, item 4): the
+ * learning rate, batch and schedule that reached the best validation PSNR in a short
+ * CPU-time-budgeted sweep (README "Training recipes"). residual: trained on a base (--base). */
+typedef struct lm_train_recipe {
+    const char *preset;
+    int residual;
+    float lr;
+    int batch, accum_steps;
+    const char *schedule;
+    float lr_min;
+    long warmup;
+    float synth_fraction;           /* < 0: the default */
+} lm_train_recipe;
+/* The recipe of a preset ("rt-8", or a variant "rt-8-b2", "rt-8-mf3": the first name the
+ * preset starts with followed by "-"), trained on a base or not; NULL when none is measured
+ * (the paper-size presets, the closed-form fits). */
+const lm_train_recipe *lm_train_recipe_find(const char *preset, int residual);
+/* With cfg->recipe "preset": every recipe field (lr, batch, accum_steps, schedule, lr_min,
+ * warmup, synth_fraction) that was not given takes the recipe's value. Returns the recipe used
+ * (NULL: none, or recipe "paper"). Call once the model and base are known, before
+ * lm_train_cfg_validate; a resumed run's config gives every field, so nothing changes. */
+const lm_train_recipe *lm_train_cfg_apply_recipe(lm_train_cfg *cfg);
+/* Was field `key` (JSON or flag spelling) given by a file or a flag? */
+int lm_train_cfg_given(const lm_train_cfg *cfg, const char *key);
 
 /* The default share of procedural scenes, chosen on the real validation split (README). */
 #define LM_TRAIN_PROCEDURAL_DEFAULT 0.2f
