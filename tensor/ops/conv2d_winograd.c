@@ -54,9 +54,10 @@ static inline void wstore(float *p, wv v) { memcpy(p, &v, sizeof v); }
  * floats (chunk_bytes). Measured with build/bench_conv / bench_train at 1 thread: on Zen 3
  * (512 KiB L2 + 32 MiB L3) 2.5 MB chunks beat 0.3-1.3 MB ones (wider GEMMs amortise their
  * packing; the chunk lives in L3 either way) and 10 MB ones; on a Xeon with 2 MiB of L2 per core,
- * chunks of half the L2 (1 MB, held in L2 with the packed weights) beat 2.5 MB ones by 8-20 %
- * per training step (han-tiny, mcan). So: half the L2 when the L2 holds at least 1 MiB, else
- * 2.5 MB. LM_WINOGRAD_CHUNK_KB overrides it (for tuning on another machine). */
+ * chunks held in L2 with the packed weights win: per 2-thread training step, 2.5 MB -> 1 MB
+ * took han-tiny 8-20 % and mcan 7-17 % off, and 1 MB -> 640 KB another 9 % and 3 % (256-640 KB
+ * alike; 1.5-2 MB worse). So: 5/16 of the L2 when the L2 holds at least 1 MiB, else 2.5 MB.
+ * LM_WINOGRAD_CHUNK_KB overrides it (for tuning on another machine). */
 #define CHUNK_BYTES (2560 * 1024)
 #define CHUNK_L2_MIN (1024 * 1024)
 #define TC_MIN 32
@@ -374,7 +375,7 @@ static long chunk_bytes(void)
     long kb = e ? atol(e) : 0;
     if (kb >= 16 && kb <= 1L << 20) return kb * 1024;
     long l2 = sysconf(_SC_LEVEL2_CACHE_SIZE);
-    return l2 >= CHUNK_L2_MIN ? l2 / 2 : CHUNK_BYTES;
+    return l2 >= CHUNK_L2_MIN ? l2 / 16 * 5 : CHUNK_BYTES;
 }
 
 static int chunk_tiles(int Cin, int Cout, long T, int nt)
