@@ -103,18 +103,26 @@ static lm_status align_pair(const float *cur, const float *nb, float dt, int h, 
     return s;
 }
 
-lm_status lm_align_frame(const float *prev, const float *cur, const float *next, int np, int h,
-                         int w, const float *t, int ref, const lm_flow_opts *o,
-                         const lm_align_opts *ao, float *out, lm_err *e)
+/* The arguments lm_align_frame and lm_align_stack share, checked. */
+static lm_status check_args(const float *cur, const float *t, const float *out, int np, int h,
+                            int w, int ref, lm_err *e)
 {
     if (!cur || !t || !out) return lm_err_set(e, LM_ERR_ARG, "align: NULL frame, times or output");
     if (np < 1 || ref < 0 || ref >= np)
         return lm_err_set(e, LM_ERR_ARG, "align: reference plane %d outside 0..%d", ref, np - 1);
     if (h <= 0 || w <= 0)
         return lm_err_set(e, LM_ERR_SHAPE, "align: empty sub-images %dx%d", h, w);
+    return LM_OK;
+}
+
+lm_status lm_align_frame(const float *prev, const float *cur, const float *next, int np, int h,
+                         int w, const float *t, int ref, const lm_flow_opts *o,
+                         const lm_align_opts *ao, float *out, lm_err *e)
+{
+    lm_status cs = check_args(cur, t, out, np, h, w, ref, e);
+    if (cs) return cs;
     lm_align_opts dao;
-    if (!ao) lm_align_default_opts(&dao);
-    if (!ao) ao = &dao;
+    if (!ao) lm_align_default_opts(&dao), ao = &dao;
     size_t n = (size_t)h * (size_t)w;
     float *f = malloc(sizeof(float) * 4 * n);
     if (!f) return lm_err_set(e, LM_ERR_NOMEM, "align: out of memory");
@@ -152,14 +160,10 @@ lm_status lm_align_stack(const float *prev, const float *cur, const float *next,
                          int w, const float *t, int ref, const lm_flow_opts *o,
                          const lm_align_opts *ao, float *out, lm_err *e)
 {
-    if (!cur || !t || !out) return lm_err_set(e, LM_ERR_ARG, "align: NULL frame, times or output");
-    if (np < 1 || ref < 0 || ref >= np)
-        return lm_err_set(e, LM_ERR_ARG, "align: reference plane %d outside 0..%d", ref, np - 1);
-    if (h <= 0 || w <= 0)
-        return lm_err_set(e, LM_ERR_SHAPE, "align: empty sub-images %dx%d", h, w);
+    lm_status cs = check_args(cur, t, out, np, h, w, ref, e);
+    if (cs) return cs;
     lm_align_opts dao;
-    if (!ao) lm_align_default_opts(&dao);
-    if (!ao) ao = &dao;
+    if (!ao) lm_align_default_opts(&dao), ao = &dao;
     size_t n = (size_t)h * (size_t)w, fr = (size_t)np * n;
     float *f = malloc(sizeof(float) * 8 * n); /* F_{i->i-1}, F_{i-1->i}, F_{i->i+1}, F_{i+1->i} */
     if (!f) return lm_err_set(e, LM_ERR_NOMEM, "align: out of memory");
