@@ -225,13 +225,8 @@ static lm_status curve_data(const json_t *rec, const char *sdir, const char *dir
     double ema = 0, alpha = 2.0 / (smooth + 1.0);
     int first = 1;
     while (fv && fgets(line, sizeof line, in)) {
-        char *fld[7] = {0}, *p = line;
-        int k = 0;
-        for (; k < 7 && p; k++) {
-            fld[k] = p;
-            p = strchr(p, ',');
-            if (p) *p++ = 0;
-        }
+        char *fld[7];
+        int k = lm_study_log_fields(line, fld);
         char *end;
         long it = strtol(fld[0], &end, 10);
         if (end == fld[0] || k < 4) continue; /* the header */

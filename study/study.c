@@ -415,6 +415,18 @@ static int schedule_done(const char *rundir)
     return total > 0 && done >= total;
 }
 
+int lm_study_log_fields(char *line, char *fld[7])
+{
+    int k = 0;
+    for (char *p = line; k < 7 && p; k++) {
+        fld[k] = p;
+        p = strchr(p, ',');
+        if (p) *p++ = 0;
+    }
+    for (int i = k; i < 7; i++) fld[i] = NULL;
+    return k;
+}
+
 /* The "train" record of a run trained before (by a --jobs worker, or an earlier invocation),
  * from its folder: iterations, first and final loss and the last validation metrics from
  * log.csv, the training seconds from the checkpoint; closed form when fit.json is there. NULL
@@ -432,16 +444,8 @@ static json_t *train_record_from_run(const char *rundir)
     int have_val = 0;
     if (!fgets(line, sizeof line, f)) line[0] = 0; /* header */
     while (fgets(line, sizeof line, f)) {
-        char *fld[7] = {0}, *p = line;
-        int n = 0;
-        while (n < 7) { /* empty fields stay empty: split on every comma */
-            fld[n++] = p;
-            char *c = strchr(p, ',');
-            if (!c) break;
-            *c = 0;
-            p = c + 1;
-        }
-        if (n < 7) continue;
+        char *fld[7];
+        if (lm_study_log_fields(line, fld) < 7) continue;
         char *end;
         long i = strtol(fld[0], &end, 10);
         if (end == fld[0]) continue;

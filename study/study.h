@@ -102,6 +102,9 @@ typedef struct lm_study {
 lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_opts *o,
                        lm_study *out, lm_err *err);
 void lm_study_free(lm_study *s);
+/* One row of a run's log.csv (iteration,loss,lr,psnr,ssim,mae,sam) split in place at its commas
+ * into fld[0..6] (empty fields stay empty strings, missing ones NULL); the number of fields. */
+int lm_study_log_fields(char *line, char *fld[7]);
 /* A --jobs worker: train (or continue) the one preset `name` of the config into
  * dir/runs/<name>, stopping at stop_s seconds of training time when stop_s > 0. */
 lm_status lm_study_train_one(const lm_study_cfg *cfg, const char *dir, const char *name,
