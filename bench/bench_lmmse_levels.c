@@ -121,20 +121,9 @@ int main(int argc, char **argv)
     lm_infer_model im;
     memset(&im, 0, sizeof im);
     if (lm_system_default(&im.sys, &e)) return die(&e);
-    lm_dataset_cfg dc;
-    lm_dataset_default_cfg(&dc);
-    dc.paths = (const char *const *)(argv + a);
-    dc.npaths = argc - a;
-    dc.sys = &im.sys;
-    dc.patch_h = cfg.patch_h;
-    dc.patch_w = cfg.patch_w;
-    dc.synth_fraction = cfg.synth_fraction;
-    dc.procedural_fraction = lm_train_procedural_share(&cfg);
-    dc.noise_min = dc.noise_max = dc.val_noise = 0.0f; /* the fit adds the noise itself */
-    dc.seed = cfg.seed;
-    dc.workers = cfg.workers;
-    dc.val_patches = cfg.val_patches;
-    lm_dataset *d = lm_dataset_open(&dc, &e);
+    for (int i = a; i < argc; i++)
+        if (lm_train_cfg_set(&cfg, "data", argv[i], &e)) return die(&e);
+    lm_dataset *d = lm_train_open_data(&cfg, &im.sys, 1, &e); /* clean: the fit adds noise */
     if (!d) return die(&e);
     int ns = lm_dataset_num_scenes(d, LM_SPLIT_TEST);
     if (ns < 1 || ns > MAX_SCENES) {

@@ -64,6 +64,12 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     return lm_dataset_open(&dc, err);
 }
 
+lm_dataset *lm_train_open_data(const lm_train_cfg *cfg, const lm_system *sys, int clean,
+                               lm_err *err)
+{
+    return open_data(cfg, sys, clean, 0, 0, 0, err);
+}
+
 /* ---- residual on a trained base ---------------------------------------------------------- */
 /* The weights file of a run folder or a .safetensors path. */
 static void weights_path(const char *run, char *out, size_t n)

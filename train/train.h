@@ -144,6 +144,13 @@ int lm_train_cfg_given(const lm_train_cfg *cfg, const char *key);
 /* The share of procedural scenes a run draws: procedural_fraction, or when it is -1 the
  * default share, at most 1 - synth_fraction. */
 float lm_train_procedural_share(const lm_train_cfg *cfg);
+/* The data set a run reads, opened as `lumosaic train` opens it (one process, no context
+ * around the patches); clean: no noise, clipping or quantisation (what a closed-form fit reads:
+ * it adds them itself). NULL with err set. */
+struct lm_system;
+typedef struct lm_dataset lm_dataset;
+lm_dataset *lm_train_open_data(const lm_train_cfg *cfg, const struct lm_system *sys, int clean,
+                               lm_err *err);
 /* Paper defaults (system.md §7) with output "runs/train". */
 void lm_train_cfg_default(lm_train_cfg *cfg);
 /* Merge a JSON config file over cfg. Unknown fields and wrong types are errors naming the
