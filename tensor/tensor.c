@@ -296,11 +296,27 @@ lm_tensor *lm_tensor_zeros(lm_ctx *c, int ndim, const int *shape)
     return lm_tensor_full(c, ndim, shape, 0.0f);
 }
 
+/* Large fills (gradient buffers zeroed at the start of every backward) are split over the
+ * threads: one core writing a 4 MB buffer alone left the other idle for ~5 % of a MCAN step. */
+#define FILL_PARALLEL_MIN (1L << 18)
 static int fill_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
-    (void)c;
     (void)nt;
-    lm_tensor_fill(t[0], *(const float *)params);
+    long n = lm_tensor_numel(t[0]);
+    int nth = lm_nthreads(c);
+    if (n < FILL_PARALLEL_MIN || nth < 2) {
+        lm_tensor_fill(t[0], *(const float *)params);
+        return 0;
+    }
+    float v = *(const float *)params, *d = t[0]->data;
+#pragma omp parallel num_threads(nth)
+    {
+        int me = omp_get_thread_num(), k = omp_get_num_threads();
+        long a = n * me / k, b = n * (me + 1) / k;
+        if (v == 0.0f) memset(d + a, 0, (size_t)(b - a) * sizeof(float));
+        else
+            for (long i = a; i < b; i++) d[i] = v;
+    }
     return 0;
 }
 LM_KERNEL(fill, fill_cpu);

@@ -22,7 +22,9 @@
  * What it is not: strided, dilated, grouped or non-3x3 convolution (conv2d_tiled.c). */
 #include "tensor/ops/gemm_internal.h"
 #include "tensor/ops/simd.h"
+#include <immintrin.h>
 #include <omp.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -148,7 +150,6 @@ typedef struct wgrid {
     int C, H, W;        /* input channels and size (the one the patches are read from) */
     int Ho, Wo, ph, pw; /* output size and padding */
     int ty, tx, txp;    /* tiles per column, per row, per row padded to a multiple of VL */
-    int wp;             /* width of a staged input row: 4 txp + 4 */
     long T;             /* tiles in all (B * ty * txp) */
 } wgrid;
 
@@ -156,9 +157,8 @@ typedef struct wgrid {
 
 static wgrid make_grid(int C, int H, int W, int Ho, int Wo, int ph, int pw, int B)
 {
-    wgrid r = {C, H, W, Ho, Wo, ph, pw, (Ho + 3) / 4, (Wo + 3) / 4, 0, 0, 0};
+    wgrid r = {C, H, W, Ho, Wo, ph, pw, (Ho + 3) / 4, (Wo + 3) / 4, 0, 0};
     r.txp = (r.tx + VL - 1) / VL * VL;
-    r.wp = 4 * r.txp + 4;
     r.T = (long)B * r.ty * r.txp;
     return r;
 }
@@ -197,65 +197,85 @@ static inline void transpose4q(wv a, wv b, wv c, wv d, wv r[4])
 #undef MH
 }
 
-/* Stage rows 4 ty - ph .. +5 of every channel of image b, zero-padded: st[c][r][u] = x[b, c,
- * 4 ty - ph + r, u - pw] (0 outside the image), u < wp. */
-static void stage_rows(const wgrid *g, const float *x, int b, int ty, float *st)
+/* VL floats of one input row (row: its first element, W floats) from column u on; lanes
+ * outside 0..W-1 read 0. Used only where the group of tiles meets the image's left or right
+ * edge: masked loads touch no memory outside the row (AVX-512 / AVX), else lane by lane. */
+static inline wv load_edge(const float *row, int u, int W)
 {
-    long cs = (long)g->H * g->W;
-    int y0 = 4 * ty - g->ph, n = g->W < g->wp - g->pw ? g->W : g->wp - g->pw;
-    for (int c = 0; c < g->C; c++)
-        for (int r = 0; r < 6; r++) {
-            float *d = st + ((long)c * 6 + r) * g->wp;
-            int yy = y0 + r;
-            if (yy < 0 || yy >= g->H) {
-                memset(d, 0, sizeof(float) * (size_t)g->wp);
-                continue;
-            }
-            const float *s = x + ((long)b * g->C + c) * cs + (long)yy * g->W;
-            memset(d, 0, sizeof(float) * (size_t)g->pw);
-            memcpy(d + g->pw, s, sizeof(float) * (size_t)n);
-            memset(d + g->pw + n, 0, sizeof(float) * (size_t)(g->wp - g->pw - n));
-        }
+    int lo = u < 0 ? -u : 0, hi = W - u < VL ? W - u : VL;
+    if (hi <= lo) return wsplat(0.0f);
+    const float *p = (const float *)((uintptr_t)row + (intptr_t)u * (intptr_t)sizeof(float));
+    wv r;
+#if LM_VLN == 16
+    __mmask16 m = (__mmask16)(((1u << hi) - 1u) & ~((1u << lo) - 1u));
+    __m512 v = _mm512_maskz_loadu_ps(m, p);
+    memcpy(&r, &v, sizeof r);
+#elif defined(__AVX__)
+    wvi lane = {0, 1, 2, 3, 4, 5, 6, 7};
+    wvi on = (lane >= lo) & (lane < hi);
+    __m256i mi;
+    memcpy(&mi, &on, sizeof mi);
+    __m256 v = _mm256_maskload_ps(p, mi);
+    memcpy(&r, &v, sizeof r);
+#else
+    (void)p;
+    for (int l = 0; l < VL; l++) r[l] = l >= lo && l < hi ? row[u + l] : 0.0f;
+#endif
+    return r;
 }
 
 /* V[xi][c][j] (36 blocks of C rows, ld ldv) = B^T d B for the tiles t0 .. t0+n-1 (n and t0
  * multiples of VL; column j0 + l = tile j0 + LANE_TILE(l)) of every channel of x
- * (B x C x H x W). st: room for the staged rows (C x 6 x wp). */
-static void input_transform(const wgrid *g, const float *x, long t0, int n, float *V, int ldv,
-                            float *st)
+ * (B x C x H x W), zero-padded: tile (ty, tx) reads rows 4 ty - ph .. +5 and columns
+ * 4 tx - pw .. +5 of x. Read straight from x: plain vector loads inside the image, masked ones
+ * at its left and right edges, zeros for rows above and below it (an earlier version copied the
+ * rows into a zero-padded buffer first: 4 % of a MCAN training step in memcpy). */
+static void input_transform(const wgrid *g, const float *x, long t0, int n, float *V, int ldv)
 {
-    long xis = (long)g->C * ldv;
-    int sb = -1, sty = -1;
+    long xis = (long)g->C * ldv, cs = (long)g->H * g->W;
     for (int j0 = 0; j0 < n; j0 += VL) {
         int b, ty, tx0;
         group_of(g, t0 + j0, &b, &ty, &tx0);
-        if (b != sb || ty != sty) stage_rows(g, x, b, ty, st), sb = b, sty = ty;
+        int y0 = 4 * ty - g->ph, u0 = 4 * tx0 - g->pw;
+        int inside = u0 >= 0 && u0 + 4 + 4 * VL <= g->W; /* every load of a row in the image */
         for (int c = 0; c < g->C; c++) {
-            const float *p = st + (long)c * 6 * g->wp + 4 * tx0;
+            const float *xc = x + ((long)b * g->C + c) * cs;
             wv d[6][6], o[6], t[6][6], col[6];
             #pragma GCC unroll 6
-            for (int r = 0; r < 6; r++, p += g->wp) {
-                wv q4[4];
-                transpose4q(lm_loadn(p), lm_loadn(p + VL), lm_loadn(p + 2 * VL),
-                            lm_loadn(p + 3 * VL), d[r]);
-                transpose4q(lm_loadn(p + 4), lm_loadn(p + 4 + VL), lm_loadn(p + 4 + 2 * VL),
-                            lm_loadn(p + 4 + 3 * VL), q4);
+            for (int r = 0; r < 6; r++) {
+                int yy = y0 + r;
+                wv q[8], q4[4];
+                if (yy < 0 || yy >= g->H) {
+                    #pragma GCC unroll 8
+                    for (int k = 0; k < 8; k++) q[k] = wsplat(0.0f);
+                } else {
+                    const float *row = xc + (long)yy * g->W;
+                    if (inside) {
+                        #pragma GCC unroll 8
+                        for (int k = 0; k < 8; k++) q[k] = lm_loadn(row + u0 + 4 * (k / 4) + VL * (k % 4));
+                    } else {
+                        #pragma GCC unroll 8
+                        for (int k = 0; k < 8; k++) q[k] = load_edge(row, u0 + 4 * (k / 4) + VL * (k % 4), g->W);
+                    }
+                }
+                transpose4q(q[0], q[1], q[2], q[3], d[r]);
+                transpose4q(q[4], q[5], q[6], q[7], q4);
                 d[r][4] = q4[0], d[r][5] = q4[1];
             }
             #pragma GCC unroll 6
-            for (int q = 0; q < 6; q++) { /* columns: t[.][q] = B^T d[.][q] */
+            for (int qq = 0; qq < 6; qq++) { /* columns: t[.][q] = B^T d[.][q] */
                 #pragma GCC unroll 6
-                for (int r = 0; r < 6; r++) col[r] = d[r][q];
+                for (int r = 0; r < 6; r++) col[r] = d[r][qq];
                 BT6(o, col);
                 #pragma GCC unroll 6
-                for (int r = 0; r < 6; r++) t[r][q] = o[r];
+                for (int r = 0; r < 6; r++) t[r][qq] = o[r];
             }
             float *dst = V + (long)c * ldv + j0;
             #pragma GCC unroll 6
             for (int r = 0; r < 6; r++) { /* rows: V[r][.] = t[r][.] B */
                 BT6(o, t[r]);
                 #pragma GCC unroll 6
-                for (int q = 0; q < 6; q++) wstore(dst + (r * 6 + q) * xis, o[q]);
+                for (int qq = 0; qq < 6; qq++) wstore(dst + (r * 6 + qq) * xis, o[qq]);
             }
         }
     }
@@ -401,7 +421,7 @@ static int winograd_run(lm_ctx *c, const wgrid *gi, const wgrid *go, const float
     int tc = chunk_tiles(Cin, Cout, T, nt);
     long nchunks = (T + tc - 1) / tc;
     if (nchunks < nt) nt = (int)nchunks;
-    size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + (size_t)Cin * 6 * (size_t)gi->wp;
+    size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc;
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
     float *buf = lm_ctx_alloc(c, sizeof(float) * per * (size_t)nt);
     if (!buf) return c->status;
@@ -411,12 +431,12 @@ static int winograd_run(lm_ctx *c, const wgrid *gi, const wgrid *go, const float
 #pragma omp parallel num_threads(nt)
     {
         float *V = buf + per * (size_t)omp_get_thread_num();
-        float *M = V + 36 * (size_t)Cin * (size_t)tc, *st = M + 36 * (size_t)Cout * (size_t)tc;
+        float *M = V + 36 * (size_t)Cin * (size_t)tc;
 #pragma omp for schedule(dynamic, 1)
         for (long ch = 0; ch < nchunks; ch++) {
             long t0 = ch * tc;
             int n = T - t0 < tc ? (int)(T - t0) : tc;
-            input_transform(gi, x, t0, n, V, tc, st);
+            input_transform(gi, x, t0, n, V, tc);
             for (int xi = 0; xi < 36; xi++)
                 lm_sgemm_panel(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc, NULL, 0,
                                M + (long)xi * Cout * tc, tc);
@@ -498,7 +518,7 @@ int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
      * threads come free (a thread slowed by another process takes fewer), and the partials are
      * added in group order: the result depends on the thread count only */
     long ng = nchunks < 4L * nt ? nchunks : 4L * nt;
-    size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc + (size_t)Cin * 6 * (size_t)gi.wp;
+    size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc;
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
     float *dUs = lm_ctx_alloc(c, sizeof(float) * (36 * (size_t)nw * (size_t)ng + per * (size_t)nt));
     if (!dUs) return c->status;
@@ -506,7 +526,7 @@ int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
 #pragma omp parallel num_threads(nt)
     {
         float *V = scratch + per * (size_t)omp_get_thread_num();
-        float *Md = V + 36 * (size_t)Cin * (size_t)tc, *st = Md + 36 * (size_t)Cout * (size_t)tc;
+        float *Md = V + 36 * (size_t)Cin * (size_t)tc;
 #pragma omp for schedule(dynamic, 1)
         for (long gr = 0; gr < ng; gr++) {
             float *dU = dUs + 36 * (size_t)nw * (size_t)gr;
@@ -514,7 +534,7 @@ int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
             for (long ch = nchunks * gr / ng; ch < nchunks * (gr + 1) / ng; ch++) {
                 long t0 = ch * tc;
                 int n = T - t0 < tc ? (int)(T - t0) : tc;
-                input_transform(&gi, x, t0, n, V, tc, st);
+                input_transform(&gi, x, t0, n, V, tc);
                 grad_transform(&gi, dy, t0, n, Md, tc, Cout);
                 for (int xi = 0; xi < 36; xi++)
                     lm_sgemm_st(0, 1, Cout, Cin, n, 1.0f, Md + (long)xi * Cout * tc, tc,
