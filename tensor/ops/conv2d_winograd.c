@@ -530,15 +530,17 @@ int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
 #pragma omp for schedule(dynamic, 1)
         for (long gr = 0; gr < ng; gr++) {
             float *dU = dUs + 36 * (size_t)nw * (size_t)gr;
-            memset(dU, 0, sizeof(float) * 36 * (size_t)nw);
-            for (long ch = nchunks * gr / ng; ch < nchunks * (gr + 1) / ng; ch++) {
+            long c0 = nchunks * gr / ng, c1 = nchunks * (gr + 1) / ng;
+            for (long ch = c0; ch < c1; ch++) {
                 long t0 = ch * tc;
                 int n = T - t0 < tc ? (int)(T - t0) : tc;
                 input_transform(&gi, x, t0, n, V, tc);
                 grad_transform(&gi, dy, t0, n, Md, tc, Cout);
+                /* the group's first chunk writes its partial (beta 0: no zeroing pass) */
                 for (int xi = 0; xi < 36; xi++)
                     lm_sgemm_st(0, 1, Cout, Cin, n, 1.0f, Md + (long)xi * Cout * tc, tc,
-                                V + (long)xi * Cin * tc, tc, 1.0f, dU + (long)xi * nw, Cin);
+                                V + (long)xi * Cin * tc, tc, ch == c0 ? 0.0f : 1.0f,
+                                dU + (long)xi * nw, Cin);
             }
         }
         /* (the implicit barrier of the loop) partials added in group order, then dw += G^T dU
