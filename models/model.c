@@ -42,7 +42,11 @@ static lm_status build_mst(lm_model *m, const preset *ps, lm_err *err)
 }
 static lm_status build_rt(lm_model *m, const preset *ps, lm_err *err)
 {
-    return lm_rt_build(m, ps->width, err);
+    return lm_rt_build(m, ps->width, 0, err);
+}
+static lm_status build_rt_nc(lm_model *m, const preset *ps, lm_err *err)
+{
+    return lm_rt_build(m, ps->width, 1, err);
 }
 
 #define CL LM_CAP_OPENCL
@@ -79,6 +83,9 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     /* multi-frame: the current frame and its two neighbours aligned to it (3 input planes) */
     {"rt-8-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0}, 8},
     {"rt-16-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0}, 16},
+    /* noise-conditioned: the branch also sees the input's estimated noise level */
+    {"rt-8-nc", build_rt_nc, CL, {0, 0, 0, 0}, 8},
+    {"rt-16-nc", build_rt_nc, CL, {0, 0, 0, 0}, 16},
 };
 #undef B2
 #undef CL

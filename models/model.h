@@ -169,6 +169,7 @@ lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *c
 /* Real-time: demosaic + raw, two 3x3 convs at `width`, 1x1 head (models/rt.c); with
  * LM_CAP_TWO_BUCKETS the branch's first conv also reads the bucket-0 plane, with
  * LM_CAP_MULTI_FRAME the two neighbour frames' planes (the demosaic is of plane 0). */
-lm_status lm_rt_build(lm_model *m, int width, lm_err *err);
+/* noise_cond: "-nc" presets, a bias from the input's noise sd in the branch (noise_input). */
+lm_status lm_rt_build(lm_model *m, int width, int noise_cond, lm_err *err);
 
 #endif

@@ -13,12 +13,43 @@
  * plane beside bucket 1 (P + 2 input channels); the demosaic and the head are unchanged.
  * Multi-frame (LM_CAP_MULTI_FRAME, "rt-N-mf3"): likewise the two neighbour frames moved onto
  * the current one (P + 3 input channels).
+ * Noise-conditioned ("rt-N-nc"): the branch's first conv also gets a per-channel bias
+ * proportional to the input's noise sd (body.0.noise, width values, starting at 0), the sd
+ * estimated from each frame as for lmmse (noise_input; train and infer set it): the same as
+ * a constant noise-level input plane away from the borders, so one model can learn to leave
+ * clean frames alone and denoise noisy ones (a residual trained on noisy samples only loses
+ * 0.1-0.3 dB on clean frames against its lmmse base).
  * What it is not: an attention network; nothing here depends on the frame size. */
 #include "models/model.h"
+#include "tensor/device.h"
 #include <stdio.h>
 #include <stdlib.h>
 
-typedef struct rt_net { lm_conv body0, body2, head; } rt_net;
+typedef struct rt_net {
+    lm_conv body0, body2, head;
+    lm_tensor *noise; /* "body.0.noise" (width) or NULL */
+} rt_net;
+
+/* Scale of the noise sd in the bias: sd 0.1 (10 % of a bright frame) -> 1. */
+#define RT_NOISE_SCALE 10.0f
+
+/* B x width x 1 x 1: RT_NOISE_SCALE x the noise sd of each item x body.0.noise; NULL with
+ * the ctx error set when the model was given no noise level. */
+static lm_tensor *noise_bias(lm_ctx *c, lm_model *m, const rt_net *n, int B)
+{
+    const float *items = m->noise_sigma_items;
+    if (!items && !(m->noise_sigma >= 0.0f)) {
+        lm_ctx_fail(c, LM_ERR_ARG, "%s: the input's noise level is not set (noise_sigma; the "
+                    "caller estimates it, data/noise_est.h)", m->preset);
+        return NULL;
+    }
+    lm_tensor *s = lm_tensor_new_on(c, LM_DEVICE_CPU, 4, (int[]){B, 1, 1, 1});
+    if (!s) return NULL;
+    for (int b = 0; b < B; b++) s->data[b] = RT_NOISE_SCALE * (items ? items[b] : m->noise_sigma);
+    if (c->backend->device != LM_DEVICE_CPU) s = lm_tensor_to_device(c, s);
+    int w = n->noise->shape[0];
+    return lm_mul(c, s, lm_reshape(c, n->noise, 4, (int[]){1, w, 1, 1}));
+}
 
 static lm_tensor *rt_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
 {
@@ -28,7 +59,9 @@ static lm_tensor *rt_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
     lm_tensor *b1 = m->in_channels == 1 ? raw : lm_contiguous(c, lm_slice(c, raw, 1, 0, 1));
     lm_tensor *x = lm_mosaic_demosaic(c, &m->mosaic, b1);
     lm_tensor *xr[2] = {x, raw};
-    lm_tensor *f = lm_relu(c, lm_conv_forward(c, &n->body0, lm_concat(c, xr, 2, 1)));
+    lm_tensor *f = lm_conv_forward(c, &n->body0, lm_concat(c, xr, 2, 1));
+    if (n->noise) f = lm_add(c, f, noise_bias(c, m, n, raw->shape[0]));
+    f = lm_relu(c, f);
     lm_tensor *xf[2] = {x, lm_relu(c, lm_conv_forward(c, &n->body2, f))};
     return lm_conv_forward(c, &n->head, lm_concat(c, xf, 2, 1));
 }
@@ -47,7 +80,7 @@ static void rt_free(lm_model *m)
     m->impl = NULL;
 }
 
-lm_status lm_rt_build(lm_model *m, int width, lm_err *err)
+lm_status lm_rt_build(lm_model *m, int width, int noise_cond, lm_err *err)
 {
     rt_net *n = calloc(1, sizeof *n);
     m->impl = n;
@@ -60,6 +93,11 @@ lm_status lm_rt_build(lm_model *m, int width, lm_err *err)
         lm_conv3_declare(&m->params, &n->body2, "body.2", width, width, err) ||
         lm_conv_declare(&m->params, &n->head, "head", head, 1, err))
         return err->status;
+    if (noise_cond) {
+        n->noise = lm_params_add(&m->params, "body.0.noise", 1, &width, 1, err);
+        if (!n->noise) return err->status;
+        m->noise_input = 1;
+    }
     m->forward = rt_forward;
     m->init = rt_init;
     m->conv_rows = 2; /* two 3x3 (the 1x1 convs add nothing) */

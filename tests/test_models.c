@@ -48,6 +48,55 @@ static void test_parameter_counts(void)
     }
     check_count("rt-8-mf3", 2365, 2365);
     check_count("rt-16-mf3", 5453, 5453);
+    /* the -nc form: one noise weight per branch channel */
+    check_count("rt-8-nc", 2221 + 8, 2221 + 8);
+    check_count("rt-16-nc", 5165 + 16, 5165 + 16);
+}
+
+/* rt-N-nc: refused without a noise level; with zero noise weights (the start) it is its plain
+ * rt-N twin (same seed) at any level; with non-zero ones each item's level reaches its own
+ * output only. */
+static void test_noise_conditioned(void)
+{
+    lm_mosaic mo;
+    test_mosaic(&mo);
+    lm_err e = {0};
+    lm_model *m = lm_model_create("rt-8-nc", &mo, 3, &e), *p = lm_model_create("rt-8", &mo, 3, &e);
+    CHECK_MSG(m && p, "%s", e.msg);
+    if (!m || !p) return;
+    CHECK(m->noise_input && !p->noise_input);
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_rng r;
+    lm_rng_seed(&r, 1);
+    const int B = 2, H = 12, W = 16;
+    long n = (long)B * 33 * H * W, half = n / B;
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){B, 1, H, W}, &r, 0, 1);
+    CHECK(lm_model_forward(&c, m, x) == NULL && strstr(c.msg, "noise level"));
+    CHECK_CTX_FAILED(&c, LM_ERR_ARG);
+    lm_ctx_clear_error(&c);
+    m->noise_sigma = 0.05f;
+    lm_tensor *y0 = lm_model_forward(&c, m, x), *yp = lm_model_forward(&c, p, x);
+    CHECK_CTX_OK(&c);
+    CHECK(y0 && yp && !memcmp(y0->data, yp->data, sizeof(float) * (size_t)n));
+    lm_tensor *nw = &lm_params_find(&m->params, "body.0.noise")->t;
+    for (int i = 0; i < 8; i++) nw->data[i] = 0.5f * (float)(i % 3) - 0.4f;
+    float sig[2] = {0.0f, 0.05f};
+    m->noise_sigma_items = sig; /* item 0 clean, item 1 at the level above */
+    lm_tensor *y1 = lm_model_forward(&c, m, x);
+    m->noise_sigma_items = NULL;
+    lm_tensor *y2 = lm_model_forward(&c, m, x); /* both at 0.05 */
+    CHECK_CTX_OK(&c);
+    double d0 = 0, d1 = 0, d2 = 0;
+    for (long i = 0; y1 && y2 && i < half; i++) {
+        d0 += fabs(y1->data[i] - yp->data[i]);               /* clean item: no bias */
+        d1 += fabs(y1->data[half + i] - y2->data[half + i]); /* same level, same output */
+        d2 += fabs(y2->data[i] - yp->data[i]);               /* level 0.05: the bias acts */
+    }
+    CHECK_MSG(d0 == 0 && d1 == 0 && d2 > 1e-3, "rt-8-nc: %g %g %g", d0, d1, d2);
+    lm_ctx_free(&c);
+    lm_model_free(m);
+    lm_model_free(p);
 }
 
 static void test_paper_han_count(void)
@@ -177,6 +226,9 @@ static void gradcheck_model(const char *preset, int H, int W)
     lm_param *g1 = lm_params_find(&m->params, "la.gamma"), *g2 = lm_params_find(&m->params, "csa.gamma");
     if (g1) g1->t.data[0] = 0.3f;
     if (g2) g2->t.data[0] = 0.7f;
+    lm_param *nz = lm_params_find(&m->params, "body.0.noise"); /* rt-N-nc: non-zero, a level */
+    for (int i = 0; nz && i < nz->t.shape[0]; i++) nz->t.data[i] = 0.3f - 0.1f * (float)i;
+    if (m->noise_input) m->noise_sigma = 0.04f;
     lm_ctx c;
     lm_ctx_init(&c, 2);
     lm_rng r;
@@ -221,6 +273,7 @@ static void test_gradcheck_models(void)
     gradcheck_model("srnet-tiny", 12, 16);
     gradcheck_model("rt-8-b2", 6, 8);
     gradcheck_model("rt-8-mf3", 6, 8);
+    gradcheck_model("rt-8-nc", 6, 8);
 }
 
 /* A training step (forward, loss, backward) allocates nothing from the system after the
@@ -267,6 +320,7 @@ int main(int argc, char **argv)
     RUN(test_unknown_preset);
     RUN(test_init_deterministic);
     RUN(test_forward_shapes);
+    RUN(test_noise_conditioned);
     RUN(test_gradcheck_models);
     RUN(test_training_steps_reuse_arena);
     if (argc < 2 || strcmp(argv[1], "--quick")) RUN(test_paper_han_count);
