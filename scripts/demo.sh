@@ -13,7 +13,7 @@ cd "$(dirname "$0")/.."
 out=${1:-demo_out}
 shared=${LM_SHARED_DIR:-../shared}
 scene="$shared/data/cave-256/cd_256"
-model=models/demo/rt16-lmmse.safetensors
+model=models/demo/rt16nc-lmmse.safetensors
 [ -d "$scene" ] || { echo "demo: scene $scene not found (set LM_SHARED_DIR)" >&2; exit 2; }
 
 rm -rf "$out"

@@ -14,7 +14,7 @@
 source "$(dirname "$0")/lib.sh"
 RSS=$3
 REG=$(cd "$(dirname "$0")/../fuzz/regress" && pwd)
-MODEL=$(cd "$(dirname "$0")/../.." && pwd)/models/demo/rt16-lmmse.safetensors
+MODEL=$(cd "$(dirname "$0")/../.." && pwd)/models/demo/rt16nc-lmmse.safetensors
 SLACK_KB=65536
 
 # a valid frame (the first of each hostile sequence)

@@ -91,7 +91,7 @@ PY
 
 # infer under mpirun: each rank a block of frames (aligned with the neighbours it reads
 # itself), one output folder: the same cubes as one process, bit for bit
-DEMO=$(dirname "$0")/../../models/demo/rt16-lmmse.safetensors
+DEMO=$(dirname "$0")/../../models/demo/rt16nc-lmmse.safetensors
 "$LM" simulate --input "$CAVE" --video --frames 5 --motion translate:60,0 --crop \
   --output "$T/vid" > /dev/null 2> "$T/err"
 check "simulate a video: $(tail -1 "$T/err")" [ $? -eq 0 ]
