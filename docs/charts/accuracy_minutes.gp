@@ -6,7 +6,7 @@ if (strstrt(GPVAL_TERMINALS, "pngcairo") > 0) {
 }
 set output "accuracy_minutes.png"
 set title "Held-out accuracy against training time (solid: noise 0 %, dashed: 10 %)"
-set xlabel "minutes of training (this machine)"
+set xlabel "CPU minutes of training (this machine)"
 set ylabel "PSNR (dB)"
 set grid
 set key outside right top
