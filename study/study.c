@@ -364,7 +364,9 @@ static lm_status eval_curve(const lm_study_cfg *cfg, const char *rundir, const h
         if (i < n) snprintf(d, sizeof d, "%s/%gmin", sdir, mins[i]);
         else snprintf(d, sizeof d, "%s", rundir);
         double m = i < n ? mins[i] : run_minutes(rundir); /* final: its training time */
-        if (i == n && n > 0 && m <= mins[n - 1] + 1e-6) break; /* the last snapshot is final */
+        /* the last snapshot is final: a run stopped at its budget (or the drop check) writes
+         * its checkpoint a few seconds of training after the snapshot of the same weights */
+        if (i == n && n > 0 && m <= mins[n - 1] + 0.1) break;
         json_t *lv = NULL;
         if (!(st = dir_levels(cfg, d, h, threads, &lv, err)))
             json_array_append_new(curve, json_pack("{s:f, s:o}", "minutes", m, "levels", lv));
