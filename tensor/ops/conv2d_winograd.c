@@ -22,7 +22,9 @@
  * What it is not: strided, dilated, grouped or non-3x3 convolution (conv2d_tiled.c). */
 #include "tensor/ops/gemm_internal.h"
 #include "tensor/ops/simd.h"
+#if defined(__AVX__) || defined(__AVX512F__)
 #include <immintrin.h>
+#endif
 #include <omp.h>
 #include <stdint.h>
 #include <stdlib.h>
