@@ -88,6 +88,10 @@ lm_status lm_cube_read_exr(const char *path, lm_cube *cube, lm_err *e);
 lm_status lm_cube_read_mat_with(const char *path, const lm_cube_read_opts *o, int resample,
                                 lm_cube *cube, lm_err *e);
 
+/* The name under which the .mat reader's child process runs (data/isolate.h); its helper program
+ * `lumosaic-reader` (cli/reader_main.c) calls this so that the reader is linked in. */
+const char *lm_mat_reader_name(void);
+
 /* Write a spectral OpenEXR: attribute spectralLayoutVersion = "1.0", one FLOAT channel per band
  * named `T.<wavelength>nm` with a comma and 6 decimals (e.g. "T.550,000000nm"), ZIP-compressed
  * (zlib level 1, lossless) scanlines. Wavelengths must be distinct; values finite and >= 0 (clamp network outputs first)

@@ -7,7 +7,8 @@
  * and validate the values; each band is resampled (resample.h) as it arrives, so a 519-band
  * cube is never held whole in the parent. See cube_io.h for the exact rules.
  * How: the file's structure is checked first (mat_check.c: truncation, v5 variables whose data
- * do not cover their dimensions); then matio runs in a child process (isolate.h), because
+ * do not cover their dimensions); then matio runs in a child process (isolate.h; the child is
+ * io_mat_child.c, in the helper program lumosaic-reader), because
  * libmatio/libhdf5 read out of bounds or allocate gigabytes on some corrupt files: the child
  * checks the variable's header against data/limits.h before reading it and sends the raw values
  * through a pipe; the parent checks the reply and converts it. A fault, a hang or an
@@ -15,7 +16,7 @@
  * What it is not: a writer, a reader of struct or cell variables, or the resampling method
  * (resample.c). */
 #include "data/cube_io.h"
-#include "data/isolate.h"
+#include "data/io_mat_wire.h"
 #include "data/limits.h"
 #include "data/mat_check.h"
 #include <hdf5.h>
@@ -25,6 +26,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #define KAUST_SCALE 4095.0
 #define CHILD_MEM_BASE (256u << 20) /* the child's address space beyond its data */
@@ -32,247 +34,6 @@
 #define CHUNK_VALUES 65536
 
 static const char *const mat_keys[] = {LM_MAT_CUBE_KEYS, NULL};
-static const char *const wl_keys[] = {LM_MAT_WL_KEYS, NULL};
-#define KEY_LEN 64
-
-/* ---- the child: matio ------------------------------------------------------------------ */
-
-typedef struct mat_job {
-    const char *path;
-    const char *key; /* the caller's, or NULL: the first of mat_keys */
-    lm_mat_kind kind;
-    long long file_bytes;
-} mat_job;
-
-/* The reply's fixed part; nbytes of raw values (class_type's C type, column-major) and nbands
- * doubles (the wavelength variable wl_key, if any) follow when status is LM_OK. */
-typedef struct mat_reply {
-    int32_t status, class_type, rank, nbands;
-    uint64_t dims[3], nbytes;
-    char key[KEY_LEN], wl_key[KEY_LEN];
-    char msg[480];
-} mat_reply;
-
-/* matio reports problems through a log function: keep the last message (the child has one
- * thread) so errors can quote it, and print nothing. */
-static char mat_last_msg[256];
-
-static void mat_log_quiet(int level, char *message)
-{
-    (void)level;
-    snprintf(mat_last_msg, sizeof mat_last_msg, "%s", message ? message : "");
-    char *nl = strchr(mat_last_msg, '\n');
-    if (nl) *nl = 0;
-}
-
-static const char *mat_why(void) { return mat_last_msg[0] ? mat_last_msg : "no detail"; }
-
-static int is_real_numeric(const matvar_t *v)
-{
-    return v->class_type >= MAT_C_DOUBLE && v->class_type <= MAT_C_UINT64 && !v->isComplex;
-}
-
-static size_t var_count(const matvar_t *v)
-{
-    size_t n = 1;
-    for (int d = 0; d < v->rank; d++) n *= v->dims[d];
-    return n;
-}
-
-/* Shape rules: H x W x B with 1 <= B <= LM_RESAMPLE_MAX_BANDS, the image within
- * LM_MAX_IMAGE_SIDE and the variable within LM_MAX_CUBE_VALUES. */
-static lm_status check_shape(int rank, const uint64_t *dims, const char *path, const char *key,
-                             lm_err *e)
-{
-    if (rank != 3)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' has %d dimensions, expected H x W x bands",
-                          path, key, rank);
-    uint64_t B = dims[2];
-    if (B < 1 || B > LM_RESAMPLE_MAX_BANDS)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' is %llu x %llu x %llu: wrong band count, "
-                          "expected 1 to %d bands", path, key, (unsigned long long)dims[0],
-                          (unsigned long long)dims[1], (unsigned long long)B,
-                          LM_RESAMPLE_MAX_BANDS);
-    if (dims[0] == 0 || dims[1] == 0 || dims[0] > LM_MAX_IMAGE_SIDE ||
-        dims[1] > LM_MAX_IMAGE_SIDE)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' has an invalid image size %llu x %llu",
-                          path, key, (unsigned long long)dims[0], (unsigned long long)dims[1]);
-    if ((double)dims[0] * (double)dims[1] * (double)B > (double)LM_MAX_CUBE_VALUES)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' is %llu x %llu x %llu, over the limit of "
-                          "%lld values", path, key, (unsigned long long)dims[0],
-                          (unsigned long long)dims[1], (unsigned long long)B, LM_MAX_CUBE_VALUES);
-    return LM_OK;
-}
-
-/* The variable's header, before its values are read: numeric, the shape rules, and no more
- * bytes than the file can hold. */
-static lm_status child_check_info(const mat_job *j, const matvar_t *v, const char *key,
-                                  lm_err *e)
-{
-    if (!is_real_numeric(v))
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: variable '%s' is not a real numeric array",
-                          j->path, key);
-    uint64_t dims[3] = {0, 0, 0};
-    for (int d = 0; d < v->rank && d < 3; d++) dims[d] = v->dims[d];
-    lm_status s = check_shape(v->rank, dims, j->path, key, e);
-    if (s != LM_OK) return s;
-    int plain = j->kind == LM_MAT_V5 && v->compression == MAT_COMPRESSION_NONE;
-    char what[96];
-    snprintf(what, sizeof what, "variable '%s' (%llu x %llu x %llu)", key,
-             (unsigned long long)dims[0], (unsigned long long)dims[1],
-             (unsigned long long)dims[2]);
-    return lm_limit_decoded(j->path, what,
-                            (double)var_count(v) * (double)Mat_SizeOfClass(v->class_type),
-                            j->file_bytes, plain ? "none" : "deflate",
-                            plain ? LM_RATIO_NONE : LM_RATIO_DEFLATE, e);
-}
-
-/* v7.3: the dataset's storage must be allocated and hold what its size needs (HDF5 reads
- * unallocated chunks as fill values, silently). */
-static lm_status child_check_hdf5(const mat_job *j, const char *key, double need, lm_err *e)
-{
-    hid_t f = H5Fopen(j->path, H5F_ACC_RDONLY, H5P_DEFAULT);
-    hid_t d = f >= 0 ? H5Dopen2(f, key, H5P_DEFAULT) : -1;
-    hid_t p = d >= 0 ? H5Dget_create_plist(d) : -1;
-    H5D_space_status_t st = H5D_SPACE_STATUS_ERROR;
-    int ok = d >= 0 && p >= 0 && H5Dget_space_status(d, &st) >= 0;
-    double stored = ok ? (double)H5Dget_storage_size(d) : 0.0;
-    int contiguous = ok && H5Pget_layout(p) == H5D_CONTIGUOUS;
-    if (p >= 0) H5Pclose(p);
-    if (d >= 0) H5Dclose(d);
-    if (f >= 0) H5Fclose(f);
-    if (!ok) return lm_err_set(e, LM_ERR_FORMAT, "%s: cannot open dataset '%s'", j->path, key);
-    if (st != H5D_SPACE_STATUS_ALLOCATED ||
-        stored * (contiguous ? 1.0 : LM_RATIO_DEFLATE) + LM_DECODE_SLACK < need)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: variable '%s' has %.0f bytes stored for %.0f "
-                          "bytes of values%s: corrupt or truncated", j->path, key, stored, need,
-                          st == H5D_SPACE_STATUS_ALLOCATED ? "" : " (partly unallocated)");
-    return LM_OK;
-}
-
-/* The first of keys the file holds, or NULL. */
-static const char *first_key(mat_t *m, const char *const *keys)
-{
-    for (int k = 0; keys[k]; k++) {
-        matvar_t *v = Mat_VarReadInfo(m, keys[k]);
-        if (v) {
-            Mat_VarFree(v);
-            return keys[k];
-        }
-    }
-    return NULL;
-}
-
-/* The error when the key is missing: list what the file holds. */
-static lm_status no_key(mat_t *m, const mat_job *j, lm_err *e)
-{
-    size_t n = 0;
-    char **dir = Mat_GetDir(m, &n); /* owned by m */
-    if (!dir || n == 0)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: no readable variable (truncated or corrupt "
-                          "file?): %s", j->path, mat_why());
-    char list[200] = "";
-    for (size_t i = 0; i < n && strlen(list) < sizeof list - 40; i++)
-        if (dir[i]) snprintf(list + strlen(list), sizeof list - strlen(list), "%s%.32s",
-                             i ? ", " : "", dir[i]);
-    if (j->key)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: no variable '%.64s'; the file holds: %s",
-                          j->path, j->key, list);
-    return lm_err_set(e, LM_ERR_FORMAT, "%s: no cube variable (cube, hsi, rad, ref, ...: "
-                      "choose one with --mat-key); the file holds: %s", j->path, list);
-}
-
-/* The wavelength variable (the first of wl_keys) as doubles, at most LM_RESAMPLE_MAX_BANDS. */
-static lm_status child_bands(mat_t *m, const char *path, double *wl, mat_reply *r, lm_err *e)
-{
-    r->nbands = 0;
-    const char *key = first_key(m, wl_keys);
-    if (!key) return LM_OK;
-    snprintf(r->wl_key, sizeof r->wl_key, "%s", key);
-    matvar_t *v = Mat_VarReadInfo(m, key);
-    size_t k = v ? var_count(v) : 0;
-    int ok = v && is_real_numeric(v) && k <= LM_RESAMPLE_MAX_BANDS;
-    if (v) Mat_VarFree(v);
-    v = ok ? Mat_VarRead(m, key) : NULL;
-    ok = v && v->data && var_count(v) == k && (size_t)v->nbytes >= k * Mat_SizeOfClass(v->class_type);
-#define TO_DOUBLE(T) for (size_t i = 0; i < k; i++) wl[i] = (double)((const T *)v->data)[i]; break
-    if (ok) switch (v->class_type) {
-        case MAT_C_DOUBLE: TO_DOUBLE(double);
-        case MAT_C_SINGLE: TO_DOUBLE(float);
-        case MAT_C_INT8: TO_DOUBLE(signed char);
-        case MAT_C_UINT8: TO_DOUBLE(unsigned char);
-        case MAT_C_INT16: TO_DOUBLE(short);
-        case MAT_C_UINT16: TO_DOUBLE(unsigned short);
-        case MAT_C_INT32: TO_DOUBLE(int);
-        case MAT_C_UINT32: TO_DOUBLE(unsigned int);
-        case MAT_C_INT64: TO_DOUBLE(long long);
-        case MAT_C_UINT64: TO_DOUBLE(unsigned long long);
-        default: ok = 0;
-        }
-#undef TO_DOUBLE
-    if (v) Mat_VarFree(v);
-    if (!ok) return lm_err_set(e, LM_ERR_FORMAT, "%s: '%s' is not a real numeric array of "
-                               "at most %d wavelengths", path, key, LM_RESAMPLE_MAX_BANDS);
-    r->nbands = (int)k;
-    return LM_OK;
-}
-
-/* Open, find the key, check the header, read the values (and `bands`). */
-static lm_status child_read(const mat_job *j, mat_t **m, matvar_t **v, mat_reply *r,
-                            double *wl, lm_err *e)
-{
-    if (j->kind == LM_MAT_V73 && H5Fis_hdf5(j->path) <= 0)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: a v7.3 .mat file that HDF5 does not "
-                          "recognise: corrupt", j->path);
-    if (!(*m = Mat_Open(j->path, MAT_ACC_RDONLY)))
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: not a readable MATLAB .mat file (corrupt or "
-                          "truncated?): %s", j->path, mat_why());
-    const char *one[2] = {j->key, NULL};
-    const char *key = first_key(*m, j->key ? one : mat_keys);
-    if (!key) return no_key(*m, j, e);
-    matvar_t *info = Mat_VarReadInfo(*m, key);
-    if (!info) return lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read variable '%s'", j->path, key);
-    lm_status s = child_check_info(j, info, key, e);
-    Mat_VarFree(info);
-    if (s != LM_OK) return s;
-    if (!(*v = Mat_VarRead(*m, key)))
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: cannot read variable '%s' (truncated or "
-                          "corrupt file?): %s", j->path, key, mat_why());
-    if ((s = child_check_info(j, *v, key, e)) != LM_OK) return s; /* may disagree with info */
-    size_t bytes = var_count(*v) * Mat_SizeOfClass((*v)->class_type);
-    if (!(*v)->data || (*v)->data_size != (int)Mat_SizeOfClass((*v)->class_type) ||
-        (size_t)(*v)->nbytes < bytes)
-        return lm_err_set(e, LM_ERR_FORMAT, "%s: variable '%s' has no or short data", j->path,
-                          key);
-    if (j->kind == LM_MAT_V73 && (s = child_check_hdf5(j, key, (double)bytes, e)) != LM_OK)
-        return s;
-    snprintf(r->key, sizeof r->key, "%s", key);
-    r->class_type = (*v)->class_type;
-    r->rank = (*v)->rank;
-    for (int d = 0; d < 3; d++) r->dims[d] = (*v)->dims[d];
-    r->nbytes = bytes;
-    return child_bands(*m, j->path, wl, r, e);
-}
-
-static void mat_child(int fd, void *arg)
-{
-    const mat_job *j = arg;
-    Mat_LogInitFunc("lumosaic", mat_log_quiet);
-    H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
-    mat_reply r;
-    memset(&r, 0, sizeof r);
-    lm_err e = {LM_OK, ""};
-    mat_t *m = NULL;
-    matvar_t *v = NULL;
-    double wl[LM_RESAMPLE_MAX_BANDS];
-    r.status = child_read(j, &m, &v, &r, wl, &e);
-    snprintf(r.msg, sizeof r.msg, "%s", e.msg);
-    if (lm_isolate_write(fd, &r, sizeof r) == 0 && r.status == LM_OK &&
-        lm_isolate_write(fd, wl, sizeof(double) * (size_t)r.nbands) == 0)
-        lm_isolate_write(fd, v->data, (size_t)r.nbytes);
-    if (v) Mat_VarFree(v);
-    if (m) Mat_Close(m);
-}
 
 /* ---- the parent: check the reply, convert ---------------------------------------------- */
 
@@ -385,7 +146,7 @@ static lm_status check_reply(mat_recv *q, lm_err *e)
     q->csize = r->class_type >= MAT_C_DOUBLE && r->class_type <= MAT_C_UINT64
                    ? Mat_SizeOfClass(r->class_type)
                    : 0;
-    lm_status s = check_shape(r->rank, r->dims, q->path, r->key, e);
+    lm_status s = lm_mat_check_shape(r->rank, r->dims, q->path, r->key, e);
     if (s != LM_OK) return s;
     if (q->csize == 0 || !r->key[0] || r->nbands < 0 || r->nbands > LM_RESAMPLE_MAX_BANDS ||
         r->nbytes != r->dims[0] * r->dims[1] * r->dims[2] * q->csize)
@@ -448,12 +209,23 @@ lm_status lm_cube_read_mat_with(const char *path, const lm_cube_read_opts *o, in
     double most = (double)j.file_bytes * LM_RATIO_DEFLATE;
     if (most > (double)LM_MAX_CUBE_VALUES * 8) most = (double)LM_MAX_CUBE_VALUES * 8;
     lm_isolate_limits lim = {CHILD_MEM_BASE + (size_t)(2 * most),
-                             CHILD_CPU_BASE + (int)(j.file_bytes >> 22)};
+                             CHILD_CPU_BASE + (int)(j.file_bytes >> 22), 0};
     mat_recv *q = calloc(1, sizeof *q);
     if (!q) return lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", path);
     q->path = path, q->o = o, q->resample = resample;
+    size_t plen = strlen(path) + 1, n = sizeof(mat_wire) + plen;
+    if (n > LM_ISOLATE_MAX_ARG)
+        return free(q), lm_err_set(e, LM_ERR_ARG, "%.200s...: the path is too long", path);
+    unsigned char *wire = calloc(1, n);
+    if (!wire) return free(q), lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", path);
+    mat_wire w = {(int32_t)j.kind, key != NULL, j.file_bytes, ""};
+    if (key) snprintf(w.key, sizeof w.key, "%s", key);
+    memcpy(wire, &w, sizeof w);
+    memcpy(wire + sizeof w, path, plen);
     lm_isolate c;
-    if ((s = lm_isolate_start(&c, mat_child, &j, &lim, path, e)) != LM_OK) return free(q), s;
+    s = lm_isolate_start(&c, &lm_mat_entry, wire, n, &lim, path, e);
+    free(wire);
+    if (s != LM_OK) return free(q), s;
     int early = receive(&c, q, cube, e, &s);
     lm_status end = lm_isolate_finish(&c, path, "reading the .mat file", early ? e : NULL);
     if (early) s = end != LM_OK ? end : lm_err_set(e, LM_ERR_FORMAT, "%s: the .mat reader's "

@@ -1,19 +1,29 @@
 /* isolate.c — a library call in a child process (see isolate.h).
- * What it is: fork + pipe, rlimits (address space, CPU) in the child, default fault handlers there
- * (so a fault ends the child, whatever handlers a sanitizer or fuzzer installed), a wall-clock
- * bound on the parent's reads (a child stuck on a lock it inherited is killed), and the child's
- * end turned into a status and a message.
- * What it is not: a general process API (no exec, no stdin/stdout plumbing). */
+ * What it is: fork, then exec of the entry's helper beside the running program, or failing that
+ * of /proc/self/exe, with the entry in the environment
+ * (LM_ISOLATE_ENTRY, _FD, _MEM, _ARG in hex); between the two the child makes only system calls
+ * (no allocation, no lock: any lock may be held by a thread that no longer exists). The new
+ * image's constructor (lm_isolate_serve) sets the limits that need a look at its own address
+ * space, default fault handlers (so a fault ends the child, whatever handlers a sanitizer or
+ * fuzzer installed), and runs the entry. The parent bounds each read of the reply by the wall
+ * clock (a child that never answers is killed) and turns the child's end into a status and a
+ * message.
+ * What it is not: a general process API (no stdin/stdout plumbing). */
+#define _GNU_SOURCE
 #include "data/isolate.h"
 #include <errno.h>
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
+#include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
+
+extern char **environ;
 
 #if defined(__SANITIZE_ADDRESS__)
 #define LM_ISOLATE_SANITIZED 1
@@ -22,6 +32,12 @@
 #define LM_ISOLATE_SANITIZED 1
 #endif
 #endif
+
+#define ENV_ENTRY "LM_ISOLATE_ENTRY="
+#define ENV_FD "LM_ISOLATE_FD="
+#define ENV_MEM "LM_ISOLATE_MEM="
+#define ENV_ARG "LM_ISOLATE_ARG="
+#define EXIT_BAD_START 97 /* the exec'd child could not read what it was given */
 
 /* The wall-clock time the parent waits for each piece of the reply: generous, for loaded
  * machines; the CPU limit ends a busy child long before. */
@@ -39,16 +55,30 @@ static size_t vm_bytes(void)
     return (size_t)pages * (size_t)sysconf(_SC_PAGESIZE);
 }
 
-static void child_setup(const lm_isolate_limits *lim)
+/* Fault signals to their default action (a fault ends the child). */
+static void default_faults(void)
 {
     const int faults[] = {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGPIPE, SIGXCPU};
     for (size_t i = 0; i < sizeof faults / sizeof faults[0]; i++) signal(faults[i], SIG_DFL);
+}
+
+static void limit_as(size_t bytes)
+{
+    if (bytes == 0) return;
     struct rlimit r;
-    if (lim->mem_bytes > 0) {
-        r.rlim_cur = r.rlim_max = (rlim_t)(vm_bytes() + lim->mem_bytes);
-        setrlimit(RLIMIT_AS, &r);
-    }
+    r.rlim_cur = r.rlim_max = (rlim_t)bytes;
+    setrlimit(RLIMIT_AS, &r);
+}
+
+/* The forked child, before exec: system calls only. */
+static void child_prepare(int fd, const lm_isolate_limits *lim)
+{
+    sigset_t none;
+    sigemptyset(&none);
+    sigprocmask(SIG_SETMASK, &none, NULL); /* the forking thread's mask is inherited */
+    fcntl(fd, F_SETFD, 0);                 /* the reply pipe survives exec */
     if (lim->cpu_seconds > 0) {
+        struct rlimit r;
         r.rlim_cur = (rlim_t)lim->cpu_seconds;
         r.rlim_max = (rlim_t)lim->cpu_seconds + 2;
         setrlimit(RLIMIT_CPU, &r);
@@ -64,37 +94,138 @@ static void child_setup(const lm_isolate_limits *lim)
 #endif
 }
 
-lm_status lm_isolate_start(lm_isolate *c, lm_isolate_fn fn, void *arg,
-                           const lm_isolate_limits *lim, const char *what, lm_err *e)
+/* The child's environment: the caller's without LM_ISOLATE_*, then the entry's four. NULL if
+ * out of memory. */
+static char **child_env(const lm_isolate_entry *en, int fd, size_t mem, const void *arg,
+                        size_t n, char **own)
+{
+    size_t k = 0;
+    for (char **v = environ; v && *v; v++) k++;
+    char **env = malloc(sizeof(char *) * (k + 5));
+    size_t len = strlen(ENV_ENTRY) + strlen(en->name) + 1;
+    char *s = malloc(len + 128 + strlen(ENV_ARG) + 2 * n + 1);
+    if (!env || !s) {
+        free(env);
+        free(s);
+        return NULL;
+    }
+    size_t m = 0;
+    for (char **v = environ; v && *v; v++)
+        if (strncmp(*v, "LM_ISOLATE_", 11) != 0) env[m++] = *v;
+    char *w = s;
+    env[m++] = w, w += sprintf(w, "%s%s", ENV_ENTRY, en->name) + 1;
+    env[m++] = w, w += sprintf(w, "%s%d", ENV_FD, fd) + 1;
+    env[m++] = w, w += sprintf(w, "%s%zu", ENV_MEM, mem) + 1;
+    env[m++] = w, w += sprintf(w, "%s", ENV_ARG);
+    static const char hex[] = "0123456789abcdef";
+    const unsigned char *a = arg;
+    for (size_t i = 0; i < n; i++) *w++ = hex[a[i] >> 4], *w++ = hex[a[i] & 15];
+    *w = 0;
+    env[m] = NULL;
+    *own = s;
+    return env;
+}
+
+/* dir(/proc/self/exe)/name if it is an executable file; "" otherwise. */
+static void helper_path(const char *name, char *out, size_t cap)
+{
+    out[0] = 0;
+    char self[4096];
+    ssize_t k = readlink("/proc/self/exe", self, sizeof self - 1);
+    if (k <= 0) return;
+    self[k] = 0;
+    char *slash = strrchr(self, '/');
+    if (!slash) return;
+    *slash = 0;
+    if ((size_t)snprintf(out, cap, "%s/%s", self, name) >= cap || access(out, X_OK) != 0)
+        out[0] = 0;
+}
+
+lm_status lm_isolate_start(lm_isolate *c, const lm_isolate_entry *entry, const void *arg,
+                           size_t n, const lm_isolate_limits *lim, const char *what, lm_err *e)
 {
     c->pid = -1;
     c->fd = -1;
     c->timed_out = 0;
+    if (n > LM_ISOLATE_MAX_ARG)
+        return lm_err_set(e, LM_ERR_ARG, "%s: the reader's argument is too long (%zu bytes)",
+                          what, n);
     int p[2];
-    if (pipe(p) != 0)
+    if (pipe2(p, O_CLOEXEC) != 0)
         return lm_err_set(e, LM_ERR_IO, "%s: cannot create a pipe: %s", what, strerror(errno));
+    char *strings = NULL;
+    char **env = lim->fork_only ? NULL : child_env(entry, p[1], lim->mem_bytes, arg, n, &strings);
+    if (!lim->fork_only && !env) {
+        close(p[0]), close(p[1]);
+        return lm_err_set(e, LM_ERR_NOMEM, "%s: out of memory", what);
+    }
+    size_t as_fallback = lim->mem_bytes ? vm_bytes() + lim->mem_bytes : 0;
+    char helper[4096] = "";
+    if (env && entry->helper) helper_path(entry->helper, helper, sizeof helper);
+    char *argv[] = {(char *)"lumosaic-reader", (char *)entry->name, NULL};
     fflush(NULL); /* nothing buffered may be written twice */
     pid_t pid = fork();
     if (pid < 0) {
-        close(p[0]);
-        close(p[1]);
+        int err = errno;
+        close(p[0]), close(p[1]);
+        free(env), free(strings);
         return lm_err_set(e, LM_ERR_IO, "%s: cannot start a reader process: %s", what,
-                          strerror(errno));
+                          strerror(err));
     }
     if (pid == 0) {
         close(p[0]);
-        child_setup(lim);
-        fn(p[1], arg);
+        child_prepare(p[1], lim);
+        if (env && helper[0]) execve(helper, argv, env);
+        if (env) execve("/proc/self/exe", argv, env);
+        /* no exec: the entry runs in the forked image (see isolate.h) */
+        default_faults();
+        limit_as(as_fallback);
+        entry->run(p[1], arg, n);
         close(p[1]);
         _exit(0);
     }
     close(p[1]);
+    free(env), free(strings);
     c->pid = pid;
     c->fd = p[0];
     c->wall_ms = 1000L * (lim->cpu_seconds > 0
                               ? WALL_SECONDS_PER_CPU_SECOND * lim->cpu_seconds + WALL_SECONDS_MIN
                               : 24 * 3600);
     return LM_OK;
+}
+
+static int hex_digit(char ch)
+{
+    if (ch >= '0' && ch <= '9') return ch - '0';
+    if (ch >= 'a' && ch <= 'f') return ch - 'a' + 10;
+    return -1;
+}
+
+void lm_isolate_serve(const lm_isolate_entry *entry)
+{
+    const char *name = getenv("LM_ISOLATE_ENTRY");
+    if (!name || strcmp(name, entry->name) != 0) return;
+    const char *fds = getenv("LM_ISOLATE_FD"), *mems = getenv("LM_ISOLATE_MEM");
+    const char *hexarg = getenv("LM_ISOLATE_ARG");
+    char *end = NULL;
+    long fd = fds ? strtol(fds, &end, 10) : -1;
+    if (fd < 0 || !end || *end || !mems || !hexarg) _exit(EXIT_BAD_START);
+    unsigned long long mem = strtoull(mems, &end, 10);
+    size_t len = strlen(hexarg);
+    if (*end || len % 2 || len / 2 > LM_ISOLATE_MAX_ARG) _exit(EXIT_BAD_START);
+    unsigned char *arg = malloc(len / 2 + 1);
+    if (!arg) _exit(EXIT_BAD_START);
+    for (size_t i = 0; i < len / 2; i++) {
+        int hi = hex_digit(hexarg[2 * i]), lo = hex_digit(hexarg[2 * i + 1]);
+        if (hi < 0 || lo < 0) _exit(EXIT_BAD_START);
+        arg[i] = (unsigned char)(hi << 4 | lo);
+    }
+    arg[len / 2] = 0;
+    default_faults();
+    if (mem) limit_as(vm_bytes() + (size_t)mem);
+    entry->run((int)fd, arg, len / 2);
+    close((int)fd);
+    _exit(0);
 }
 
 int lm_isolate_read(lm_isolate *c, void *buf, size_t n)
