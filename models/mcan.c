@@ -21,17 +21,17 @@ typedef struct mcan {
     ca_block blocks[2];
 } mcan;
 
-/* Mosaic attention: space-to-channel by the tile, squeeze-excite per (channel, phase). */
+/* Mosaic attention: squeeze-excite per (channel, phase); the phase ops (tensor/ops/phase.c) do
+ * what space-to-channel by the tile, pooling, scaling and channel-to-space did, in place. */
 static lm_tensor *mosaic_attention(lm_ctx *c, const mcan *n, const ma_layer *ma, lm_tensor *x)
 {
-    lm_tensor *u = lm_pixel_unshuffle(c, x, n->ty, n->tx);
-    if (!u) return NULL;
-    int B = u->shape[0], CP = u->shape[1];
-    lm_tensor *s = lm_reshape(c, lm_global_avg_pool(c, u), 2, (int[]){B, CP});
+    if (!x) return NULL;
+    lm_tensor *s = lm_phase_mean(c, x, n->ty, n->tx);
+    if (!s) return NULL;
+    s = lm_reshape(c, s, 2, (int[]){s->shape[0], s->shape[1]});
     s = lm_relu(c, lm_linear_forward(c, &ma->fc0, s));
     s = lm_sigmoid(c, lm_linear_forward(c, &ma->fc2, s));
-    s = lm_reshape(c, s, 4, (int[]){B, CP, 1, 1});
-    return lm_pixel_shuffle(c, lm_mul(c, u, s), n->ty, n->tx);
+    return lm_phase_scale(c, x, s, n->ty, n->tx);
 }
 
 /* A constant built on the host: moved to the ctx's device when the backend is not the CPU. */

@@ -30,6 +30,9 @@
     X(pixel_shuffle_fwd) X(pixel_shuffle_bwd) X(concat_fwd) X(concat_bwd) X(split_fwd)        \
     X(split_bwd) X(pad2d_fwd) X(pad2d_bwd) X(resize_bilinear_fwd) X(resize_bilinear_bwd)       \
     X(mosaic_upsample_fwd) X(mosaic_upsample_bwd)                                             \
+    /* ops/phase.c */                                                                         \
+    X(phase_mean_fwd) X(phase_mean_bwd) X(phase_scale_fwd) X(phase_scale_bwd_x)                \
+    X(phase_scale_bwd_s)                                                                      \
     /* ops/matmul.c */                                                                        \
     X(matmul_fwd) X(matmul_bwd_a) X(matmul_bwd_b) X(linear_fwd) X(linear_bwd_x)               \
     X(linear_bwd_w) X(linear_bwd_bias)                                                        \

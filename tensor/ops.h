@@ -90,6 +90,12 @@ lm_tensor *lm_conv3d(lm_ctx *c, lm_tensor *x, lm_tensor *w, lm_tensor *bias, int
 lm_tensor *lm_pixel_unshuffle(lm_ctx *c, lm_tensor *x, int fy, int fx);
 /* Inverse of lm_pixel_unshuffle. */
 lm_tensor *lm_pixel_shuffle(lm_ctx *c, lm_tensor *x, int fy, int fx);
+/* Per mosaic phase (tensor/ops/phase.c), x B x C x H x W with H, W multiples of fy, fx:
+ * B x (C fy fx) x 1 x 1 means, channel c fy fx + i fx + j = mean of x[c, i::fy, j::fx]
+ * (= global_avg_pool(pixel_unshuffle(x))), and x scaled by s (B x C fy fx, any shape of that
+ * size) at each phase (= pixel_shuffle(pixel_unshuffle(x) * s)). */
+lm_tensor *lm_phase_mean(lm_ctx *c, lm_tensor *x, int fy, int fx);
+lm_tensor *lm_phase_scale(lm_ctx *c, lm_tensor *x, lm_tensor *s, int fy, int fx);
 /* out.shape[i] = x.shape[perm[i]] (contiguous copy). */
 lm_tensor *lm_permute(lm_ctx *c, lm_tensor *x, const int *perm);
 lm_tensor *lm_transpose(lm_ctx *c, lm_tensor *x, int d0, int d1);

@@ -1,6 +1,7 @@
 /* test_opencl_move.c — CPU vs OpenCL agreement, forward and input gradients, of the data
  * movement ops: permute/transpose, pixel (un)shuffle, concat/split, pad2d (zero, reflect),
- * bilinear resize (both align_corners, up and down), phase-aware mosaic upsampling.
+ * bilinear resize (both align_corners, up and down), phase-aware mosaic upsampling, and the
+ * per-phase mean and scale of mosaic attention (sums in another order: atol 1e-5).
  * These only move values or take fixed weighted sums in the CPU's order, so tolerances are
  * tight (exact for pure moves; atol 1e-6, rtol 1e-5 for resize; atol 1e-5 for the long
  * weighted sums of the mosaic backward, where fused multiply-adds may differ). Exit 77 only when no OpenCL platform exists. */
@@ -23,6 +24,16 @@ static lm_tensor *f_shuffle(lm_ctx *c, lm_tensor *const *in, int n, void *u)
     const shuf_sel *s = u;
     return s->inverse ? lm_pixel_shuffle(c, in[0], s->fy, s->fx)
                       : lm_pixel_unshuffle(c, in[0], s->fy, s->fx);
+}
+
+/* phase_scale(x, s) * (1 + phase_mean(x) broadcast): both ops and both of phase_scale's inputs. */
+static lm_tensor *f_phase(lm_ctx *c, lm_tensor *const *in, int n, void *u)
+{
+    (void)n;
+    const shuf_sel *s = u;
+    lm_tensor *m = lm_phase_mean(c, in[0], s->fy, s->fx);
+    lm_tensor *y = lm_phase_scale(c, in[0], in[1], s->fy, s->fx);
+    return lm_phase_scale(c, y, lm_add_scalar(c, m, 1.0f), s->fy, s->fx);
 }
 
 typedef struct cat_sel { int dim; } cat_sel;
@@ -91,6 +102,13 @@ static void test_shuffle(void)
     check_agree(&k1, 10);
     check_agree(&k2, 11);
     check_agree(&k3, 12);
+    shuf_sel p34 = {3, 4, 0}, p21 = {2, 1, 0};
+    agree_case k4 = {"phase mean + scale 3x4", f_phase, &p34, 2, {4, 4},
+                     {SHAPE(2, 3, 9, 16), SHAPE(2, 36, 1, 1)}, .atol = 1e-5, .rtol = 1e-5};
+    agree_case k5 = {"phase mean + scale 2x1", f_phase, &p21, 2, {4, 2},
+                     {SHAPE(1, 5, 4, 7), SHAPE(1, 10)}, .atol = 1e-5, .rtol = 1e-5};
+    check_agree(&k4, 13);
+    check_agree(&k5, 14);
 }
 
 static void test_concat_split(void)

@@ -1,5 +1,7 @@
 /* test_shuffle.c — pixel_unshuffle / pixel_shuffle: reference values from an independent
- * index loop, round trips, gradients, strided inputs and error cases. */
+ * index loop, round trips, gradients, strided inputs and error cases; the per-phase mean and
+ * scale (tensor/ops/phase.c) against their definitions through the shuffles, by hand and with
+ * gradients. */
 #include "tests/check.h"
 
 /* Reference: out[b, ch*fy*fx + i*fx + j, y, x] = in[b, ch, fy*y + i, fx*x + j]. */
@@ -141,6 +143,66 @@ static void test_errors(void)
     lm_ctx_free(&c);
 }
 
+/* phase_mean = global_avg_pool(pixel_unshuffle), phase_scale = shuffle(unshuffle(x) * s). */
+static void test_phase_ops_match_shuffles(void)
+{
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_rng r;
+    lm_rng_seed(&r, 15);
+    const int fy[3] = {3, 2, 1}, fx[3] = {4, 1, 3}, H[3] = {66, 6, 5}, W[3] = {64, 5, 9};
+    for (int k = 0; k < 3; k++) {
+        lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){2, 5, H[k], W[k]}, &r, -1, 1);
+        int P = fy[k] * fx[k];
+        lm_tensor *s = lm_tensor_uniform(&c, 4, (int[]){2, 5 * P, 1, 1}, &r, 0, 2);
+        lm_tensor *u = lm_pixel_unshuffle(&c, x, fy[k], fx[k]);
+        lm_tensor *m = lm_phase_mean(&c, x, fy[k], fx[k]), *me = lm_global_avg_pool(&c, u);
+        lm_tensor *y = lm_phase_scale(&c, x, s, fy[k], fx[k]);
+        lm_tensor *ye = lm_pixel_shuffle(&c, lm_mul(&c, u, s), fy[k], fx[k]);
+        CHECK_CTX_OK(&c);
+        CHECK(m && me && lm_tensor_same_shape(m, me) && y && lm_tensor_same_shape(y, x));
+        if (m && me) CHECK_ARRAY_CLOSE(m->data, me->data, lm_tensor_numel(me), 1e-6, 1e-5);
+        if (y && ye) CHECK_ARRAY_CLOSE(y->data, ye->data, lm_tensor_numel(ye), 0, 0);
+    }
+    /* by hand: 1 x 1 x 2 x 4, factors 1 x 2: phase 0 = columns 0, 2; phase 1 = columns 1, 3 */
+    float v[8] = {0, 1, 2, 3, 4, 5, 6, 7}, sc[2] = {10, -1};
+    lm_tensor *x = lm_tensor_from(&c, 4, (int[]){1, 1, 2, 4}, v);
+    lm_tensor *m = lm_phase_mean(&c, x, 1, 2);
+    lm_tensor *y = lm_phase_scale(&c, x, lm_tensor_from(&c, 2, (int[]){1, 2}, sc), 1, 2);
+    float me[2] = {3, 4}, ye[8] = {0, -1, 20, -3, 40, -5, 60, -7};
+    if (m) CHECK_ARRAY_CLOSE(m->data, me, 2, 0, 0);
+    if (y) CHECK_ARRAY_CLOSE(y->data, ye, 8, 0, 0);
+    CHECK_CTX_OK(&c);
+    lm_ctx_free(&c);
+}
+
+static lm_tensor *fn_phase(lm_ctx *c, lm_tensor *const *in, int nin, void *u)
+{
+    (void)nin, (void)u;
+    lm_tensor *m = lm_phase_mean(c, in[0], 3, 2);
+    lm_tensor *y = lm_phase_scale(c, in[0], in[1], 3, 2);
+    return lm_phase_scale(c, y, lm_mul(c, m, m), 3, 2); /* both ops, every input */
+}
+
+static void test_phase_gradients(void)
+{
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_rng r;
+    lm_rng_seed(&r, 16);
+    lm_tensor *in[2] = {lm_tensor_uniform(&c, 4, (int[]){2, 2, 6, 4}, &r, -1, 1),
+                        lm_tensor_uniform(&c, 2, (int[]){2, 12}, &r, -1, 1)};
+    lm_tensor_set_requires_grad(in[0], 1);
+    lm_tensor_set_requires_grad(in[1], 1);
+    CHECK_GRAD(&c, fn_phase, in, 2, NULL, NULL);
+    lm_tensor *x = lm_tensor_zeros(&c, 4, (int[]){1, 2, 6, 8});
+    expect_fail(&c, lm_phase_mean(&c, x, 4, 4), LM_ERR_SHAPE, "phase_mean");
+    expect_fail(&c, lm_phase_mean(&c, x, 0, 2), LM_ERR_ARG, "phase_mean");
+    expect_fail(&c, lm_phase_scale(&c, x, lm_tensor_zeros(&c, 2, (int[]){1, 23}), 3, 4),
+                LM_ERR_SHAPE, "phase_scale");
+    lm_ctx_free(&c);
+}
+
 int main(void)
 {
     RUN(test_unshuffle_reference_3x4);
@@ -148,6 +210,8 @@ int main(void)
     RUN(test_round_trips);
     RUN(test_strided_input);
     RUN(test_gradients);
+    RUN(test_phase_ops_match_shuffles);
+    RUN(test_phase_gradients);
     RUN(test_errors);
     return check_summary();
 }
