@@ -7,6 +7,8 @@ set(LM_FUZZ_HARNESSES frame exr_cube mat cave safetensors checkpoint system run_
     study_config sidecar doe)
 if(LM_FUZZ)
   add_custom_target(fuzz)
+  # fuzz_mat's reader child (data/isolate.h): the small helper beside it, not the harness again
+  add_dependencies(fuzz lumosaic-reader)
 endif()
 foreach(h ${LM_FUZZ_HARNESSES})
   set(src ${CMAKE_SOURCE_DIR}/tests/fuzz/fuzz_${h}.c)
