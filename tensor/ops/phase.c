@@ -5,7 +5,8 @@
  *   lm_phase_scale(x, s, fy, fx) y[b, c, y, x] = x[b, c, y, x] s[b, c P + (y % fy) fx + x % fx]
  *                                (= pixel_shuffle(pixel_unshuffle(x) * s))
  * with P = fy fx, x B x C x H x W (H, W multiples of fy, fx) and s B x C P (x 1 x 1).
- * What it is: each kernel runs over the B C planes of x, one plane per thread at a time (static
+ * What it is: two loops, a per-phase sum (of x, or of gy x) and a per-phase broadcast (of a
+ * scale, times x or gy), over the B C planes of the image, one plane per thread at a time (static
  * schedule), so every output element is computed by one thread in a fixed order whatever the
  * thread count. A plane's rows are added into W-wide float column sums per row phase
  * (vectorised), and those folded into the P phase sums in double. The scale is applied through a
@@ -20,152 +21,131 @@
 
 #define PAR_MIN 32768L /* below this many elements, one thread */
 
-/* Per-thread scratch of n floats each, or NULL (out of memory: the kernel fails). */
-static float *scratch(int nthreads, size_t n) { return malloc(sizeof(float) * n * nthreads); }
+/* A kernel's view of the image: P phases, planes of H x W, threads, and per-thread scratch of
+ * fy W floats (freed by the kernel). */
+typedef struct pgeom {
+    int fy, fx, P, H, W, nth;
+    long planes, hw;
+    float *buf;
+} pgeom;
 
-/* The row patterns of one plane: pat[i W + x] = k s[(i fx + x % fx)], i < fy. */
-static void patterns(const float *s, int fy, int fx, int W, float k, float *pat)
+static int pgeom_init(lm_ctx *c, const lm_tensor *img, const void *params, const char *op,
+                      pgeom *g)
 {
-    for (int i = 0; i < fy; i++)
-        for (int x = 0; x < W; x++) pat[i * W + x] = k * s[i * fx + x % fx];
+    const lm_shuffle_params *p = params;
+    g->fy = p->fy, g->fx = p->fx, g->P = p->fy * p->fx;
+    g->H = img->shape[2], g->W = img->shape[3];
+    g->planes = (long)img->shape[0] * img->shape[1], g->hw = (long)g->H * g->W;
+    g->nth = g->planes * g->hw >= PAR_MIN ? lm_nthreads(c) : 1;
+    g->buf = malloc(sizeof(float) * (size_t)g->fy * g->W * g->nth);
+    return g->buf ? 0 : lm_ctx_fail(c, LM_ERR_NOMEM, "%s: out of memory", op);
 }
 
-/* t[0] = x, t[1] = y (B x C P x 1 x 1): y = per-phase means (writes =). */
-static int phase_mean_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
+/* y[k P + q] (= or +=, add) k_ * sum over phase q of plane k of a, or of a b when b != NULL.
+ * A plane's rows are added into W-wide column sums per row phase, folded in double. */
+static int phase_sums(lm_ctx *c, const lm_tensor *a, const lm_tensor *b, float *y, double k_,
+                      int add, const void *params, const char *op)
 {
-    (void)nt;
-    const lm_shuffle_params *p = params;
-    const lm_tensor *x = t[0];
-    const int fy = p->fy, fx = p->fx, P = fy * fx, H = x->shape[2], W = x->shape[3];
-    const long planes = (long)x->shape[0] * x->shape[1], hw = (long)H * W;
-    const int nth = planes * hw >= PAR_MIN ? lm_nthreads(c) : 1;
-    float *col = scratch(nth, (size_t)fy * W);
-    if (!col) return lm_ctx_fail(c, LM_ERR_NOMEM, "phase_mean: out of memory");
-    const double inv = 1.0 / (double)(hw / P);
-    float *y = t[1]->data;
-#pragma omp parallel for num_threads(nth) schedule(static)
-    for (long k = 0; k < planes; k++) {
-        float *cs = col + (size_t)omp_get_thread_num() * fy * W;
-        const float *xp = x->data + k * hw;
+    pgeom g;
+    if (pgeom_init(c, a, params, op, &g)) return c->status;
+    const int fy = g.fy, fx = g.fx, W = g.W, H = g.H;
+#pragma omp parallel for num_threads(g.nth) schedule(static)
+    for (long k = 0; k < g.planes; k++) {
+        float *cs = g.buf + (size_t)omp_get_thread_num() * fy * W;
+        const float *ap = a->data + k * g.hw, *bp = b ? b->data + k * g.hw : NULL;
         for (int i = 0; i < fy; i++) {
-            const float *r0 = xp + (long)i * W;
-            for (int u = 0; u < W; u++) cs[i * W + u] = r0[u];
-            for (int yy = i + fy; yy < H; yy += fy) {
-                const float *r = xp + (long)yy * W;
-                float *d = cs + i * W;
-                for (int u = 0; u < W; u++) d[u] += r[u];
+            float *d = cs + i * W;
+            for (int u = 0; u < W; u++) d[u] = 0.0f;
+            for (int yy = i; yy < H; yy += fy) {
+                const float *r = ap + (long)yy * W;
+                if (bp)
+                    for (int u = 0; u < W; u++) d[u] += r[u] * bp[(long)yy * W + u];
+                else
+                    for (int u = 0; u < W; u++) d[u] += r[u];
             }
         }
         for (int i = 0; i < fy; i++)
             for (int j = 0; j < fx; j++) {
                 double s = 0.0;
                 for (int u = j; u < W; u += fx) s += cs[i * W + u];
-                y[k * P + i * fx + j] = (float)(s * inv);
+                float v = (float)(s * k_), *o = y + k * g.P + i * fx + j;
+                *o = add ? *o + v : v;
             }
     }
-    free(col);
+    free(g.buf);
     return 0;
 }
 
-/* t[0] = gy (B x C P), t[1] = gx: gx += gy / (H W / P) at each phase's pixels. */
+/* d (= or +=, add) k_ s[plane P + phase] times a (or 1 when a == NULL), through row patterns
+ * (the phase scales of row phase i repeated along W). */
+static int phase_apply(lm_ctx *c, const lm_tensor *a, const float *s, lm_tensor *d, float k_,
+                       int add, const void *params, const char *op)
+{
+    pgeom g;
+    if (pgeom_init(c, d, params, op, &g)) return c->status;
+    const int fy = g.fy, fx = g.fx, W = g.W, H = g.H;
+#pragma omp parallel for num_threads(g.nth) schedule(static)
+    for (long k = 0; k < g.planes; k++) {
+        float *pat = g.buf + (size_t)omp_get_thread_num() * fy * W;
+        for (int i = 0; i < fy; i++)
+            for (int u = 0; u < W; u++) pat[i * W + u] = k_ * s[k * g.P + i * fx + u % fx];
+        float *dp = d->data + k * g.hw;
+        const float *ap = a ? a->data + k * g.hw : NULL;
+        for (int yy = 0; yy < H; yy++) {
+            const float *q = pat + (yy % fy) * W;
+            float *r = dp + (long)yy * W;
+            if (ap && add)
+                for (int u = 0; u < W; u++) r[u] += ap[(long)yy * W + u] * q[u];
+            else if (ap)
+                for (int u = 0; u < W; u++) r[u] = ap[(long)yy * W + u] * q[u];
+            else
+                for (int u = 0; u < W; u++) r[u] += q[u];
+        }
+    }
+    free(g.buf);
+    return 0;
+}
+
+static double per_pixel(const lm_tensor *img, const lm_shuffle_params *p)
+{
+    return (double)(p->fy * p->fx) / ((double)img->shape[2] * img->shape[3]);
+}
+
+/* t = {x, y (B x C P)}: y = per-phase means. */
+static int phase_mean_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
+{
+    (void)nt;
+    return phase_sums(c, t[0], NULL, t[1]->data, per_pixel(t[0], params), 0, params,
+                      "phase_mean");
+}
+
+/* t = {gy (B x C P), gx}: gx += gy / (H W / P) at each phase's pixels. */
 static int phase_mean_bwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const lm_shuffle_params *p = params;
-    const lm_tensor *gx = t[1];
-    const int fy = p->fy, fx = p->fx, P = fy * fx, H = gx->shape[2], W = gx->shape[3];
-    const long planes = (long)gx->shape[0] * gx->shape[1], hw = (long)H * W;
-    const int nth = planes * hw >= PAR_MIN ? lm_nthreads(c) : 1;
-    float *pats = scratch(nth, (size_t)fy * W);
-    if (!pats) return lm_ctx_fail(c, LM_ERR_NOMEM, "phase_mean: out of memory");
-    const float inv = (float)(1.0 / (double)(hw / P));
-#pragma omp parallel for num_threads(nth) schedule(static)
-    for (long k = 0; k < planes; k++) {
-        float *pat = pats + (size_t)omp_get_thread_num() * fy * W;
-        patterns(t[0]->data + k * P, fy, fx, W, inv, pat);
-        float *gp = gx->data + k * hw;
-        for (int yy = 0; yy < H; yy++) {
-            float *r = gp + (long)yy * W;
-            const float *q = pat + (yy % fy) * W;
-            for (int u = 0; u < W; u++) r[u] += q[u];
-        }
-    }
-    free(pats);
-    return 0;
+    return phase_apply(c, NULL, t[0]->data, t[1], (float)per_pixel(t[1], params), 1, params,
+                       "phase_mean");
 }
 
-/* y = x s (mode 0, writes =) or gx += gy s (mode 1): t = {x or gy, s, y or gx}. */
-static int scale_rows(lm_ctx *c, lm_tensor *const *t, const lm_shuffle_params *p, int add)
-{
-    const lm_tensor *x = t[0];
-    const int fy = p->fy, fx = p->fx, P = fy * fx, H = x->shape[2], W = x->shape[3];
-    const long planes = (long)x->shape[0] * x->shape[1], hw = (long)H * W;
-    const int nth = planes * hw >= PAR_MIN ? lm_nthreads(c) : 1;
-    float *pats = scratch(nth, (size_t)fy * W);
-    if (!pats) return lm_ctx_fail(c, LM_ERR_NOMEM, "phase_scale: out of memory");
-#pragma omp parallel for num_threads(nth) schedule(static)
-    for (long k = 0; k < planes; k++) {
-        float *pat = pats + (size_t)omp_get_thread_num() * fy * W;
-        patterns(t[1]->data + k * P, fy, fx, W, 1.0f, pat);
-        const float *xp = x->data + k * hw;
-        float *yp = t[2]->data + k * hw;
-        for (int yy = 0; yy < H; yy++) {
-            const float *r = xp + (long)yy * W, *q = pat + (yy % fy) * W;
-            float *d = yp + (long)yy * W;
-            if (add)
-                for (int u = 0; u < W; u++) d[u] += r[u] * q[u];
-            else
-                for (int u = 0; u < W; u++) d[u] = r[u] * q[u];
-        }
-    }
-    free(pats);
-    return 0;
-}
-
+/* t = {x, s, y}: y = x s. */
 static int phase_scale_fwd_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    return scale_rows(c, t, params, 0);
+    return phase_apply(c, t[0], t[1]->data, t[2], 1.0f, 0, params, "phase_scale");
 }
 
 /* t = {gy, s, gx}: gx += gy s. */
 static int phase_scale_bwd_x_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    return scale_rows(c, t, params, 1);
+    return phase_apply(c, t[0], t[1]->data, t[2], 1.0f, 1, params, "phase_scale");
 }
 
 /* t = {gy, x, gs}: gs[b, c P + q] += sum over phase q's pixels of gy x. */
 static int phase_scale_bwd_s_cpu(lm_ctx *c, lm_tensor *const *t, int nt, const void *params)
 {
     (void)nt;
-    const lm_shuffle_params *p = params;
-    const lm_tensor *gy = t[0];
-    const int fy = p->fy, fx = p->fx, P = fy * fx, H = gy->shape[2], W = gy->shape[3];
-    const long planes = (long)gy->shape[0] * gy->shape[1], hw = (long)H * W;
-    const int nth = planes * hw >= PAR_MIN ? lm_nthreads(c) : 1;
-    float *col = scratch(nth, (size_t)fy * W);
-    if (!col) return lm_ctx_fail(c, LM_ERR_NOMEM, "phase_scale: out of memory");
-    float *gs = t[2]->data;
-#pragma omp parallel for num_threads(nth) schedule(static)
-    for (long k = 0; k < planes; k++) {
-        float *cs = col + (size_t)omp_get_thread_num() * fy * W;
-        const float *a = gy->data + k * hw, *b = t[1]->data + k * hw;
-        for (int i = 0; i < fy; i++) {
-            float *d = cs + i * W;
-            for (int u = 0; u < W; u++) d[u] = a[(long)i * W + u] * b[(long)i * W + u];
-            for (int yy = i + fy; yy < H; yy += fy)
-                for (int u = 0; u < W; u++) d[u] += a[(long)yy * W + u] * b[(long)yy * W + u];
-        }
-        for (int i = 0; i < fy; i++)
-            for (int j = 0; j < fx; j++) {
-                double s = 0.0;
-                for (int u = j; u < W; u += fx) s += cs[i * W + u];
-                gs[k * P + i * fx + j] += (float)s;
-            }
-    }
-    free(col);
-    return 0;
+    return phase_sums(c, t[0], t[1], t[2]->data, 1.0, 1, params, "phase_scale");
 }
 
 LM_KERNEL(phase_mean_fwd, phase_mean_fwd_cpu);
