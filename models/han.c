@@ -1,7 +1,10 @@
 /* han.c — HAN (Holistic Attention Network), Lumosaic variant (models.md §2): head conv,
  * G residual groups of B RCABs (channel attention), body-tail conv, layer attention (LAM) over
  * the stack of group outputs, channel-spatial attention (CSAM) on the body output, fusion, global
- * residual and a 33-channel tail. Parameter names follow the official PyTorch module names. */
+ * residual and a 33-channel tail. Parameter names follow the official PyTorch module names.
+ * "han-tiny-nc" (cfg.noise_cond): the head's output also gets a per-channel bias proportional
+ * to the input's noise sd ("head.0.noise", feats values starting at 0; lm_model_noise_bias),
+ * the rt-N-nc conditioning, so one model can leave clean frames alone and denoise noisy ones. */
 #include "models/model.h"
 #include <math.h>
 #include <stdio.h>
@@ -16,6 +19,7 @@ typedef struct han {
     rgroup *groups;
     lm_tensor *lam_gamma, *csa_gamma;
     lm_tensor *csa_w, *csa_b;      /* Conv3d(1, 1, 3): 1x1x3x3x3 and 1 */
+    lm_tensor *noise;              /* "head.0.noise" (feats) or NULL */
 } han;
 
 /* CALayer: x * sigmoid(conv(relu(conv(gap(x))))) */
@@ -70,6 +74,7 @@ static lm_tensor *han_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
     han *h = m->impl;
     int G = h->cfg.groups, C = h->cfg.feats;
     lm_tensor *x0 = lm_conv_forward(c, &h->head, lm_mosaic_demosaic(c, &m->mosaic, raw));
+    if (h->noise) x0 = lm_add(c, x0, lm_model_noise_bias(c, m, h->noise, raw->shape[0]));
     lm_tensor **outs = lm_ctx_alloc(c, (size_t)(G + 1) * sizeof *outs);
     if (!x0 || !outs) return NULL;
     lm_tensor *r = x0;
@@ -159,6 +164,10 @@ lm_status lm_han_build(lm_model *m, lm_han_cfg cfg, lm_err *err)
     lm_params *p = &m->params;
     int C = cfg.feats, N = cfg.groups + 1;
     if (lm_conv3_declare(p, &h->head, "head.0", m->mosaic.nch, C, err)) return err->status;
+    if (cfg.noise_cond) {
+        if (!(h->noise = lm_params_add(p, "head.0.noise", 1, &C, 1, err))) return err->status;
+        m->noise_input = 1;
+    }
     for (int g = 0; g < cfg.groups; g++)
         if (declare_group(p, &h->groups[g], g, &cfg, err)) return err->status;
     char nm[LM_PARAM_NAME_MAX];

@@ -1,6 +1,7 @@
 /* model.c — the preset table (each row: builder and capability flags) and the common model
  * life cycle. What it is not: the families' layers (models/<family>.c). */
 #include "models/model.h"
+#include "tensor/device.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -57,35 +58,36 @@ static lm_status build_rt_nc(lm_model *m, const preset *ps, lm_err *err)
 #define B2 LM_CAP_TWO_BUCKETS
 static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rfD]" its flags,
                                    * "lmmse-b2" those of "lmmse-K-b2" */
-    {"linear", build_linear, CL, {0, 0, 0, 0}, 0},
-    {"lmmse", build_lmmse, CL | FIT, {0, 0, 0, 0}, 0},
-    {"lmmse-rf", build_lmmse, CL | FIT, {0, 0, 0, 0}, 256},
-    {"han-tiny", build_han, CL, {2, 2, 16, 4}, 0},
-    {"han-g3b2c32", build_han, CL, {3, 2, 32, 8}, 0},
-    {"han-small", build_han, CL, {4, 6, 64, 16}, 0},
-    {"han-paper", build_han, CL, {10, 18, 128, 16}, 0},
-    {"mcan-tiny", build_mcan, CL, {0, 0, 0, 0}, 16},
-    {"mcan", build_mcan, CL, {0, 0, 0, 0}, 64},
-    {"srnet-tiny", build_srnet, CL, {0, 0, 0, 0}, 8},
-    {"srnet", build_srnet, CL, {0, 0, 0, 0}, 32},
-    {"mst-tiny", build_mst, RGB | WHOLE, {0, 0, 0, 0}, 1},
-    {"mst", build_mst, RGB | WHOLE, {0, 0, 0, 0}, 3},
-    {"mst-coded", build_mst, WHOLE, {0, 0, 0, 0}, 3},
-    {"qdo-mst", build_mst, RGB | WHOLE | QDO, {0, 0, 0, 0}, 1}, /* MST++-tiny behind a DOE */
+    {"linear", build_linear, CL, {0, 0, 0, 0, 0}, 0},
+    {"lmmse", build_lmmse, CL | FIT, {0, 0, 0, 0, 0}, 0},
+    {"lmmse-rf", build_lmmse, CL | FIT, {0, 0, 0, 0, 0}, 256},
+    {"han-tiny", build_han, CL, {2, 2, 16, 4, 0}, 0},
+    {"han-tiny-nc", build_han, CL, {2, 2, 16, 4, 1}, 0}, /* noise-conditioned, as rt-N-nc */
+    {"han-g3b2c32", build_han, CL, {3, 2, 32, 8, 0}, 0},
+    {"han-small", build_han, CL, {4, 6, 64, 16, 0}, 0},
+    {"han-paper", build_han, CL, {10, 18, 128, 16, 0}, 0},
+    {"mcan-tiny", build_mcan, CL, {0, 0, 0, 0, 0}, 16},
+    {"mcan", build_mcan, CL, {0, 0, 0, 0, 0}, 64},
+    {"srnet-tiny", build_srnet, CL, {0, 0, 0, 0, 0}, 8},
+    {"srnet", build_srnet, CL, {0, 0, 0, 0, 0}, 32},
+    {"mst-tiny", build_mst, RGB | WHOLE, {0, 0, 0, 0, 0}, 1},
+    {"mst", build_mst, RGB | WHOLE, {0, 0, 0, 0, 0}, 3},
+    {"mst-coded", build_mst, WHOLE, {0, 0, 0, 0, 0}, 3},
+    {"qdo-mst", build_mst, RGB | WHOLE | QDO, {0, 0, 0, 0, 0}, 1}, /* MST++-tiny behind a DOE */
     /* the same with the DOE learned end to end (QDO proper; train/doe_opt.c) */
-    {"qdo-mst-doe", build_mst, RGB | WHOLE | QDO | LM_CAP_DOE_LEARNED, {0, 0, 0, 0}, 1},
-    {"rt-8", build_rt, CL, {0, 0, 0, 0}, 8},
-    {"rt-16", build_rt, CL, {0, 0, 0, 0}, 16},
+    {"qdo-mst-doe", build_mst, RGB | WHOLE | QDO | LM_CAP_DOE_LEARNED, {0, 0, 0, 0, 0}, 1},
+    {"rt-8", build_rt, CL, {0, 0, 0, 0, 0}, 8},
+    {"rt-16", build_rt, CL, {0, 0, 0, 0, 0}, 16},
     /* both buckets: the same families reading bucket 1 and bucket 0 (2 input planes) */
-    {"lmmse-b2", build_lmmse, CL | FIT | B2, {0, 0, 0, 0}, 0},
-    {"rt-8-b2", build_rt, CL | B2, {0, 0, 0, 0}, 8},
-    {"rt-16-b2", build_rt, CL | B2, {0, 0, 0, 0}, 16},
+    {"lmmse-b2", build_lmmse, CL | FIT | B2, {0, 0, 0, 0, 0}, 0},
+    {"rt-8-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 8},
+    {"rt-16-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 16},
     /* multi-frame: the current frame and its two neighbours aligned to it (3 input planes) */
-    {"rt-8-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0}, 8},
-    {"rt-16-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0}, 16},
+    {"rt-8-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0, 0}, 8},
+    {"rt-16-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0, 0}, 16},
     /* noise-conditioned: the branch also sees the input's estimated noise level */
-    {"rt-8-nc", build_rt_nc, CL, {0, 0, 0, 0}, 8},
-    {"rt-16-nc", build_rt_nc, CL, {0, 0, 0, 0}, 16},
+    {"rt-8-nc", build_rt_nc, CL, {0, 0, 0, 0, 0}, 8},
+    {"rt-16-nc", build_rt_nc, CL, {0, 0, 0, 0, 0}, 16},
 };
 #undef B2
 #undef CL
@@ -94,6 +96,23 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
 #undef WHOLE
 #undef QDO
 #define NPRESETS (int)(sizeof presets / sizeof presets[0])
+
+lm_tensor *lm_model_noise_bias(lm_ctx *c, const lm_model *m, lm_tensor *weights, int B)
+{
+    const float *items = m->noise_sigma_items;
+    if (!items && !(m->noise_sigma >= 0.0f)) {
+        lm_ctx_fail(c, LM_ERR_ARG, "%s: the input's noise level is not set (noise_sigma; the "
+                    "caller estimates it, data/noise_est.h)", m->preset);
+        return NULL;
+    }
+    lm_tensor *s = lm_tensor_new_on(c, LM_DEVICE_CPU, 4, (int[]){B, 1, 1, 1});
+    if (!s) return NULL;
+    for (int b = 0; b < B; b++)
+        s->data[b] = LM_NOISE_BIAS_SCALE * (items ? items[b] : m->noise_sigma);
+    if (c->backend->device != LM_DEVICE_CPU) s = lm_tensor_to_device(c, s);
+    int w = weights->shape[0];
+    return lm_mul(c, s, lm_reshape(c, weights, 4, (int[]){1, w, 1, 1}));
+}
 
 const char *const *lm_model_presets(void)
 {

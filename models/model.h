@@ -122,7 +122,9 @@ int lm_model_preset_known(const char *name);
 const char *const *lm_model_presets(void);
 
 /* ---- families (one file each) ---------------------------------------------------------- */
-typedef struct lm_han_cfg { int groups, blocks, feats, reduction; } lm_han_cfg;
+/* noise_cond 1 ("han-tiny-nc"): the head conv's output also gets a per-channel bias
+ * proportional to the input's noise sd ("head.0.noise"), as the rt-N-nc branch does. */
+typedef struct lm_han_cfg { int groups, blocks, feats, reduction, noise_cond; } lm_han_cfg;
 lm_status lm_han_build(lm_model *m, lm_han_cfg cfg, lm_err *err);
 /* MCAN, 3x4 adaptation (models.md §3.2); feats = 64 in the paper-size model. */
 lm_status lm_mcan_build(lm_model *m, int feats, lm_err *err);
@@ -171,5 +173,10 @@ lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *c
  * LM_CAP_MULTI_FRAME the two neighbour frames' planes (the demosaic is of plane 0). */
 /* noise_cond: "-nc" presets, a bias from the input's noise sd in the branch (noise_input). */
 lm_status lm_rt_build(lm_model *m, int width, int noise_cond, lm_err *err);
+/* The "-nc" presets' bias: B x w x 1 x 1 = LM_NOISE_BIAS_SCALE x each item's noise sd
+ * (m->noise_sigma_items, else m->noise_sigma) x weights (w values). NULL with the ctx error set
+ * when the model was given no noise level. */
+#define LM_NOISE_BIAS_SCALE 10.0f /* sd 0.1 (10 % of a bright frame) -> 1 */
+lm_tensor *lm_model_noise_bias(lm_ctx *c, const lm_model *m, lm_tensor *weights, int B);
 
 #endif

@@ -30,27 +30,6 @@ typedef struct rt_net {
     lm_tensor *noise; /* "body.0.noise" (width) or NULL */
 } rt_net;
 
-/* Scale of the noise sd in the bias: sd 0.1 (10 % of a bright frame) -> 1. */
-#define RT_NOISE_SCALE 10.0f
-
-/* B x width x 1 x 1: RT_NOISE_SCALE x the noise sd of each item x body.0.noise; NULL with
- * the ctx error set when the model was given no noise level. */
-static lm_tensor *noise_bias(lm_ctx *c, lm_model *m, const rt_net *n, int B)
-{
-    const float *items = m->noise_sigma_items;
-    if (!items && !(m->noise_sigma >= 0.0f)) {
-        lm_ctx_fail(c, LM_ERR_ARG, "%s: the input's noise level is not set (noise_sigma; the "
-                    "caller estimates it, data/noise_est.h)", m->preset);
-        return NULL;
-    }
-    lm_tensor *s = lm_tensor_new_on(c, LM_DEVICE_CPU, 4, (int[]){B, 1, 1, 1});
-    if (!s) return NULL;
-    for (int b = 0; b < B; b++) s->data[b] = RT_NOISE_SCALE * (items ? items[b] : m->noise_sigma);
-    if (c->backend->device != LM_DEVICE_CPU) s = lm_tensor_to_device(c, s);
-    int w = n->noise->shape[0];
-    return lm_mul(c, s, lm_reshape(c, n->noise, 4, (int[]){1, w, 1, 1}));
-}
-
 static lm_tensor *rt_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
 {
     rt_net *n = m->impl;
@@ -60,7 +39,7 @@ static lm_tensor *rt_forward(lm_ctx *c, lm_model *m, lm_tensor *raw)
     lm_tensor *x = lm_mosaic_demosaic(c, &m->mosaic, b1);
     lm_tensor *xr[2] = {x, raw};
     lm_tensor *f = lm_conv_forward(c, &n->body0, lm_concat(c, xr, 2, 1));
-    if (n->noise) f = lm_add(c, f, noise_bias(c, m, n, raw->shape[0]));
+    if (n->noise) f = lm_add(c, f, lm_model_noise_bias(c, m, n->noise, raw->shape[0]));
     f = lm_relu(c, f);
     lm_tensor *xf[2] = {x, lm_relu(c, lm_conv_forward(c, &n->body2, f))};
     return lm_conv_forward(c, &n->head, lm_concat(c, xf, 2, 1));

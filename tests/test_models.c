@@ -51,17 +51,26 @@ static void test_parameter_counts(void)
     /* the -nc form: one noise weight per branch channel */
     check_count("rt-8-nc", 2221 + 8, 2221 + 8);
     check_count("rt-16-nc", 5165 + 16, 5165 + 16);
+    check_count("han-tiny-nc", 44223 + 16, 44223 + 16); /* one per head channel */
 }
 
-/* rt-N-nc: refused without a noise level; with zero noise weights (the start) it is its plain
- * rt-N twin (same seed) at any level; with non-zero ones each item's level reaches its own
+/* The noise weights of a "-nc" model (rt-N-nc: body.0.noise, han-tiny-nc: head.0.noise). */
+static lm_tensor *noise_weights(lm_model *m)
+{
+    lm_param *p = lm_params_find(&m->params, "body.0.noise");
+    if (!p) p = lm_params_find(&m->params, "head.0.noise");
+    return p ? &p->t : NULL;
+}
+
+/* A "-nc" preset: refused without a noise level; with zero noise weights (the start) it is its
+ * plain twin (same seed) at any level; with non-zero ones each item's level reaches its own
  * output only. */
-static void test_noise_conditioned(void)
+static void check_noise_conditioned(const char *nc, const char *plain)
 {
     lm_mosaic mo;
     test_mosaic(&mo);
     lm_err e = {0};
-    lm_model *m = lm_model_create("rt-8-nc", &mo, 3, &e), *p = lm_model_create("rt-8", &mo, 3, &e);
+    lm_model *m = lm_model_create(nc, &mo, 3, &e), *p = lm_model_create(plain, &mo, 3, &e);
     CHECK_MSG(m && p, "%s", e.msg);
     if (!m || !p) return;
     CHECK(m->noise_input && !p->noise_input);
@@ -78,9 +87,10 @@ static void test_noise_conditioned(void)
     m->noise_sigma = 0.05f;
     lm_tensor *y0 = lm_model_forward(&c, m, x), *yp = lm_model_forward(&c, p, x);
     CHECK_CTX_OK(&c);
-    CHECK(y0 && yp && !memcmp(y0->data, yp->data, sizeof(float) * (size_t)n));
-    lm_tensor *nw = &lm_params_find(&m->params, "body.0.noise")->t;
-    for (int i = 0; i < 8; i++) nw->data[i] = 0.5f * (float)(i % 3) - 0.4f;
+    CHECK_MSG(y0 && yp && !memcmp(y0->data, yp->data, sizeof(float) * (size_t)n), "%s", nc);
+    lm_tensor *nw = noise_weights(m);
+    CHECK(nw != NULL);
+    for (int i = 0; nw && i < nw->shape[0]; i++) nw->data[i] = 0.5f * (float)(i % 3) - 0.4f;
     float sig[2] = {0.0f, 0.05f};
     m->noise_sigma_items = sig; /* item 0 clean, item 1 at the level above */
     lm_tensor *y1 = lm_model_forward(&c, m, x);
@@ -93,10 +103,16 @@ static void test_noise_conditioned(void)
         d1 += fabs(y1->data[half + i] - y2->data[half + i]); /* same level, same output */
         d2 += fabs(y2->data[i] - yp->data[i]);               /* level 0.05: the bias acts */
     }
-    CHECK_MSG(d0 == 0 && d1 == 0 && d2 > 1e-3, "rt-8-nc: %g %g %g", d0, d1, d2);
+    CHECK_MSG(d0 == 0 && d1 == 0 && d2 > 1e-3, "%s: %g %g %g", nc, d0, d1, d2);
     lm_ctx_free(&c);
     lm_model_free(m);
     lm_model_free(p);
+}
+
+static void test_noise_conditioned(void)
+{
+    check_noise_conditioned("rt-8-nc", "rt-8");
+    check_noise_conditioned("han-tiny-nc", "han-tiny");
 }
 
 static void test_paper_han_count(void)
@@ -226,8 +242,8 @@ static void gradcheck_model(const char *preset, int H, int W)
     lm_param *g1 = lm_params_find(&m->params, "la.gamma"), *g2 = lm_params_find(&m->params, "csa.gamma");
     if (g1) g1->t.data[0] = 0.3f;
     if (g2) g2->t.data[0] = 0.7f;
-    lm_param *nz = lm_params_find(&m->params, "body.0.noise"); /* rt-N-nc: non-zero, a level */
-    for (int i = 0; nz && i < nz->t.shape[0]; i++) nz->t.data[i] = 0.3f - 0.1f * (float)i;
+    lm_tensor *nz = noise_weights(m); /* "-nc": non-zero, and a level */
+    for (int i = 0; nz && i < nz->shape[0]; i++) nz->data[i] = 0.3f - 0.1f * (float)(i % 7);
     if (m->noise_input) m->noise_sigma = 0.04f;
     lm_ctx c;
     lm_ctx_init(&c, 2);
@@ -274,6 +290,7 @@ static void test_gradcheck_models(void)
     gradcheck_model("rt-8-b2", 6, 8);
     gradcheck_model("rt-8-mf3", 6, 8);
     gradcheck_model("rt-8-nc", 6, 8);
+    gradcheck_model("han-tiny-nc", 6, 8);
 }
 
 /* A training step (forward, loss, backward) allocates nothing from the system after the

@@ -1,6 +1,6 @@
 /* test_opencl_models.c — CPU vs OpenCL agreement of whole models: for linear, han-tiny (LAM and
  * CSAM scales set non-zero), mcan-tiny and srnet-tiny (with a response map), rt-8, rt-16, lmmse,
- * lmmse-5-rf6, residuals rt-8 and rt-8-nc on lmmse-5, the two-bucket lmmse-5-b2 and rt-8-b2 on it, and
+ * lmmse-5-rf6, residuals rt-8, rt-8-nc and han-tiny-nc on lmmse-5, the two-bucket lmmse-5-b2 and rt-8-b2 on it, and
  * the RGB baseline mst-tiny (3 channels in, 31 out; attention over the whole input), the same
  * weights
  * and input run forward + L1 loss + backward on a CPU ctx and on an OpenCL ctx (parameters
@@ -144,8 +144,9 @@ static void check_model_on(const char *preset, const char *base, int B, int H, i
     lm_param *g2 = lm_params_find(&m->params, "csa.gamma");
     if (g1) g1->t.data[0] = 0.3f;
     if (g2) g2->t.data[0] = 0.7f;
-    lm_param *nz = lm_params_find(&m->params, "body.0.noise"); /* rt-N-nc: the noise bias acts */
-    for (int i = 0; nz && i < nz->t.shape[0]; i++) nz->t.data[i] = 0.4f - 0.1f * (float)i;
+    lm_param *nz = lm_params_find(&m->params, "body.0.noise"); /* "-nc": the noise bias acts */
+    if (!nz) nz = lm_params_find(&m->params, "head.0.noise");
+    for (int i = 0; nz && i < nz->t.shape[0]; i++) nz->t.data[i] = 0.4f - 0.1f * (float)(i % 9);
     int shape[4] = {B, m->in_channels, H, W}; /* 3 for the RGB baseline (MST++) */
     long nx = (long)B * m->in_channels * H * W, ny = (long)B * H * W * m->out_channels;
     float *x = malloc((size_t)nx * sizeof(float)), *target = malloc((size_t)ny * sizeof(float));
@@ -188,6 +189,7 @@ static void test_models(void)
     check_model("lmmse-5-b2", 2, 12, 16); /* both buckets: two input planes */
     check_model_on("rt-8-b2", "lmmse-5-b2", 2, 12, 16);
     check_model_on("rt-8-nc", "lmmse-5", 2, 12, 16); /* the noise level as a bias */
+    check_model_on("han-tiny-nc", "lmmse-5", 2, 12, 16);
     check_model("linear", 2, 12, 16);
     check_model("han-tiny", 2, 12, 16);
     check_model("mcan-tiny", 2, 12, 16);
