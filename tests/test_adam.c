@@ -1,6 +1,8 @@
 /* test_adam.c — Adam against hand-computed updates; schedules; convergence on a quadratic. */
 #include "train/adam.h"
 #include "tests/check.h"
+#include <math.h>
+#include <string.h>
 
 static void setup(lm_params *p, int n)
 {
@@ -119,11 +121,65 @@ static void test_converges_on_quadratic(void)
     lm_params_free(&p);
 }
 
+/* The weight average: started at the initial weights, a = d a + (1 - d) w after each update
+ * with d = min(ema, (1 + t) / (10 + t)) for update t (0-based); frozen parameters untouched;
+ * the swap exchanges the two copies exactly; decays outside [0, 1) refused. */
+static void test_ema(void)
+{
+    lm_params p;
+    setup(&p, 3);
+    lm_param *w = lm_params_find(&p, "w"), *fz = lm_params_find(&p, "frozen");
+    for (int i = 0; i < 3; i++) w->t.data[i] = 0.5f * (float)i - 1.0f;
+    lm_tensor_fill(&fz->t, 7.0f);
+    lm_adam_cfg cfg;
+    lm_adam_default_cfg(&cfg);
+    cfg.lr = 0.05f;
+    cfg.ema = 0.5f;
+    lm_adam o;
+    lm_err e = {0};
+    CHECK(lm_adam_init(&o, &p, &cfg, &e) == LM_OK && o.ema);
+    if (!o.ema) return;
+    double a[3];
+    for (int i = 0; i < 3; i++) a[i] = w->t.data[i];
+    for (int t = 0; t < 20; t++) { /* d = 0.1, 0.18, ..., then 0.5 from t = 8 */
+        for (int i = 0; i < 3; i++) w->g.data[i] = (float)(i + 1) * (t % 3 ? 1.0f : -0.5f);
+        lm_adam_step(&o, &p, 1);
+        double d = (1.0 + t) / (10.0 + t);
+        if (d > 0.5) d = 0.5;
+        for (int i = 0; i < 3; i++) a[i] = d * a[i] + (1 - d) * w->t.data[i];
+    }
+    float wv[3], av[3];
+    for (int i = 0; i < 3; i++) wv[i] = w->t.data[i], av[i] = o.ema[w->offset + i];
+    float want[3] = {(float)a[0], (float)a[1], (float)a[2]};
+    CHECK_ARRAY_CLOSE(av, want, 3, 1e-5, 0);
+    CHECK(memcmp(av, wv, sizeof wv) != 0);
+    lm_adam_ema_swap(&o, &p);
+    CHECK(!memcmp(w->t.data, av, sizeof av) && !memcmp(o.ema + w->offset, wv, sizeof wv));
+    lm_adam_ema_swap(&o, &p);
+    CHECK(!memcmp(w->t.data, wv, sizeof wv) && !memcmp(o.ema + w->offset, av, sizeof av));
+    CHECK(fz->t.data[0] == 7.0f && fz->t.data[2] == 7.0f);
+    lm_adam_free(&o);
+    const float bad[] = {1.0f, -0.1f, NAN};
+    for (int k = 0; k < 3; k++) {
+        cfg.ema = bad[k];
+        lm_err e2 = {0};
+        CHECK(lm_adam_init(&o, &p, &cfg, &e2) == LM_ERR_ARG && strstr(e2.msg, "ema"));
+        lm_adam_free(&o);
+    }
+    cfg.ema = 0; /* none: no second copy, the swap is a no-op */
+    CHECK(lm_adam_init(&o, &p, &cfg, &e) == LM_OK && !o.ema);
+    lm_adam_ema_swap(&o, &p);
+    CHECK(!memcmp(w->t.data, wv, sizeof wv));
+    lm_adam_free(&o);
+    lm_params_free(&p);
+}
+
 int main(void)
 {
     RUN(test_first_steps_by_hand);
     RUN(test_weight_decay_variants);
     RUN(test_schedules);
     RUN(test_converges_on_quadratic);
+    RUN(test_ema);
     return check_summary();
 }

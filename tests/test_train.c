@@ -240,6 +240,83 @@ static void test_resume_bitwise(void)
     free(ta), free(tb);
 }
 
+/* A moving average of the weights (--ema): the weights being trained follow the same path as
+ * without it (bitwise), the checkpoint's model is the average, and an interrupted, resumed run
+ * ends with the same tensors and log as an uninterrupted one; another decay is refused. */
+static void test_ema_run(void)
+{
+    if (!g_have_mosaic) return;
+    char p[300], a[300], b[300];
+    tmpdir_path(p, sizeof p, "ema-plain");
+    tmpdir_path(a, sizeof a, "ema-full");
+    tmpdir_path(b, sizeof b, "ema-interrupted");
+    mem_src s = {&g_mosaic, 12, 12, 0, 0, 3};
+    lm_train_source src = source_of(&s);
+    lm_train_cfg cp, ca, cb;
+    small_cfg(&cp, "han-tiny", p);
+    small_cfg(&ca, "han-tiny", a);
+    small_cfg(&cb, "han-tiny", b);
+    ca.ema = cb.ema = 0.9f;
+    lm_err e = {0};
+    lm_train_result rp, ra, r;
+    lm_model *m = make_model("han-tiny", 5);
+    CHECK_MSG(lm_train_run(&cp, m, &src, NULL, &rp, &e) == LM_OK, "%s", e.msg);
+    lm_model_free(m);
+    m = make_model("han-tiny", 5);
+    CHECK_MSG(lm_train_run(&ca, m, &src, NULL, &ra, &e) == LM_OK, "%s", e.msg);
+    lm_model *mp = NULL, *ma = NULL;
+    lm_adam op = {0}, oa = {0};
+    long itp = 0, ita = 0;
+    if (m && load_run(&cp, p, &mp, &op, &itp) && load_run(&ca, a, &ma, &oa, &ita) && oa.ema) {
+        size_t n = ma->params.total * sizeof(float);
+        /* the caller's model after the run is the average, as the file holds it */
+        CHECK(!memcmp(m->params.data, ma->params.data, n));
+        CHECK_MSG(memcmp(ma->params.data, mp->params.data, n), "the average is the weights");
+        CHECK_MSG(!memcmp(oa.ema, mp->params.data, n), "the trained weights left their path");
+        CHECK(!memcmp(oa.m, op.m, n) && !memcmp(oa.v, op.v, n));
+        /* validation scores the average: not the plain run's figure */
+        CHECK(ra.validated && rp.validated && ra.val.psnr != rp.val.psnr);
+    }
+    lm_adam_free(&op), lm_adam_free(&oa);
+    lm_model_free(mp), lm_model_free(ma), lm_model_free(m);
+    ma = NULL, oa = (lm_adam){0};
+    m = make_model("han-tiny", 5);
+    lm_train_opts stop = {.stop_after = 3};
+    CHECK_MSG(lm_train_run(&cb, m, &src, &stop, &r, &e) == LM_OK, "%s", e.msg);
+    lm_model_free(m);
+    lm_train_cfg other = cb;
+    other.ema = 0.99f;
+    m = make_model("han-tiny", 77);
+    lm_train_opts res = {.resume = b};
+    lm_err e2 = {0};
+    CHECK(lm_train_run(&other, m, &src, &res, &r, &e2) == LM_ERR_ARG && strstr(e2.msg, "ema"));
+    lm_model_free(m);
+    m = make_model("han-tiny", 77);
+    CHECK_MSG(lm_train_run(&cb, m, &src, &res, &r, &e) == LM_OK, "%s", e.msg);
+    CHECK(r.iterations_done == 6);
+    lm_model_free(m);
+    /* the files differ in their "seconds"; their tensors must not */
+    lm_model *mb = NULL;
+    lm_adam ob = {0};
+    long itb = 0;
+    if (load_run(&ca, a, &ma, &oa, &ita) && load_run(&cb, b, &mb, &ob, &itb) && oa.ema &&
+        ob.ema) {
+        size_t n = ma->params.total * sizeof(float);
+        CHECK(ita == 6 && itb == 6 && oa.step == 6 && ob.step == 6);
+        CHECK_MSG(!memcmp(ma->params.data, mb->params.data, n), "resumed average differs");
+        CHECK_MSG(!memcmp(oa.ema, ob.ema, n), "resumed trained weights differ");
+        CHECK(!memcmp(oa.m, ob.m, n) && !memcmp(oa.v, ob.v, n));
+    }
+    lm_adam_free(&oa), lm_adam_free(&ob);
+    lm_model_free(ma), lm_model_free(mb);
+    char la[320], lb[320];
+    snprintf(la, sizeof la, "%s/log.csv", a);
+    snprintf(lb, sizeof lb, "%s/log.csv", b);
+    char *ta = slurp(la), *tb = slurp(lb);
+    CHECK(ta && tb && !strcmp(ta, tb) && strstr(ta, "\n6,"));
+    free(ta), free(tb);
+}
+
 /* ---- NaN stop -------------------------------------------------------------------------- */
 static void test_nan_stop_keeps_checkpoint(void)
 {
@@ -502,6 +579,7 @@ int main(void)
     RUN(test_patch_not_on_tile);
     RUN(test_overfit_one_batch);
     RUN(test_resume_bitwise);
+    RUN(test_ema_run);
     RUN(test_nan_stop_keeps_checkpoint);
     RUN(test_profile_han_paper);
     RUN(test_profile_transposed_and_errors);

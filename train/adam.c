@@ -26,7 +26,15 @@ lm_status lm_adam_init(lm_adam *o, const lm_params *p, const lm_adam_cfg *cfg, l
     o->n = p->total;
     o->m = calloc(o->n ? o->n : 1, sizeof(float));
     o->v = calloc(o->n ? o->n : 1, sizeof(float));
-    if (!o->m || !o->v) {
+    if (!(cfg->ema >= 0 && cfg->ema < 1)) {
+        lm_adam_free(o);
+        return lm_err_set(err, LM_ERR_ARG, "adam: need 0 <= ema < 1 (got %g)", (double)cfg->ema);
+    }
+    if (cfg->ema > 0 && (o->ema = calloc(o->n ? o->n : 1, sizeof(float))))
+        for (int i = 0; i < p->n; i++) /* the average starts at the initial weights */
+            memcpy(o->ema + p->items[i]->offset, p->items[i]->t.data,
+                   (size_t)lm_tensor_numel(&p->items[i]->t) * sizeof(float));
+    if (!o->m || !o->v || (cfg->ema > 0 && !o->ema)) {
         lm_adam_free(o);
         return lm_err_set(err, LM_ERR_NOMEM, "adam: out of memory for %zu moments", p->total);
     }
@@ -37,7 +45,8 @@ void lm_adam_free(lm_adam *o)
 {
     free(o->m);
     free(o->v);
-    o->m = o->v = NULL;
+    free(o->ema);
+    o->m = o->v = o->ema = NULL;
 }
 
 float lm_adam_lr(const lm_adam_cfg *c, long step)
@@ -70,11 +79,15 @@ void lm_adam_step(lm_adam *o, lm_params *p, int nthreads)
     float step_size = (float)(lr / bc1), inv_sqrt_bc2 = (float)(1.0 / sqrt(bc2));
     float b1 = c->beta1, b2 = c->beta2, eps = c->eps, wd = c->weight_decay;
     int decoupled = c->decoupled;
+    /* the average's decay, lower while it has seen few updates (its start is the init) */
+    double ramp = (double)o->step / (double)(o->step + 9);
+    float d = (float)(c->ema < ramp ? c->ema : ramp);
     for (int i = 0; i < p->n; i++) {
         const lm_param *e = p->items[i];
         if (!e->trainable) continue;
         long n = lm_tensor_numel(&e->t);
         float *w = e->t.data, *g = e->g.data, *m = o->m + e->offset, *v = o->v + e->offset;
+        float *a = o->ema ? o->ema + e->offset : NULL;
 #pragma omp parallel for num_threads(nthreads) schedule(static) if (n > 65536)
         for (long k = 0; k < n; k++) {
             float gk = g[k];
@@ -83,6 +96,22 @@ void lm_adam_step(lm_adam *o, lm_params *p, int nthreads)
             m[k] = b1 * m[k] + (1.0f - b1) * gk;
             v[k] = b2 * v[k] + (1.0f - b2) * gk * gk;
             w[k] -= step_size * m[k] / (sqrtf(v[k]) * inv_sqrt_bc2 + eps);
+            if (a) a[k] = d * a[k] + (1.0f - d) * w[k];
+        }
+    }
+}
+
+void lm_adam_ema_swap(lm_adam *o, lm_params *p)
+{
+    if (!o->ema) return;
+    for (int i = 0; i < p->n; i++) {
+        const lm_param *e = p->items[i];
+        if (!e->trainable) continue;
+        float *w = e->t.data, *a = o->ema + e->offset;
+        for (long k = 0, n = lm_tensor_numel(&e->t); k < n; k++) {
+            float t = w[k];
+            w[k] = a[k];
+            a[k] = t;
         }
     }
 }

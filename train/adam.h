@@ -18,6 +18,8 @@ typedef struct lm_adam_cfg {
     long step_every;             /* step schedule: lr *= step_gamma every step_every steps */
     float step_gamma;
     long warmup_steps;           /* linear warm-up from 0 (0 = none) */
+    float ema;                   /* decay of an exponential moving average of the weights
+                                  * (0 = none); update t uses min(ema, (1 + t) / (10 + t)) */
 } lm_adam_cfg;
 
 typedef struct lm_adam {
@@ -25,6 +27,8 @@ typedef struct lm_adam {
     long step;                   /* number of updates done */
     size_t n;                    /* floats (= params total) */
     float *m, *v;                /* moments, same layout as the params block */
+    float *ema;                  /* cfg.ema > 0: the other copy of the weights (the average
+                                  * while training; lm_adam_ema_swap exchanges them) */
 } lm_adam;
 
 /* Paper defaults: lr 1e-4, betas (0.9, 0.999), eps 1e-8, no decay, constant lr. */
@@ -35,5 +39,8 @@ void lm_adam_free(lm_adam *o);
 float lm_adam_lr(const lm_adam_cfg *cfg, long step);
 /* One update of every trainable parameter from its gradient (grads are not cleared). */
 void lm_adam_step(lm_adam *o, lm_params *p, int nthreads);
+/* cfg.ema > 0: exchange the trainable weights with o->ema (exact; twice restores both). The
+ * training loop swaps the average in to validate and save, and back to train. */
+void lm_adam_ema_swap(lm_adam *o, lm_params *p);
 
 #endif

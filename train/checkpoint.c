@@ -10,24 +10,27 @@
 #define CKPT_FORMAT "lumosaic-checkpoint-1"
 
 /* An lm_params whose tensors view the optimizer moments (never finalized: data points into
- * opt->m / opt->v, so save and load need no copy). */
+ * opt->m / opt->v, so save and load need no copy) and, with a weight average (opt->ema), the
+ * weights being trained ("train_weights.*": the checkpoint's model.safetensors holds the
+ * average, the weights to use; the loop swaps them, lm_adam_ema_swap). */
 static lm_status moment_views(const lm_model *m, const lm_adam *opt, lm_params *v, lm_err *err)
 {
+    static const char *const kind[3] = {"exp_avg", "exp_avg_sq", "train_weights"};
     lm_params_init(v);
-    for (int pass = 0; pass < 2; pass++)
+    for (int pass = 0; pass < (opt->ema ? 3 : 2); pass++)
         for (int i = 0; i < m->params.n; i++) {
             const lm_param *e = m->params.items[i];
             if (!e->trainable) continue;
             char nm[LM_PARAM_NAME_MAX + 16];
-            snprintf(nm, sizeof nm, "%s.%s", pass ? "exp_avg_sq" : "exp_avg", e->name);
+            snprintf(nm, sizeof nm, "%s.%s", kind[pass], e->name);
             if (strlen(nm) >= LM_PARAM_NAME_MAX) /* keep the full name: fall back to a short one */
-                snprintf(nm, sizeof nm, "%s.%d", pass ? "exp_avg_sq" : "exp_avg", i);
+                snprintf(nm, sizeof nm, "%s.%d", kind[pass], i);
             lm_tensor *t = lm_params_add(v, nm, e->t.ndim, e->t.shape, 0, err);
             if (!t) {
                 lm_params_free(v);
                 return err->status;
             }
-            t->data = (pass ? opt->v : opt->m) + e->offset;
+            t->data = (pass == 2 ? opt->ema : pass ? opt->v : opt->m) + e->offset;
         }
     return LM_OK;
 }
@@ -59,11 +62,14 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
         lm_params v;
         if (moment_views(m, opt, &v, err)) return err->status;
         snprintf(step, sizeof step, "%ld", opt->step);
+        char ema[32];
+        snprintf(ema, sizeof ema, "%.9g", (double)opt->cfg.ema);
         const char *meta[] = {"format", CKPT_FORMAT, "step", step, "iteration", it,
                               "next_batch", nb, "seed", seed, "threads", thr, "seconds", secs,
-                              "clock", cfg->clock[0] ? cfg->clock : "wall", "ranks", ranks};
+                              "clock", cfg->clock[0] ? cfg->clock : "wall", "ranks", ranks,
+                              "ema", ema};
         dir_file(path, sizeof path, dir, "optimizer.safetensors");
-        lm_status st = lm_params_save(&v, path, meta, 9, err);
+        lm_status st = lm_params_save(&v, path, meta, 10, err);
         lm_params_free(&v);
         if (st) return st;
     }
@@ -136,6 +142,13 @@ static lm_status load_optimizer(const char *path, lm_model *m, lm_adam *opt, lon
     if (it != iteration)
         return lm_err_set(err, LM_ERR_FORMAT, "%s: iteration %lld but the weights are at "
                           "iteration %ld (interrupted while checkpointing?)", path, it, iteration);
+    lm_err e2 = {0};
+    char *ema = lm_safetensors_meta(path, "ema", &e2); /* absent before weight averages */
+    double was = ema ? strtod(ema, NULL) : 0.0;
+    free(ema);
+    if ((float)was != opt->cfg.ema)
+        return lm_err_set(err, LM_ERR_ARG, "%s: the run averaged its weights with ema %g, this "
+                          "run asks for %g (set --ema %g)", path, was, (double)opt->cfg.ema, was);
     lm_params v;
     if (moment_views(m, opt, &v, err)) return err->status;
     lm_status st = lm_params_load(&v, path, 0, err);

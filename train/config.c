@@ -68,6 +68,8 @@ static const field fields[] = {
     FLD("step_every", F_LONG, step_every, "N", "step schedule: decay period", 0, MAX_COUNT),
     FLD("step_gamma", F_FLOAT, step_gamma, "F", "step schedule: decay factor", 0, 1),
     FLD("weight_decay", F_FLOAT, weight_decay, "F", "Adam L2 weight decay", 0, 10),
+    FLD("ema", F_FLOAT, ema, "D", "decay of a moving average of the weights, which validation, "
+        "snapshots and the checkpoint's model use (0 = none; e.g. 0.999)", 0, 0.999999),
     FLD("noise", F_NOISE, noise_min, "MIN,MAX", "noise level range k (0,0.15)", 0, 1),
     FLD("val_noise", F_FLOAT, val_noise, "F", "noise level of validation samples", 0, 1),
     FLD("seed", F_U64, seed, "N", "random seed (init, data)", 0, 0),
@@ -595,6 +597,7 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
     if (root) json_object_set_new(root, "recipe", json_string(c->recipe));
     if (root) json_object_set_new(root, "photons", json_real(c->photons));
     if (root) json_object_set_new(root, "read_noise", json_real(c->read_noise));
+    if (root) json_object_set_new(root, "ema", json_real(c->ema));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());
@@ -630,6 +633,7 @@ void lm_train_cfg_adam(const lm_train_cfg *c, lm_adam_cfg *o)
     o->lr = c->lr;
     o->lr_min = c->lr_min;
     o->weight_decay = c->weight_decay;
+    o->ema = c->ema;
     o->schedule = !strcmp(c->schedule, "cosine") ? LM_LR_COSINE
                   : !strcmp(c->schedule, "step") ? LM_LR_STEP : LM_LR_CONSTANT;
     o->total_steps = c->iterations;

@@ -443,6 +443,7 @@ static lm_status begin(loop *L, long *start, lm_err *err)
     uint64_t seed = 0;
     if (lm_train_load_checkpoint(L->opts->resume, L->model, &L->opt, start, &nb, &seed, err))
         return err->status;
+    lm_adam_ema_swap(&L->opt, &L->model->params); /* the average was in the model file */
     if (L->src->front && L->src->front->load(L->src->user, L->opts->resume, err))
         return err->status;
     int was_cpu = lm_train_checkpoint_cpu_clock(L->opts->resume);
@@ -528,9 +529,11 @@ static lm_status snapshots(loop *L, long it, lm_err *err)
         if (stat(dir, &sb) != 0) {
             lm_train_opts o2 = *L->opts;
             o2.elapsed = el;
-            if (lm_train_make_dir(dir, err) ||
-                lm_train_save_checkpoint(dir, L->model, NULL, it, 0, &o2, cfg, err))
-                return err->status;
+            if (lm_train_make_dir(dir, err)) return err->status;
+            lm_adam_ema_swap(&L->opt, &L->model->params);
+            lm_status st = lm_train_save_checkpoint(dir, L->model, NULL, it, 0, &o2, cfg, err);
+            lm_adam_ema_swap(&L->opt, &L->model->params);
+            if (st) return st;
         }
         L->snap_done = mark;
     }
@@ -582,7 +585,10 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
         int val = (cfg->val_interval > 0 && (it + 1) % cfg->val_interval == 0) ||
                   it + 1 == L->total || out_of_time;
         if (val && L->src->eval_count && L->src->eval_count(L->src->user) > 0) {
-            if (validate(L, &res->val, err)) return err->status;
+            lm_adam_ema_swap(&L->opt, &L->model->params); /* the average is what is scored */
+            st = validate(L, &res->val, err);
+            lm_adam_ema_swap(&L->opt, &L->model->params);
+            if (st) return st;
             res->validated = 1;
         } else {
             val = 0;
@@ -596,9 +602,11 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
             o2.elapsed = elapsed(L);
             if (L->src->front && L->src->front->save(L->src->user, cfg->output, err))
                 return err->status;
-            if (lm_train_save_checkpoint(cfg->output, L->model, &L->opt, it + 1,
-                                         (it + 1) * cfg->accum_steps, &o2, cfg, err))
-                return err->status;
+            lm_adam_ema_swap(&L->opt, &L->model->params); /* the file holds the average */
+            st = lm_train_save_checkpoint(cfg->output, L->model, &L->opt, it + 1,
+                                          (it + 1) * cfg->accum_steps, &o2, cfg, err);
+            lm_adam_ema_swap(&L->opt, &L->model->params);
+            if (st) return st;
             L->saved = it + 1;
         }
         res->budget_spent = out_of_time;
@@ -636,6 +644,8 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
     L.t_train0 = train_s(&L);
     if (!st) st = run_loop(&L, start, res, err);
     res->seconds = train_s(&L) - L.t_train0;
+    if (L.opt.ema && !st) /* the caller's model: the average, as model.safetensors holds it */
+        lm_adam_ema_swap(&L.opt, &L.model->params);
     teardown(&L);
     /* a fresh run that failed before its first iteration completed leaves no run folder */
     if (st && !L.rank && !opts->resume && L.saved < 0 && res->iterations_done == 0)

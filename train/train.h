@@ -51,6 +51,10 @@ typedef struct lm_train_cfg {
     int batch, accum_steps;         /* 14, 2 */
     long iterations;                /* optimizer updates (paper 50,000) */
     float lr, lr_min, weight_decay; /* 1e-4, 0, 0 */
+    float ema;                      /* moving average of the weights: decay (0 = none); the
+                                     * average is validated, snapshotted and is the checkpoint's
+                                     * model, the weights being trained ride in the optimizer
+                                     * file */
     char schedule[16];              /* constant | cosine | step */
     long warmup, step_every;
     float step_gamma;
