@@ -19,17 +19,13 @@ lm_status lm_adam_init(lm_adam *o, const lm_params *p, const lm_adam_cfg *cfg, l
     memset(o, 0, sizeof *o);
     o->cfg = *cfg;
     if (!(cfg->lr > 0) || !(cfg->beta1 >= 0 && cfg->beta1 < 1) || !(cfg->beta2 >= 0 && cfg->beta2 < 1)
-        || !(cfg->eps > 0) || cfg->weight_decay < 0)
+        || !(cfg->eps > 0) || cfg->weight_decay < 0 || !(cfg->ema >= 0 && cfg->ema < 1))
         return lm_err_set(err, LM_ERR_ARG, "adam: need lr > 0, 0 <= betas < 1, eps > 0, "
-                          "weight_decay >= 0");
+                          "weight_decay >= 0, 0 <= ema < 1");
     if (!p->finalized) return lm_err_set(err, LM_ERR_ARG, "adam: parameters not finalized");
     o->n = p->total;
     o->m = calloc(o->n ? o->n : 1, sizeof(float));
     o->v = calloc(o->n ? o->n : 1, sizeof(float));
-    if (!(cfg->ema >= 0 && cfg->ema < 1)) {
-        lm_adam_free(o);
-        return lm_err_set(err, LM_ERR_ARG, "adam: need 0 <= ema < 1 (got %g)", (double)cfg->ema);
-    }
     if (cfg->ema > 0 && (o->ema = calloc(o->n ? o->n : 1, sizeof(float))))
         for (int i = 0; i < p->n; i++) /* the average starts at the initial weights */
             memcpy(o->ema + p->items[i]->offset, p->items[i]->t.data,
