@@ -64,6 +64,7 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     {"han-tiny", build_han, CL, {2, 2, 16, 4, 0}, 0},
     {"han-tiny-nc", build_han, CL, {2, 2, 16, 4, 1}, 0}, /* noise-conditioned, as rt-N-nc */
     {"han-g3b2c32", build_han, CL, {3, 2, 32, 8, 0}, 0},
+    {"han-g3b2c32-nc", build_han, CL, {3, 2, 32, 8, 1}, 0},
     {"han-small", build_han, CL, {4, 6, 64, 16, 0}, 0},
     {"han-paper", build_han, CL, {10, 18, 128, 16, 0}, 0},
     {"mcan-tiny", build_mcan, CL, {0, 0, 0, 0, 0}, 16},

@@ -52,6 +52,7 @@ static void test_parameter_counts(void)
     check_count("rt-8-nc", 2221 + 8, 2221 + 8);
     check_count("rt-16-nc", 5165 + 16, 5165 + 16);
     check_count("han-tiny-nc", 44223 + 16, 44223 + 16); /* one per head channel */
+    check_count("han-g3b2c32-nc", 218135 + 32, 218135 + 32); /* one per head channel */
 }
 
 /* The noise weights of a "-nc" model (rt-N-nc: body.0.noise, han-tiny-nc: head.0.noise). */
@@ -113,6 +114,7 @@ static void test_noise_conditioned(void)
 {
     check_noise_conditioned("rt-8-nc", "rt-8");
     check_noise_conditioned("han-tiny-nc", "han-tiny");
+    check_noise_conditioned("han-g3b2c32-nc", "han-g3b2c32");
 }
 
 static void test_paper_han_count(void)
