@@ -5,6 +5,7 @@
 #include <string.h>
 #include <unistd.h>
 #include "cli/commands.h"
+#include "tensor/isa.h"
 
 static const lm_command commands[] = {
     {"version", lm_cmd_version, "print the version and build configuration"},
@@ -70,6 +71,11 @@ int main(int argc, char **argv)
         return 0;
     }
     if (!strcmp(cmd, "--version")) cmd = "version";
+    char msg[200]; /* the kernels' instruction set, once, before any command computes */
+    if (lm_isa_init(msg, sizeof msg) != LM_OK) {
+        fprintf(stderr, "lumosaic: %s\n", msg);
+        return 2;
+    }
     for (int i = 0; i < NCOMMANDS; i++)
         if (!strcmp(cmd, commands[i].name)) return commands[i].run(argc - 1, argv + 1);
     fprintf(stderr, "lumosaic: unknown command '%s' (see 'lumosaic --help')\n", cmd);

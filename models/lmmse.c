@@ -26,6 +26,8 @@
  * none for a two-bucket model (whole frames of it run patch-wise).
  * What it is not: the fit (train/fit_lmmse.c) or the noise estimator. */
 #include "models/model.h"
+#include "models/lmmse_direct.h"
+#include "tensor/isa.h"
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -158,12 +160,6 @@ static lm_tensor *feature_branch(lm_ctx *c, const lm_model *m, const lmmse_net *
  * 33 (a tensor forward): five 8-lane vectors, 2 pixels. Padding as the tile path's: the phase
  * planes reflected (a tile row / column mirrored about the edge tile; zeros when a plane is
  * smaller than the pad). Equal to the tile path up to float rounding (test_lmmse). */
-typedef float v8 __attribute__((vector_size(32)));
-#define NP32 3 /* pixels per step: up to 32 channels */
-#define NP40 2 /* up to 40 */
-
-static inline v8 v8_load(const float *p) { v8 v; memcpy(&v, p, sizeof v); return v; }
-
 /* Raw row (or column) index that padded index y reads: phase planes mirrored, -1 = zero. */
 static int pad_index(int y, int t, int n, int reflect)
 {
@@ -230,63 +226,33 @@ static void pack_filters(const lmmse_net *n, float s, int ch0, int nch, int lane
         }
 }
 
-/* Row y, phase column j: pixels x = j, j + tx, ... of the phase, NP at a time (the last step
- * repeats its last pixel to fill the registers, stored once), NV 8-lane vectors of channels
- * (NV x 8 = the packing's lanes). NV and NP are constants at each call (always inlined), so
- * the accumulators stay in registers. C padded planes of PH rows lie one below the other in
- * pad; the taps run over their windows in turn (plane q's row u is tap row q K + u). */
-static inline __attribute__((always_inline)) void
-row_phase(const float *T, const float *pad, int PW, int PH, int C, int K, int y, int j, int W,
-          int tx, float *out, size_t plane, int nch, const int NV, const int NP)
-{
-    const int L = NV * 8;
-    const float *B = T + (size_t)C * K * K * L;
-    for (int x = j; x < W; x += NP * tx) {
-        int np = (W - x + tx - 1) / tx;
-        np = np < NP ? np : NP;
-        int off[8];
-#pragma GCC unroll 8
-        for (int q = 0; q < NP; q++) off[q] = (q < np ? q : np - 1) * tx;
-        v8 a[8][5];
-#pragma GCC unroll 8
-        for (int q = 0; q < NP; q++)
-#pragma GCC unroll 5
-            for (int g = 0; g < NV; g++) a[q][g] = v8_load(B + 8 * g);
-        for (int qu = 0; qu < C * K; qu++) {
-            const float *row = pad + ((size_t)(qu / K) * PH + y + qu % K) * PW + x;
-            const float *Tu = T + (size_t)qu * K * L;
-            for (int v = 0; v < K; v++, Tu += L) {
-                v8 t[5];
-#pragma GCC unroll 5
-                for (int g = 0; g < NV; g++) t[g] = v8_load(Tu + 8 * g);
-#pragma GCC unroll 8
-                for (int q = 0; q < NP; q++) {
-                    const float sv = row[v + off[q]];
-#pragma GCC unroll 5
-                    for (int g = 0; g < NV; g++) a[q][g] += sv * t[g];
-                }
-            }
-        }
-        for (int q = 0; q < np; q++) {
-            float o[40];
-            for (int g = 0; g < NV; g++) memcpy(o + 8 * g, &a[q][g], sizeof(v8));
-            float *d = out + (size_t)y * W + x + (size_t)q * tx;
-            for (int c = 0; c < nch; c++) d[c * plane] = o[c];
-        }
-    }
-}
+/* The loops of lmmse_direct.c, built once per instruction set (cmake/isa.cmake): the variant
+ * of the active level (tensor/isa.h). */
+#define LM_LMMSE_ROWS_ARGS                                                                    \
+    (const float *wt, size_t packed, const float *pad, int PW, int PH, int C, int K, int ty,  \
+     int tx, int H, int W, float *out, int nch, int lanes, int nthreads)
+void lm_lmmse_direct_rows_generic LM_LMMSE_ROWS_ARGS;
+#ifdef LM_ISA_X86_VARIANTS
+void lm_lmmse_direct_rows_avx2 LM_LMMSE_ROWS_ARGS;
+void lm_lmmse_direct_rows_avx512 LM_LMMSE_ROWS_ARGS;
+#endif
 
-/* up to 32 channels (the 31 bands of a whole frame) and up to 40 (a tensor forward's 33) */
-static void row_phase32(const float *T, const float *pad, int PW, int PH, int C, int K, int y,
-                        int j, int W, int tx, float *out, size_t plane, int nch)
+void lm_lmmse_direct_rows(const float *wt, size_t packed, const float *pad, int PW, int PH, int C,
+                          int K, int ty, int tx, int H, int W, float *out, int nch, int lanes,
+                          int nthreads)
 {
-    row_phase(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch, 4, NP32);
-}
-
-static void row_phase40(const float *T, const float *pad, int PW, int PH, int C, int K, int y,
-                        int j, int W, int tx, float *out, size_t plane, int nch)
-{
-    row_phase(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch, 5, NP40);
+#ifdef LM_ISA_X86_VARIANTS
+    lm_isa a = lm_isa_active();
+    if (a >= LM_ISA_AVX512)
+        lm_lmmse_direct_rows_avx512(wt, packed, pad, PW, PH, C, K, ty, tx, H, W, out, nch, lanes,
+                                    nthreads);
+    else if (a == LM_ISA_AVX2)
+        lm_lmmse_direct_rows_avx2(wt, packed, pad, PW, PH, C, K, ty, tx, H, W, out, nch, lanes,
+                                  nthreads);
+    else
+#endif
+        lm_lmmse_direct_rows_generic(wt, packed, pad, PW, PH, C, K, ty, tx, H, W, out, nch,
+                                     lanes, nthreads);
 }
 
 /* out (nch planes of H x W) = channels [ch0, ch0 + nch) of the filters at noise sd s on one
@@ -309,16 +275,8 @@ static void direct_frame(const lm_model *m, const lmmse_net *n, float s, const f
     pack_filters(n, s, ch0, nch, lanes, wt);
     for (int q = 0; q < C; q++)
         build_pad(m, n, raw + (size_t)q * H * W, H, W, pad + (size_t)q * PH * PW);
-    const size_t plane = (size_t)H * W;
-    #pragma omp parallel for schedule(static) num_threads(nthreads)
-    for (int y = 0; y < H; y++) {
-        const int i = y % ty;
-        for (int j = 0; j < tx; j++) {
-            const float *T = wt + (size_t)(i * tx + j) * packed_floats(C, K, lanes);
-            if (lanes == 32) row_phase32(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch);
-            else row_phase40(T, pad, PW, PH, C, K, y, j, W, tx, out, plane, nch);
-        }
-    }
+    lm_lmmse_direct_rows(wt, packed_floats(C, K, lanes), pad, PW, PH, C, K, ty, tx, H, W, out,
+                         nch, lanes, nthreads);
 }
 
 /* Can the direct path run? (no gradients needed, no device, no features, host parameters) */

@@ -47,7 +47,7 @@ typedef int wvi __attribute__((vector_size(8 * sizeof(int))));
 
 static inline wv wsplat(float x)
 {
-    wv v;
+    wv v = {0};
     for (int i = 0; i < VL; i++) v[i] = x;
     return v;
 }

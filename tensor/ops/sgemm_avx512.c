@@ -10,10 +10,11 @@
  * of every element is fixed (slices in order, k ascending inside), so results never depend
  * on threads. Packing buffers are per thread (malloc'ed once, grown, freed at thread exit).
  * The AVX-512 code is compiled with a target attribute and chosen at run time
- * (__builtin_cpu_supports); otherwise, or with LM_SGEMM=blas in the environment, or after
+ * (the level of tensor/isa.h: CPU, operating system and LM_ISA); otherwise, or with LM_SGEMM=blas in the environment, or after
  * lm_sgemm_set_impl(LM_SGEMM_BLAS), OpenBLAS cblas_sgemm does the work.
  * What it is not: multi-threaded (see gemm_parallel.c), an op, or a checker of arguments. */
 #include "tensor/ops/gemm_internal.h"
+#include "tensor/isa.h"
 #include <cblas.h>
 #include <pthread.h>
 #include <stdlib.h>
@@ -31,12 +32,11 @@ static int impl_default = LM_SGEMM_BLAS; /* resolved once */
 static int impl_forced = -1;             /* lm_sgemm_set_impl; -1 = use the default */
 static pthread_once_t impl_once = PTHREAD_ONCE_INIT;
 
+/* The AVX-512 kernel runs when the chosen level (tensor/isa.h: CPU, OS, LM_ISA) has it. */
 static int cpu_has_avx512(void)
 {
 #if LM_HAVE_AVX512_KERNEL
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-           __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
+    return lm_isa_active() >= LM_ISA_AVX512;
 #else
     return 0;
 #endif
