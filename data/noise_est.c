@@ -120,25 +120,51 @@ static long ne_scan(ne_frame *f)
 {
     const float *p = f->raw;
     const long sy = (long)f->th * f->width;
-    float lo = p[0], hi = p[0], box = -INFINITY;
+    /* eight running minima / maxima / probes, one per lane: compare-and-select loops that
+     * every compiler vectorises at any instruction set (a reduction over a ternary is not
+     * vectorised by clang without -ffast-math); min and max are exact in any order */
+    enum { NL = 8 };
+    float lo8[NL], hi8[NL], box8[NL];
+    for (int l = 0; l < NL; l++) lo8[l] = hi8[l] = p[0], box8[l] = -INFINITY;
     for (int y = 0; y < f->height; y++) {
         const float *row = p + (long)y * f->width;
-        float nan_probe = 0;
-#pragma omp simd reduction(min : lo) reduction(max : hi) reduction(+ : nan_probe)
-        for (int x = 0; x < f->width; x++) {
-            lo = row[x] < lo ? row[x] : lo, hi = row[x] > hi ? row[x] : hi; /* minps/maxps */
-            nan_probe += row[x] * 0.0f; /* NaN if any value is NaN or inf */
+        float nan8[NL] = {0};
+        int x = 0;
+        for (; x + NL <= f->width; x += NL)
+            for (int l = 0; l < NL; l++) {
+                const float v = row[x + l];
+                lo8[l] = v < lo8[l] ? v : lo8[l], hi8[l] = v > hi8[l] ? v : hi8[l]; /* min/max */
+                nan8[l] += v * 0.0f; /* NaN if any value is NaN or inf */
+            }
+        for (; x < f->width; x++) {
+            const float v = row[x];
+            lo8[0] = v < lo8[0] ? v : lo8[0], hi8[0] = v > hi8[0] ? v : hi8[0];
+            nan8[0] += v * 0.0f;
         }
+        float nan_probe = 0;
+        for (int l = 0; l < NL; l++) nan_probe += nan8[l];
         if (nan_probe != 0 || nan_probe != nan_probe)
-            for (int x = 0; x < f->width; x++)
+            for (x = 0; x < f->width; x++)
                 if (!isfinite(row[x])) return (long)y * f->width + x;
         if (y + f->th >= f->height) continue;
-#pragma omp simd reduction(max : box)
-        for (int x = 0; x < f->width - f->tw; x++)
-        {
-            float v = 0.25f * (row[x] + row[x + f->tw] + row[x + sy] + row[x + sy + f->tw]);
-            box = v > box ? v : box;
+        const int nb = f->width - f->tw;
+        x = 0;
+        for (; x + NL <= nb; x += NL)
+            for (int l = 0; l < NL; l++) {
+                const float *q = row + x + l;
+                const float v = 0.25f * (q[0] + q[f->tw] + q[sy] + q[sy + f->tw]);
+                box8[l] = v > box8[l] ? v : box8[l];
+            }
+        for (; x < nb; x++) {
+            const float *q = row + x;
+            const float v = 0.25f * (q[0] + q[f->tw] + q[sy] + q[sy + f->tw]);
+            box8[0] = v > box8[0] ? v : box8[0];
         }
+    }
+    float lo = lo8[0], hi = hi8[0], box = box8[0];
+    for (int l = 1; l < NL; l++) {
+        lo = lo8[l] < lo ? lo8[l] : lo, hi = hi8[l] > hi ? hi8[l] : hi;
+        box = box8[l] > box ? box8[l] : box;
     }
     f->lo = lo, f->hi = hi, f->box_max = box;
     return -1;

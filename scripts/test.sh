@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
 # test.sh — the whole test suite: set-up and build (scripts/setup.sh), every CTest test in the
-# Release build, then the same suite built with AddressSanitizer + UndefinedBehaviorSanitizer.
+# Release build (portable, warnings as errors; the numerical tests also at each lower
+# instruction-set level, label "isa"), then the same suite built with AddressSanitizer +
+# UndefinedBehaviorSanitizer, then the core library compiled (not run) for other CPU targets
+# and with clang, warnings as errors (scripts/check_targets.sh).
 # Exits non-zero on any failure. A skipped OpenCL test fails the run when CI=true (CI installs
 # PoCL, so a skip there means the set-up is broken).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/setup.sh
+LM_WERROR=ON scripts/setup.sh
 
 jobs=$(nproc)
 echo "== tests (Release) =="
@@ -16,7 +19,19 @@ cmake -S . -B build-asan -DLM_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLM
 cmake --build build-asan -j"$jobs"
 ASAN_OPTIONS=${ASAN_OPTIONS:-abort_on_error=0:detect_leaks=1} \
 UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1} \
-  ctest --test-dir build-asan --output-on-failure -j"$jobs" | tee build-asan/ctest.log
+  ctest --test-dir build-asan --output-on-failure -j"$jobs" -LE isa | tee build-asan/ctest.log
+
+echo "== compile for other targets (warnings as errors) =="
+# clang and its OpenMP runtime: only this check needs them
+for p in clang libomp-dev; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    sudo=""; [ "$(id -u)" -ne 0 ] && sudo="sudo"
+    $sudo apt-get update -q && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q \
+      --no-install-recommends clang libomp-dev
+    break
+  fi
+done
+scripts/check_targets.sh
 
 if [ "${CI:-}" = "true" ] && grep -q "\*\*\*Skipped\|Not Run" build/ctest.log build-asan/ctest.log; then
   echo "test.sh: tests were skipped in CI (OpenCL platform missing?): failing" >&2

@@ -9,6 +9,7 @@
 #include <string.h>
 #include "autograd/autograd.h"
 #include "tensor/ops.h"
+#include "tensor/isa.h"
 
 static int check_failures_ = 0, check_tests_ = 0, check_failed_tests_ = 0;
 
@@ -99,6 +100,11 @@ static inline void check_array_close_(const float *a, const float *b, long n, do
 
 static inline int check_summary(void)
 {
+    char isa_msg_[200]; /* a test run at an instruction-set level (LM_ISA) must really run it */
+    if (lm_isa_init(isa_msg_, sizeof isa_msg_) != LM_OK) {
+        fprintf(stderr, "%s\n", isa_msg_);
+        check_failed_tests_++;
+    }
     printf("%d passed, %d failed\n", check_tests_ - check_failed_tests_, check_failed_tests_);
     return check_failed_tests_ ? 1 : 0;
 }
