@@ -9,12 +9,13 @@ set(LM_ISA_KERNELS
   ${CMAKE_SOURCE_DIR}/tensor/ops/sgemm_panel.c
   ${CMAKE_SOURCE_DIR}/tensor/ops/conv2d_direct.c
   ${CMAKE_SOURCE_DIR}/tensor/ops/conv2d_depthwise.c
+  ${CMAKE_SOURCE_DIR}/tensor/ops/gelu_fast.c
   ${CMAKE_SOURCE_DIR}/models/lmmse_direct.c)
 set(LM_ISA_SYMBOLS
   lm_conv2d_winograd_applies lm_conv2d_winograd_fwd lm_conv2d_winograd_bwd_x
   lm_conv2d_winograd_bwd_w lm_panel_pack lm_sgemm_panel lm_conv2d_direct_applies
   lm_conv2d_direct_fwd lm_conv2d_dw_fwd lm_conv2d_dw_bwd_x lm_conv2d_dw_bwd_w
-  lm_lmmse_direct_rows)
+  lm_lmmse_direct_rows lm_gelu_fwd_fast lm_gelu_bwd_fast)
 
 if(CMAKE_SYSTEM_PROCESSOR MATCHES "^(x86_64|AMD64|amd64)$")
   set(LM_ISA_X86 ON)

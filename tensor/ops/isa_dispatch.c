@@ -2,9 +2,10 @@
  * (cmake/isa.cmake): each calls the variant of the level lm_isa_active() chose.
  * What it is: one switch per kernel; the level is read with one atomic load.
  * What it is not: a kernel. The variants are the same source files compiled with other flags
- * (conv2d_winograd.c, sgemm_panel.c, conv2d_direct.c, conv2d_depthwise.c). */
+ * (conv2d_winograd.c, sgemm_panel.c, conv2d_direct.c, conv2d_depthwise.c, gelu_fast.c). */
 #include "tensor/isa.h"
 #include "tensor/ops/gemm_internal.h"
+#include "tensor/ops/gelu_fast.h"
 
 /* The prototypes of one level's variants. */
 #define LM_DECLARE_LEVEL(L)                                                                   \
@@ -26,7 +27,9 @@
     int lm_conv2d_dw_bwd_x_##L(lm_ctx *c, const lm_conv_geom *g, const float *dy,             \
                                const float *w, float *dx);                                    \
     int lm_conv2d_dw_bwd_w_##L(lm_ctx *c, const lm_conv_geom *g, const float *dy,             \
-                               const float *x, float *dw);
+                               const float *x, float *dw);                                    \
+    void lm_gelu_fwd_fast_##L(const float *x, float *y, long n, int nthr);                    \
+    void lm_gelu_bwd_fast_##L(const float *x, const float *gy, float *gx, long n, int nthr);
 
 LM_DECLARE_LEVEL(generic)
 #ifdef LM_ISA_X86_VARIANTS
@@ -115,4 +118,14 @@ int lm_conv2d_dw_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, const 
                        float *dw)
 {
     DISPATCH(lm_conv2d_dw_bwd_w, (c, g, dy, x, dw));
+}
+
+void lm_gelu_fwd_fast(const float *x, float *y, long n, int nthr)
+{
+    DISPATCH_V(lm_gelu_fwd_fast, (x, y, n, nthr));
+}
+
+void lm_gelu_bwd_fast(const float *x, const float *gy, float *gx, long n, int nthr)
+{
+    DISPATCH_V(lm_gelu_bwd_fast, (x, gy, gx, n, nthr));
 }
