@@ -240,7 +240,7 @@ static lm_status read_part0(exr_context_t ctx, const char *path, lm_cube *cube, 
         return lm_err_set(e, LM_ERR_UNSUPPORTED, "%s: only scanline EXR images are supported "
                           "(this one is tiled or deep)", path);
     spectral_chan sc[LM_CUBE_MAX_BANDS];
-    int n;
+    int n = 0;
     lm_status s = find_channels(ctx, path, sc, &n, e);
     if (s != LM_OK) return s;
     int64_t W = (int64_t)dw.max.x - dw.min.x + 1, H = (int64_t)dw.max.y - dw.min.y + 1;

@@ -22,12 +22,12 @@ UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1} \
   ctest --test-dir build-asan --output-on-failure -j"$jobs" -LE isa | tee build-asan/ctest.log
 
 echo "== compile for other targets (warnings as errors) =="
-# clang and its OpenMP runtime: only this check needs them
-for p in clang libomp-dev; do
+# clang and its OpenMP runtime, the ARM cross compiler: only this check needs them
+for p in clang libomp-dev gcc-aarch64-linux-gnu; do
   if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
     sudo=""; [ "$(id -u)" -ne 0 ] && sudo="sudo"
     $sudo apt-get update -q && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q \
-      --no-install-recommends clang libomp-dev
+      --no-install-recommends clang libomp-dev gcc-aarch64-linux-gnu libc6-dev-arm64-cross
     break
   fi
 done
