@@ -5,7 +5,8 @@
  *
  * Usage: bench_train [threads [repeats [preset ...]]]
  *   threads default LM_BENCH_THREADS or 2; repeats default 5; presets default linear han-tiny
- *   han-small mcan srnet, then han-paper (forward, 1 repetition).
+ *   han-small mcan srnet, then han-paper (forward, 1 repetition). LM_BENCH_PRECISION=bf16: the
+ *   3x3 convolutions' Winograd products with bf16 operands (tensor.h, lm_ctx.precision).
  * Not a test: prints figures. */
 #include "autograd/autograd.h"
 #include "models/model.h"
@@ -61,6 +62,8 @@ static void bench(const char *preset, const lm_mosaic *mo, int threads, int reps
     }
     lm_ctx c;
     lm_ctx_init(&c, threads);
+    const char *prec = getenv("LM_BENCH_PRECISION"); /* bf16: the bf16 Winograd products */
+    if (prec && !strcmp(prec, "bf16")) c.precision = LM_PRECISION_BF16;
     lm_adam o;
     lm_adam_cfg ac;
     lm_adam_default_cfg(&ac);

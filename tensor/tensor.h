@@ -124,7 +124,12 @@ struct lm_ctx {
     int conv_path;
     int op_path;
     int grad_reuse;
+    /* Operand precision of the CPU convolution products: LM_PRECISION_FP32 (0, the default)
+     * or LM_PRECISION_BF16 (operands rounded to bf16, sums in fp32: the Winograd products of
+     * 3x3 convolutions, forward and input gradient; the weight gradient stays fp32). */
+    int precision;
 };
+enum { LM_PRECISION_FP32 = 0, LM_PRECISION_BF16 = 1 };
 
 /* The most threads a context takes (every command's --threads and the run config's "threads"
  * are checked against it: OpenMP fails on absurd team sizes). */

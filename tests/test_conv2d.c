@@ -286,6 +286,65 @@ static void test_winograd_vs_direct(void)
                   (int)(sizeof other / sizeof other[0]));
 }
 
+/* bf16 operands (lm_ctx.precision): the Winograd forward and input gradient against the
+ * double reference. Both products' operands are the transformed input and weights rounded to
+ * bf16 (2^-8 of themselves each); the transforms' coefficients (up to 5 in B^T, 8 in A^T) let
+ * that grow, and an output's error comes from its whole 6 x 6 input patch, not its own terms:
+ * so each element within 2^-4 of its terms' magnitude plus the tensor's mean magnitude, and
+ * the error's typical size (rms over rms magnitude) near bf16's own, under 2^-7; the weight
+ * gradient stays fp32 (4e-6, as above). */
+static void test_winograd_bf16(void)
+{
+    double worst = 0, e2 = 0, m2 = 0;
+    long bad = 0;
+    for (int i = 0; i < NWINO; i++) {
+        const cfg *k = &WINO[i];
+        lm_ctx c;
+        lm_ctx_init(&c, 2);
+        lm_rng r;
+        lm_rng_seed(&r, 300 + (uint64_t)i);
+        made m = make_inputs(&c, k, &r, 1);
+        lm_ctx_set_grad(&c, 0);
+        lm_tensor *y = lm_conv2d(&c, m.x, m.w, m.b, &k->o);
+        lm_ctx_set_grad(&c, 1);
+        lm_tensor *seed = y ? lm_tensor_uniform(&c, y->ndim, y->shape, &r, -1, 1) : NULL;
+        if (!seed) {
+            CHECK_CTX_OK(&c);
+            lm_ctx_free(&c);
+            continue;
+        }
+        reference R = make_reference(k, &m, seed);
+        c.precision = LM_PRECISION_BF16;
+        lm_tape_clear(&c);
+        y = lm_conv2d(&c, m.x, m.w, m.b, &k->o);
+        CHECK(y && lm_backward(&c, y, seed) == LM_OK);
+        CHECK_CTX_OK(&c);
+        if (y && m.x->grad && m.w->grad) {
+            const float *got[2] = {y->data, m.x->grad->data};
+            long n[2] = {lm_tensor_numel(y), lm_tensor_numel(m.x)};
+            for (int t = 0; t < 2; t++) {
+                double mean = 0;
+                for (long j = 0; j < n[t]; j++) mean += R.mag[t][j] / (double)n[t];
+                for (long j = 0; j < n[t]; j++) {
+                    double d = fabs(got[t][j] - R.val[t][j]), mag = R.mag[t][j];
+                    if (!(d <= (1.0 / 16) * (mag + mean))) bad++;
+                    if (d / (mag + mean) > worst) worst = d / (mag + mean);
+                    e2 += d * d, m2 += mag * mag;
+                }
+            }
+            check_doubles(m.w->grad->data, R.val[2], R.mag[2], lm_tensor_numel(m.w), 4e-6,
+                          k->what, "dw (fp32)");
+        }
+        free_reference(&R);
+        lm_ctx_free(&c);
+    }
+    double rms = sqrt(e2 / m2);
+    CHECK_MSG(bad == 0 && rms < 1.0 / 128, "%ld over the bound; worst %.3g of the magnitude plus "
+              "the mean, rms %.3g", bad, worst, rms);
+    printf("     (bf16 Winograd: worst %.3g of the magnitude plus the mean, rms %.3g)\n", worst,
+           rms);
+}
+
 /* 1x1 convs on the pointwise path (a plain sum, held to 1e-6 like the tiled path): pixel
  * counts with 16-column blocks, one 8-column block and a scalar tail, output channels that
  * are not a multiple of the 6-row panel. */
@@ -560,6 +619,7 @@ int main(void)
     RUN(test_hand_computed);
     RUN(test_forward_backward_vs_direct);
     RUN(test_winograd_vs_direct);
+    RUN(test_winograd_bf16);
     RUN(test_pointwise_vs_direct);
     RUN(test_gradcheck);
     RUN(test_fast_matches_simple);

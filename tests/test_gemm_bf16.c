@@ -121,8 +121,35 @@ static void test_error_size(void)
     free(A), free(B), free(C), free(Ap), free(Bp);
 }
 
+/* The packed B holds exactly lm_bf16_round of each value (the vector path included): ties,
+ * infinities, NaN (stays NaN), denormals, both rows of a pair and the odd last row. */
+static void test_pack_b_exact(void)
+{
+    const int K = 5, n = 37;
+    float B[5 * 37];
+    lm_rng r;
+    lm_rng_seed(&r, 5);
+    for (int i = 0; i < K * n; i++) B[i] = frand(&r) * 1e3f;
+    B[3] = INFINITY, B[40] = -INFINITY, B[41] = NAN, B[77] = 1e-40f, B[100] = 1.0f + 1.0f / 256;
+    B[101] = -(1.0f + 3.0f / 256), B[20] = 3.4e38f;
+    lm_bf16 *Bp = malloc(sizeof(lm_bf16) * lm_bf16_pack_b_size(K, n));
+    lm_bf16_pack_b(K, n, B, n, Bp);
+    long bad = 0;
+    const int NP = (n + 15) / 16 * 16;
+    for (int k = 0; k < 6; k++)
+        for (int j = 0; j < NP; j++) {
+            lm_bf16 want = k < K && j < n ? lm_bf16_round(B[k * n + j]) : 0;
+            lm_bf16 got = Bp[((size_t)(k / 2) * NP + j) * 2 + k % 2];
+            float wf = lm_bf16_to_f32(want), gf = lm_bf16_to_f32(got);
+            if (got != want && !(wf != wf && gf != gf)) bad++;
+        }
+    CHECK_MSG(bad == 0, "%ld packed values differ from lm_bf16_round", bad);
+    free(Bp);
+}
+
 int main(void)
 {
+    RUN(test_pack_b_exact);
     RUN(test_round);
     RUN(test_shapes);
     RUN(test_error_size);

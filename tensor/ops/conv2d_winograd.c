@@ -22,6 +22,7 @@
  * What it is not: strided, dilated, grouped or non-3x3 convolution (conv2d_tiled.c). */
 #include "tensor/ops/gemm_internal.h"
 #include "tensor/ops/simd.h"
+#include "tensor/ops/gemm_bf16.h"
 #if defined(__AVX__) || defined(__AVX512F__)
 #include <immintrin.h>
 #endif
@@ -414,9 +415,12 @@ static int chunk_tiles(int Cin, int Cout, long T, int nt)
 }
 
 /* y (B x Cout x Ho x Wo) = bias + conv or += conv, from x (B x Cin x H x W) and the
- * transformed weights U: 36 products with weights packed in panels (lm_sgemm_panel). */
+ * transformed weights: 36 products with weights packed in panels, U for lm_sgemm_panel (fp32)
+ * or, when Uh is not NULL, Uh for lm_gemm_bf16_panel (bf16 operands: each chunk's transformed
+ * input rounded and paired as it goes in; fp32 sums and output transform). */
 static int winograd_run(lm_ctx *c, const wgrid *gi, const wgrid *go, const float *x,
-                        const float *U, long pu, const float *bias, int accumulate, float *y)
+                        const float *U, long pu, const lm_bf16 *Uh, long puh, const float *bias,
+                        int accumulate, float *y)
 {
     int Cin = gi->C, Cout = go->C, nt = lm_nthreads(c);
     long T = gi->T;
@@ -424,24 +428,33 @@ static int winograd_run(lm_ctx *c, const wgrid *gi, const wgrid *go, const float
     long nchunks = (T + tc - 1) / tc;
     if (nchunks < nt) nt = (int)nchunks;
     size_t per = 36 * (size_t)(Cin + Cout) * (size_t)tc;
+    size_t perh = Uh ? (lm_bf16_pack_b_size(Cin, tc) + 1) / 2 + 16 : 0; /* floats of room */
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
-    float *buf = lm_ctx_alloc(c, sizeof(float) * per * (size_t)nt);
+    float *buf = lm_ctx_alloc(c, sizeof(float) * (per + perh) * (size_t)nt);
     if (!buf) return c->status;
     /* chunks handed out as threads come free: a thread slowed by another process on its core
      * takes fewer. Each chunk's outputs are computed whole by one thread, the same way
      * whichever thread it is, so the result does not depend on the hand-out. */
 #pragma omp parallel num_threads(nt)
     {
-        float *V = buf + per * (size_t)omp_get_thread_num();
+        float *V = buf + (per + perh) * (size_t)omp_get_thread_num();
         float *M = V + 36 * (size_t)Cin * (size_t)tc;
+        lm_bf16 *Vh = (lm_bf16 *)(M + 36 * (size_t)Cout * (size_t)tc);
 #pragma omp for schedule(dynamic, 1)
         for (long ch = 0; ch < nchunks; ch++) {
             long t0 = ch * tc;
             int n = T - t0 < tc ? (int)(T - t0) : tc;
             input_transform(gi, x, t0, n, V, tc);
-            for (int xi = 0; xi < 36; xi++)
-                lm_sgemm_panel(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc, NULL, 0,
-                               M + (long)xi * Cout * tc, tc);
+            for (int xi = 0; xi < 36; xi++) {
+                if (Uh) {
+                    lm_bf16_pack_b(Cin, n, V + (long)xi * Cin * tc, tc, Vh);
+                    lm_gemm_bf16_panel(Cout, n, Cin, Uh + xi * puh, Vh, NULL, 0,
+                                       M + (long)xi * Cout * tc, tc);
+                } else {
+                    lm_sgemm_panel(Cout, n, Cin, U + xi * pu, V + (long)xi * Cin * tc, tc, NULL,
+                                   0, M + (long)xi * Cout * tc, tc);
+                }
+            }
             output_transform(go, M, tc, t0, n, bias, accumulate, y);
         }
     }
@@ -482,14 +495,28 @@ static int forward_like(lm_ctx *c, const lm_conv_geom *g, const float *in, const
                         int flip, const float *bias, float *out)
 {
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
-    long pu;
+    long pu, puh = 0;
     float *U = packed_weights(c, g, w, flip, &pu);
     if (!U) return c->status;
+    lm_bf16 *Uh = NULL;
+    if (c->precision == LM_PRECISION_BF16) { /* the same U, rounded and paired per product */
+        int rows = flip ? g->Cin : g->Cout, K = flip ? g->Cout : g->Cin;
+        puh = (long)lm_bf16_pack_a_size(rows, K);
+        Uh = lm_ctx_alloc(c, sizeof(lm_bf16) * 36 * (size_t)puh);
+        float *row = lm_ctx_alloc(c, sizeof(float) * (size_t)rows * K);
+        if (!Uh || !row) return c->status;
+        for (int xi = 0; xi < 36; xi++) {
+            for (int m = 0; m < rows; m++)
+                for (int k = 0; k < K; k++)
+                    row[(long)m * K + k] = U[xi * pu + lm_panel_at(K, m, k)];
+            lm_bf16_pack_a(rows, K, row, K, Uh + xi * puh);
+        }
+    }
     wgrid gi = flip ? make_grid(g->Cout, g->Ho, g->Wo, g->H, g->W, 2 - g->ph, 2 - g->pw, g->B)
                     : make_grid(g->Cin, g->H, g->W, g->Ho, g->Wo, g->ph, g->pw, g->B);
     wgrid go = gi;
     go.C = flip ? g->Cin : g->Cout;
-    int st = winograd_run(c, &gi, &go, in, U, pu, bias, flip, out);
+    int st = winograd_run(c, &gi, &go, in, U, pu, Uh, puh, bias, flip, out);
     lm_arena_rewind(&c->arena, mk);
     return st;
 }

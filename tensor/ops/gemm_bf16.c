@@ -47,18 +47,53 @@ void lm_bf16_pack_a(int M, int K, const float *A, long lda, lm_bf16 *Ap)
                 }
 }
 
+#if LM_HAVE_BF16_KERNEL
+/* lm_bf16_round of 16 floats, each in the low half of its 32-bit lane. */
+__attribute__((target("avx512f"))) static inline __m512i round16(const float *p)
+{
+    const __m512i u = _mm512_castps_si512(_mm512_loadu_ps(p));
+    const __m512i one = _mm512_set1_epi32(1);
+    __m512i r = _mm512_add_epi32(u, _mm512_set1_epi32(0x7fff));
+    r = _mm512_srli_epi32(_mm512_add_epi32(r, _mm512_and_si512(_mm512_srli_epi32(u, 16), one)), 16);
+    const __mmask16 nan = _mm512_cmpgt_epu32_mask(_mm512_and_si512(u, _mm512_set1_epi32(0x7fffffff)),
+                                                  _mm512_set1_epi32(0x7f800000));
+    const __m512i quiet = _mm512_or_si512(_mm512_srli_epi32(u, 16), _mm512_set1_epi32(0x40));
+    return _mm512_mask_mov_epi32(r, nan, quiet);
+}
+
+/* 16 columns of one pair of rows (b1 may be NULL: zeros), rounded and interleaved: 32 bf16. */
+__attribute__((target("avx512f"))) static void pack_pair16(const float *b0, const float *b1,
+                                                           lm_bf16 *d)
+{
+    __m512i r = round16(b0);
+    if (b1) r = _mm512_or_si512(r, _mm512_slli_epi32(round16(b1), 16));
+    _mm512_storeu_si512(d, r);
+}
+#endif
+
 void lm_bf16_pack_b(int K, int n, const float *B, long ldb, lm_bf16 *Bp)
 {
     const int K2 = (K + 1) / 2, NP = pad16(n);
+#if LM_HAVE_BF16_KERNEL
+    const int vec = lm_isa_active() >= LM_ISA_AVX512;
+#else
+    const int vec = 0;
+#endif
     for (int q = 0; q < K2; q++) {
         lm_bf16 *d = Bp + (size_t)q * NP * 2;
         const float *b0 = B + (long)(2 * q) * ldb, *b1 = 2 * q + 1 < K ? b0 + ldb : NULL;
-        for (int j = 0; j < n; j++) {
+        int j = 0;
+#if LM_HAVE_BF16_KERNEL
+        if (vec)
+            for (; j + 16 <= n; j += 16) pack_pair16(b0 + j, b1 ? b1 + j : NULL, d + 2 * j);
+#endif
+        for (; j < n; j++) {
             d[2 * j] = lm_bf16_round(b0[j]);
             d[2 * j + 1] = b1 ? lm_bf16_round(b1[j]) : 0;
         }
         memset(d + 2 * n, 0, sizeof(lm_bf16) * 2 * (size_t)(NP - n));
     }
+    (void)vec;
 }
 
 /* ---- fp32 twin: the same sums, pair by pair (a1 b1 first, then a0 b0, as vdpbf16ps) ----- */
