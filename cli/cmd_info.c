@@ -31,7 +31,7 @@ static void help(void)
            "  --doe FILE     a DOE description (QDO baseline optics; 'default' = bundled): its\n"
            "                 summary and PSF figures at 400..700 nm\n"
            "  --csv          machine-readable table (layer,kind,shape,params,macs)\n"
-           "  --list         list the model presets\n"
+           "  --list         list the model presets, each with what it is for\n"
            "  --help         this text\n");
 }
 
@@ -134,7 +134,11 @@ int lm_cmd_info(int argc, char **argv)
     if (r != 1) return r;
     if (a.doe) return describe_doe(&c, a.doe);
     if (a.list) {
-        for (const char *const *p = lm_model_presets(); *p; p++) printf("%s\n", *p);
+        for (const char *const *p = lm_model_presets(); *p; p++)
+            printf("%-15s %s\n", *p, lm_model_preset_purpose(*p));
+        printf("\nalso: lmmse-K (window K, odd 1..31), lmmse-K-b2, lmmse-K-rfD (D random "
+               "features);\nNET+BASE in results tables: NET trained as a residual on BASE "
+               "(train --model NET --base RUN)\n");
         if (!a.model) return 0;
     }
     lm_system sys;

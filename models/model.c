@@ -123,6 +123,44 @@ const char *const *lm_model_presets(void)
     return names;
 }
 
+/* One line per preset: what it is for (lumosaic info --list). */
+static const struct { const char *name, *purpose; } purposes[] = {
+    {"linear", "one learned linear filter per tile phase: the simplest baseline"},
+    {"lmmse", "closed-form floor: noise-aware linear filters fitted in seconds (base of residuals)"},
+    {"lmmse-rf", "the floor on random ReLU features: a little above lmmse, slow to fit"},
+    {"han-tiny", "HAN, 2 groups x 2 blocks, 16 channels: small attention network"},
+    {"han-tiny-nc", "han-tiny that also sees the frame's noise level: best residual on lmmse"},
+    {"han-g3b2c32", "HAN, 3 groups x 2 blocks, 32 channels: 5x han-tiny's cost"},
+    {"han-g3b2c32-nc", "han-g3b2c32 that also sees the noise level: the larger residual"},
+    {"han-small", "HAN, 4 x 6, 64 channels: too slow to train well on a CPU"},
+    {"han-paper", "the paper's HAN (57 M parameters): for GPUs"},
+    {"mcan-tiny", "MCAN with 16 features: mosaic attention, small"},
+    {"mcan", "the paper's MCAN (64 features)"},
+    {"srnet-tiny", "SRNet with 8 channels: transformer-style baseline, small"},
+    {"srnet", "the paper's SRNet (32 channels)"},
+    {"mst-tiny", "MST++ (1 stage) from an RGB image: the RGB-camera baseline"},
+    {"mst", "MST++ (3 stages) from an RGB image"},
+    {"mst-coded", "MST++ (3 stages) on the coded frame"},
+    {"qdo-mst", "QDO baseline: MST++-tiny behind a fixed diffractive optic and RGB sensor"},
+    {"qdo-mst-doe", "QDO with the optic's height map learned end to end"},
+    {"rt-8", "real-time residual network, 8 channels (~30-45 fps at 640 x 480, 2 cores)"},
+    {"rt-16", "real-time residual network, 16 channels"},
+    {"lmmse-b2", "closed-form floor reading both buckets (bucket 1 and bucket 0)"},
+    {"rt-8-b2", "rt-8 reading both buckets"},
+    {"rt-16-b2", "rt-16 reading both buckets"},
+    {"rt-8-mf3", "rt-8 reading three aligned frames (video)"},
+    {"rt-16-mf3", "rt-16 reading three aligned frames (video)"},
+    {"rt-8-nc", "rt-8 that also sees the noise level"},
+    {"rt-16-nc", "rt-16 that also sees the noise level: the bundled demo residual on lmmse"},
+};
+
+const char *lm_model_preset_purpose(const char *name)
+{
+    for (size_t i = 0; i < sizeof purposes / sizeof purposes[0]; i++)
+        if (!strcmp(purposes[i].name, name)) return purposes[i].purpose;
+    return "";
+}
+
 static const preset *find_preset(const char *name)
 {
     for (int i = 0; i < NPRESETS; i++)

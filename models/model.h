@@ -120,6 +120,8 @@ static inline int lm_model_coded_planes(const lm_model *m)
 int lm_model_preset_known(const char *name);
 /* NULL-terminated list of preset names. */
 const char *const *lm_model_presets(void);
+/* One line on what a preset is for ("" for a name that is not a preset). */
+const char *lm_model_preset_purpose(const char *name);
 
 /* ---- families (one file each) ---------------------------------------------------------- */
 /* noise_cond 1 ("han-tiny-nc"): the head conv's output also gets a per-channel bias

@@ -110,6 +110,14 @@ static void check_noise_conditioned(const char *nc, const char *plain)
     lm_model_free(p);
 }
 
+/* Every preset says what it is for (info --list). */
+static void test_purposes(void)
+{
+    for (const char *const *p = lm_model_presets(); *p; p++)
+        CHECK_MSG(lm_model_preset_purpose(*p)[0], "preset %s has no purpose line", *p);
+    CHECK(lm_model_preset_purpose("no-such")[0] == 0);
+}
+
 static void test_noise_conditioned(void)
 {
     check_noise_conditioned("rt-8-nc", "rt-8");
@@ -340,6 +348,7 @@ int main(int argc, char **argv)
     RUN(test_init_deterministic);
     RUN(test_forward_shapes);
     RUN(test_noise_conditioned);
+    RUN(test_purposes);
     RUN(test_gradcheck_models);
     RUN(test_training_steps_reuse_arena);
     if (argc < 2 || strcmp(argv[1], "--quick")) RUN(test_paper_han_count);

@@ -66,7 +66,7 @@ check "wrong bucket 0 is worse ($pw < $p2 dB)" awk -v a="$pw" -v b="$p2" 'BEGIN 
 check "eval of the two-bucket model: $(cat "$T/evlog")" [ -s "$T/ev/eval.json" ]
 e2=$(awk -F, 'NR == 2 { print $0 }' "$T/ev/eval.csv")
 check "eval table has a row ($e2)" [ -n "$e2" ]
-check "info lists the -b2 presets" grep -q '^rt-8-b2$' <("$LM" info --list)
+check "info lists the -b2 presets" grep -q '^rt-8-b2 ' <("$LM" info --list)
 
 # ---- bad input ---------------------------------------------------------------------------
 mkdir -p "$T/lone" && cp "$S/frames/frame_0000.png" "$T/lone/f.png"

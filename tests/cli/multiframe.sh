@@ -33,7 +33,7 @@ check_not "aligned and recorded stacks give different cubes" \
 check "eval of the multi-frame model: $(cat "$T/evlog")" [ -s "$T/ev/eval_motion.csv" ]
 check "four motion rows per scene and mean" \
   [ "$(grep -cE '^(balloons_crop100|mean),(0|240),' "$T/ev/eval_motion.csv")" -eq 8 ]
-check "info lists the -mf3 presets" grep -q '^rt-16-mf3$' <("$LM" info --list)
+check "info lists the -mf3 presets" grep -q '^rt-16-mf3 ' <("$LM" info --list)
 
 # ---- bad input ---------------------------------------------------------------------------
 expect_error "one frame for a multi-frame model" 2 "reads three frames" "$T/e1" -- \
