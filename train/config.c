@@ -114,6 +114,9 @@ static const field fields[] = {
         "spans it)", 0, 1e6),
     FLD("clock", F_STR, clock, "C", "what minutes and snapshots count: wall | cpu (CPU time of "
         "the process, all threads; not shrunk by a busy machine)", 0, 0),
+    FLD("precision", F_STR, precision, "P", "fp32 | bf16: bf16 operands (fp32 sums, master "
+        "weights, Adam, loss) for the 3x3 convolutions' Winograd products, forward and input "
+        "gradient; AVX-512-BF16 where the CPU has it, else the same arithmetic slower", 0, 0),
     FLD("doe", F_STR, doe, "FILE", "qdo presets: DOE description (default: bundled; a run's "
         "doe.json)", 0, 0),
     FLD("doe_optimise", F_INT, doe_optimise, "0|1", "qdo presets: train the DOE's height map "
@@ -171,6 +174,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     c->fit_synth = -1.0f;
     c->res_init = 1.0f;
     snprintf(c->clock, sizeof c->clock, "wall");
+    snprintf(c->precision, sizeof c->precision, "fp32");
     c->doe_lr = 0.01f;
     snprintf(c->doe_quantise, sizeof c->doe_quantise, "progressive");
     c->doe_bands = 4;
@@ -528,6 +532,8 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
         BAD("'fit': must be auto, closed or sgd (got '%s')", c->fit);
     if (strcmp(c->clock, "wall") && strcmp(c->clock, "cpu"))
         BAD("'clock': must be wall or cpu (got '%s')", c->clock);
+    if (strcmp(c->precision, "fp32") && strcmp(c->precision, "bf16"))
+        BAD("'precision': must be fp32 or bf16 (got '%s')", c->precision);
     if (strcmp(c->recipe, "preset") && strcmp(c->recipe, "paper"))
         BAD("'recipe': must be preset or paper (got '%s')", c->recipe);
     if (!(c->fit_synth == -1.0f || (c->fit_synth >= 0.0f && c->fit_synth <= 1.0f)))
@@ -598,6 +604,7 @@ lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err
     if (root) json_object_set_new(root, "photons", json_real(c->photons));
     if (root) json_object_set_new(root, "read_noise", json_real(c->read_noise));
     if (root) json_object_set_new(root, "ema", json_real(c->ema));
+    if (root) json_object_set_new(root, "precision", json_string(c->precision));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);
     char tmp[LM_TRAIN_PATH_LEN + 32];
     snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());

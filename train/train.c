@@ -395,6 +395,7 @@ static lm_status setup(loop *L, lm_err *err)
     const lm_train_cfg *cfg = L->cfg;
     if (lm_ctx_init(&L->ctx, cfg->threads) != LM_OK)
         return lm_err_set(err, LM_ERR_NOMEM, "train: cannot create the compute context");
+    L->ctx.precision = strcmp(cfg->precision, "bf16") ? LM_PRECISION_FP32 : LM_PRECISION_BF16;
     if (open_device(L, err)) return err->status;
     size_t bn = (size_t)cfg->batch * cfg->patch_h * cfg->patch_w;
     L->raw = malloc(bn * L->model->in_channels * sizeof(float));

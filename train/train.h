@@ -96,6 +96,7 @@ typedef struct lm_train_cfg {
      * (elapsed time, the default) or "cpu" (CPU time of the process, every thread: a budget a
      * busy machine does not shrink; the study runs presets side by side on it) */
     char clock[8];
+    char precision[8];              /* fp32 | bf16: operands of the 3x3 convolutions' products */
     int buckets;                    /* coded-frame buckets the model reads: 1 (bucket 1) or 2
                                      * (both; the preset's "-b2" form, which sets 2 itself) */
     int frames;                     /* coded frames per sample: 1, or 3 (the preset's "-mf3"
