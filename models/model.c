@@ -50,6 +50,11 @@ static lm_status build_rt_nc(lm_model *m, const preset *ps, lm_err *err)
     return lm_rt_build(m, ps->width, 1, err);
 }
 
+static lm_status build_tile(lm_model *m, const preset *ps, lm_err *err)
+{
+    return lm_tile_build(m, ps->width, 1, err);
+}
+
 #define CL LM_CAP_OPENCL
 #define FIT LM_CAP_CLOSED_FORM
 #define RGB LM_CAP_RGB_INPUT
@@ -89,6 +94,9 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     /* noise-conditioned: the branch also sees the input's estimated noise level */
     {"rt-8-nc", build_rt_nc, CL, {0, 0, 0, 0, 0}, 8},
     {"rt-16-nc", build_rt_nc, CL, {0, 0, 0, 0, 0}, 16},
+    /* tile resolution, noise-conditioned: the phase planes of each tile, `width` channels */
+    {"tn-64-nc", build_tile, CL, {0, 0, 0, 0, 0}, 64},
+    {"tn-96-nc", build_tile, CL, {0, 0, 0, 0, 0}, 96},
 };
 #undef B2
 #undef CL
@@ -152,6 +160,8 @@ static const struct { const char *name, *purpose; } purposes[] = {
     {"rt-16-mf3", "rt-16 reading three aligned frames (video)"},
     {"rt-8-nc", "rt-8 that also sees the noise level"},
     {"rt-16-nc", "rt-16 that also sees the noise level: the bundled demo residual on lmmse"},
+    {"tn-64-nc", "tile-resolution residual, 64 channels, sees the noise level (1/3 han-tiny's cost)"},
+    {"tn-96-nc", "tile-resolution residual, 96 channels, sees the noise level (3/4 han-tiny's cost)"},
 };
 
 const char *lm_model_preset_purpose(const char *name)

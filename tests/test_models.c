@@ -53,6 +53,11 @@ static void test_parameter_counts(void)
     check_count("rt-16-nc", 5165 + 16, 5165 + 16);
     check_count("han-tiny-nc", 44223 + 16, 44223 + 16); /* one per head channel */
     check_count("han-g3b2c32-nc", 218135 + 32, 218135 + 32); /* one per head channel */
+    /* tile resolution: head 3x3 12 -> C, four 3x3 C -> C, 1x1 C -> 33 x 12, C noise weights */
+    for (int C = 64; C <= 96; C += 32) {
+        long n = (9L * 12 * C + C) + 4 * (9L * C * C + C) + ((long)C * 396 + 396) + C;
+        check_count(C == 64 ? "tn-64-nc" : "tn-96-nc", n, n);
+    }
 }
 
 /* The noise weights of a "-nc" model (rt-N-nc: body.0.noise, han-tiny-nc: head.0.noise). */
@@ -301,6 +306,7 @@ static void test_gradcheck_models(void)
     gradcheck_model("rt-8-mf3", 6, 8);
     gradcheck_model("rt-8-nc", 6, 8);
     gradcheck_model("han-tiny-nc", 6, 8);
+    gradcheck_model("tn-64-nc", 6, 8);
 }
 
 /* A training step (forward, loss, backward) allocates nothing from the system after the

@@ -1,6 +1,6 @@
 /* test_opencl_models.c — CPU vs OpenCL agreement of whole models: for linear, han-tiny (LAM and
  * CSAM scales set non-zero), mcan-tiny and srnet-tiny (with a response map), rt-8, rt-16, lmmse,
- * lmmse-5-rf6, residuals rt-8, rt-8-nc and han-tiny-nc on lmmse-5, the two-bucket lmmse-5-b2 and rt-8-b2 on it, and
+ * lmmse-5-rf6, residuals rt-8, rt-8-nc, han-tiny-nc and tn-64-nc on lmmse-5, the two-bucket lmmse-5-b2 and rt-8-b2 on it, and
  * the RGB baseline mst-tiny (3 channels in, 31 out; attention over the whole input), the same
  * weights
  * and input run forward + L1 loss + backward on a CPU ctx and on an OpenCL ctx (parameters
@@ -190,6 +190,7 @@ static void test_models(void)
     check_model_on("rt-8-b2", "lmmse-5-b2", 2, 12, 16);
     check_model_on("rt-8-nc", "lmmse-5", 2, 12, 16); /* the noise level as a bias */
     check_model_on("han-tiny-nc", "lmmse-5", 2, 12, 16);
+    check_model_on("tn-64-nc", "lmmse-5", 2, 12, 16);
     check_model("linear", 2, 12, 16);
     check_model("han-tiny", 2, 12, 16);
     check_model("mcan-tiny", 2, 12, 16);
