@@ -10,8 +10,9 @@
  * only three frames' sub-images are held at a time (read one frame ahead). --device opencl runs
  * the network on an OpenCL device, the weights uploaded once for the run (lm_tile_device).
  * Models with a finite receptive field (linear, rt-*: lm_whole_halo > 0) run on the whole frame
- * in strips (infer/whole.h) unless --tiles. --model auto picks a model per window from a
- * calibration file (infer/auto.h, `lumosaic fit-auto`) and prints the share of each model.
+ * in strips (infer/whole.h) unless --tiles (the choice: infer/recon.h). --model auto picks a
+ * model per window from a calibration file (infer/auto.h, `lumosaic fit-auto`) and prints the
+ * share of each model.
  * Two-bucket models ("-b2" presets) read bucket 0 too: --bucket0 (a frame, pattern or folder
  * like --input, the same count and size), else the bucket0/ folder `simulate --bucket0` writes
  * beside frames/ (the input path with its last "frames" component renamed); bucket 0 is not
@@ -41,8 +42,8 @@
 #include "data/align.h"
 #include "infer/auto.h"
 #include "infer/model_io.h"
+#include "infer/recon.h"
 #include "infer/tile.h"
-#include "infer/whole.h"
 
 static void help(void)
 {
@@ -168,7 +169,7 @@ typedef struct infer_run {
     lm_infer_model more[LM_AUTO_MAX_MODELS]; /* auto: models 1.. (model 0 is im) */
     lm_model *models[LM_AUTO_MAX_MODELS];
     lm_auto_calib cal;
-    int choice[LM_AUTO_MAX_BINS], whole;
+    int choice[LM_AUTO_MAX_BINS];
     long windows[LM_AUTO_MAX_MODELS];
     lm_frame_seq seq;
     lm_frame_seq seq0;   /* two-bucket models: bucket 0 of the frames (count 0 otherwise) */
@@ -185,9 +186,7 @@ typedef struct infer_run {
 /* Write one reconstructed cube (clamped to >= 0) and its sRGB preview into the staging dir. */
 static int write_frame(infer_run *r, lm_cube *cube, int number, lm_err *e)
 {
-    size_t n = (size_t)cube->bands * cube->height * cube->width;
-    for (size_t i = 0; i < n; i++)
-        if (cube->data[i] < 0.0f) cube->data[i] = 0.0f;
+    lm_recon_clamp(cube);
     char path[1200];
     snprintf(path, sizeof path, "%s/cube_%04d.exr", r->tmp, number);
     if (lm_cube_write_exr(path, cube, e)) return fail(r->c, e, 1);
@@ -398,16 +397,19 @@ static lm_status with_bucket0(infer_run *r, int i, const float **in, int H, int 
     return st;
 }
 
-/* One frame to a 31-band cube by the run's path: auto, whole frame or windows. */
+/* One frame to a 31-band cube by the run's path: auto, or the fixed model's (infer/recon.h:
+ * whole frame or windows). */
 static lm_status reconstruct(infer_run *r, const float *in, int H, int W, lm_cube *cube,
                              lm_err *e)
 {
-    lm_tile_opts to;
-    lm_tile_default_opts(&to);
-    to.batch = (int)r->o->batch;
-    if (r->o->is_auto) return auto_frame(r, in, H, W, &to, cube, e);
-    if (r->whole) return lm_whole_infer(&r->ctx, r->im.model, in, H, W, cube, e);
-    return lm_tile_infer(&r->ctx, r->im.model, in, H, W, &to, cube, e);
+    if (r->o->is_auto) {
+        lm_tile_opts to;
+        lm_tile_default_opts(&to);
+        to.batch = (int)r->o->batch;
+        return auto_frame(r, in, H, W, &to, cube, e);
+    }
+    lm_recon_opts ro = {.batch = (int)r->o->batch, .tiles = r->o->tiles};
+    return lm_recon_frame(&r->ctx, r->im.model, in, H, W, &ro, cube, e);
 }
 
 /* The share of windows per model over the run and the calibration's expected PSNR. */
@@ -512,14 +514,10 @@ static int open_inputs(infer_run *r, lm_err *e)
     } else {
         r->im.model->noise_given = (float)r->o->noise_level;
     }
-    r->whole = !r->o->is_auto && !r->o->tiles && lm_whole_halo(r->im.model) > 0;
     if (lm_frame_seq_open(r->o->input, &r->seq, e)) return fail(r->c, e, 0);
     int rc = open_bucket0(r, e);
     if (rc) return rc;
-    lm_tile_opts to;
-    lm_tile_default_opts(&to);
-    const lm_mosaic *mo = &r->im.model->mosaic;
-    if (lm_tile_check(&to, r->seq.height, r->seq.width, mo->ty, mo->tx, e))
+    if (lm_recon_check(r->im.model, r->seq.height, r->seq.width, e))
         return lm_cli_error(r->c, "%s: %s", r->seq.paths[0], e->msg);
     float wl[31];
     for (int b = 0; b < 31; b++) wl[b] = 400.0f + 10.0f * b;

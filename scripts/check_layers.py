@@ -26,10 +26,12 @@ RULES = {
     "tensor": set(),
     "autograd": {"tensor"},
     "kernels-opencl": {"tensor"},
-    "data": {"tensor"},
+    "data": {"tensor", "include"},
     "models": {"tensor", "autograd", "data/mosaic.h"},
     "train": {"tensor", "autograd", "data", "models"},
-    "infer": {"tensor", "data", "models"},
+    "infer": {"tensor", "data", "models", "include"},
+    "include": set(),  # the public C API's header: standalone, implemented by data/, infer/
+    "examples": {"include"},  # programs on the public C API only
     "study": {"tensor", "autograd", "data", "models", "train", "infer"},  # train, infer and below
     "cli": ALL,
     "bench": ALL,

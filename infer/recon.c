@@ -1,0 +1,44 @@
+/* recon.c — one coded frame to a 31-band cube with a loaded model (see recon.h).
+ * What it is not: model loading, alignment or file output. */
+#include "infer/recon.h"
+#include "infer/tile.h"
+#include "infer/whole.h"
+
+void lm_recon_default_opts(lm_recon_opts *o)
+{
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    o->batch = to.batch;
+    o->tiles = 0;
+}
+
+int lm_recon_is_whole(const lm_model *m, const lm_recon_opts *o)
+{
+    return !o->tiles && lm_whole_halo(m) > 0;
+}
+
+lm_status lm_recon_check(const lm_model *m, int height, int width, lm_err *err)
+{
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    return lm_tile_check(&to, height, width, m->mosaic.ty, m->mosaic.tx, err);
+}
+
+lm_status lm_recon_frame(lm_ctx *c, lm_model *m, const float *in, int height, int width,
+                         const lm_recon_opts *o, lm_cube *cube, lm_err *err)
+{
+    lm_status st = lm_recon_check(m, height, width, err);
+    if (st) return st;
+    if (lm_recon_is_whole(m, o)) return lm_whole_infer(c, m, in, height, width, cube, err);
+    lm_tile_opts to;
+    lm_tile_default_opts(&to);
+    to.batch = o->batch;
+    return lm_tile_infer(c, m, in, height, width, &to, cube, err);
+}
+
+void lm_recon_clamp(lm_cube *cube)
+{
+    size_t n = (size_t)cube->bands * cube->height * cube->width;
+    for (size_t i = 0; i < n; i++)
+        if (cube->data[i] < 0.0f) cube->data[i] = 0.0f;
+}
