@@ -183,9 +183,11 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     lm_status st = lm_lmmse_fit(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches, cfg->batch,
                                 cfg->fit_synth, &sensor, &r, err);
     if (!st) st = lm_train_make_dir_top(cfg->output, made, sizeof made, err);
+    if (opts->hold) opts->hold(1);
     if (!st) st = lm_train_cfg_save(cfg, path, err);
     if (!st) st = lm_train_save_checkpoint(cfg->output, m, NULL, 0, 0, opts, cfg, err);
     if (!st) st = write_fit_report(cfg, &r, lm_lmmse_window(m), err);
+    if (opts->hold) opts->hold(0);
     if (st) {
         lm_train_discard_dir(cfg->output, made);
         return st;

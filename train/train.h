@@ -303,6 +303,13 @@ typedef struct lm_train_opts {
                                 * (nonzero, e.g. the signal's number): the run finishes the
                                 * current iteration, writes its checkpoint and returns LM_OK
                                 * with res->interrupted = the flag's value */
+    void (*hold)(int on);      /* NULL, or called with 1 before and 0 after the run folder's
+                                * files that must agree are written (config.json and the
+                                * checkpoint), so that a signal ending the program at once
+                                * waits for them (cli: lm_cli_signals_hold) */
+    int restart;               /* 1: cfg.output holds config.json (and maybe log.csv) but no
+                                * checkpoint: the run starts from its beginning there, and a
+                                * failure leaves the folder's config.json in place */
     int data_parallel;         /* 1: this process is one of lm_dist_size() data-parallel ranks
                                 * of one run (`mpirun ... lumosaic train`); 0: it trains alone
                                 * (also under mpirun, e.g. a study's rank training its preset) */
@@ -366,5 +373,7 @@ lm_status lm_train_make_dir_top(const char *path, char *top, size_t n, lm_err *e
  * log.csv, fit.json, the checkpoints) and the folders from dir up to `top` (as made by
  * lm_train_make_dir_top; "" = none were created). Other files are left alone. */
 void lm_train_discard_dir(const char *dir, const char *top);
+/* Remove the checkpoint files of `dir` (weights, optimizer state, a DOE's state). */
+void lm_train_discard_checkpoint(const char *dir);
 
 #endif

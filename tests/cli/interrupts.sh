@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# interrupts.sh — SIGINT / SIGTERM at any moment leave something that continues: a training run
+# stopped by two signals in quick succession (whatever their timing) resumes with --resume; a
+# run folder holding only its config.json starts again from it; `study --jobs` forwards a
+# signal to its workers, which checkpoint and exit, and waits for them before it reports; the
+# closed-form fit shows its progress, stops on SIGINT saying what was kept, and stops
+# accumulating at --minutes.
+# usage: interrupts.sh LUMOSAIC MAKE_CUBE
+source "$(dirname "$0")/lib.sh"
+
+# wait_for COND...: poll (up to 60 s) until the command succeeds
+wait_for() {
+  local k
+  for k in $(seq 1 1200); do "$@" 2>/dev/null && return 0; sleep 0.05; done
+  return 1
+}
+# watch PID: SIGKILL it after 90 s (the watchdog's pid in $dog)
+watch() { (sleep 90; kill -KILL "$1") > /dev/null 2>&1 & dog=$!; }
+
+# ---- two signals in quick succession: the run folder resumes -------------------------------
+# (han-small: a first iteration of seconds, so the signals come before it ends)
+SLOW="--model han-small --data $CAVE --batch 4 --accum-steps 1 --synth-fraction 0 --val-patches 1 --quiet"
+for delay in 0 0.4 1.5; do
+  d=$T/twice_$delay
+  "$LM" train $SLOW --iterations 5 --output "$d" > "$d.out" 2> "$d.err" &
+  pid=$!
+  watch $pid
+  wait_for [ -s "$d/config.json" ]
+  sleep "$delay"
+  kill -INT $pid
+  sleep 0.05
+  kill -INT $pid
+  wait $pid
+  rc=$?
+  kill $dog
+  check "two SIGINTs after $delay s: exit $rc: $(cat "$d.err")" [ $rc -eq 130 ]
+  check "two SIGINTs after $delay s: one line: $(cat "$d.err")" [ "$(wc -l < "$d.err")" -eq 1 ]
+  check "two SIGINTs after $delay s: says what is kept: $(cat "$d.err")" \
+    grep -q "stopped at once: the last checkpoint in $d is kept" "$d.err"
+  check "two SIGINTs after $delay s: a checkpoint: $(ls "$d")" \
+    [ -s "$d/model.safetensors" -a -s "$d/optimizer.safetensors" ]
+  check "two SIGINTs after $delay s: no temporary file: $(ls "$d")" [ -z "$(ls "$d" | grep tmp)" ]
+  timeout 120 "$LM" train --resume "$d" --iterations 1 > "$d.res" 2>&1
+  rc=$?
+  check "two SIGINTs after $delay s: resumes: exit $rc: $(cat "$d.res")" [ $rc -eq 0 ]
+  check "two SIGINTs after $delay s: trained: $(cat "$d.res")" grep -q "for 1 iterations" "$d.res"
+done
+# SIGTERM after SIGINT: the second signal is named, and gives the exit status
+d=$T/int_term
+"$LM" train $SLOW --iterations 5 --output "$d" > "$d.out" 2> "$d.err" &
+pid=$!
+watch $pid
+wait_for [ -s "$d/model.safetensors" ]
+kill -INT $pid
+sleep 0.05
+kill -TERM $pid
+wait $pid
+rc=$?
+kill $dog
+check "SIGINT then SIGTERM: exit $rc: $(cat "$d.err")" [ $rc -eq 143 ]
+check "SIGINT then SIGTERM: both named: $(cat "$d.err")" grep -q "interrupted (SIGTERM after SIGINT)" "$d.err"
+
+# a run folder with a config but no checkpoint (stopped before one was written) starts again
+Q="--model linear --data $CAVE --batch 2 --accum-steps 1 --synth-fraction 0 --val-patches 1 --quiet"
+"$LM" train $Q --iterations 2 --output "$T/nock" > /dev/null 2>&1
+rm -f "$T/nock/model.safetensors" "$T/nock/optimizer.safetensors"
+"$LM" train --resume "$T/nock" --iterations 3 > "$T/nock.out" 2> "$T/nock.err"
+rc=$?
+check "resume without a checkpoint: exit $rc: $(cat "$T/nock.err")" [ $rc -eq 0 ]
+check "resume without a checkpoint: says so: $(cat "$T/nock.out")" \
+  grep -q "has no checkpoint yet: the run starts from its beginning" "$T/nock.out"
+check "resume without a checkpoint: trained 3: $(cat "$T/nock.out")" \
+  grep -q "for 3 iterations" "$T/nock.out"
+
+finish
