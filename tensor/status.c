@@ -16,6 +16,7 @@ const char *lm_status_str(lm_status s)
     case LM_ERR_NUMERIC: return "numeric error";
     case LM_ERR_UNSUPPORTED: return "unsupported";
     case LM_ERR_WRITE: return "write error";
+    case LM_ERR_INTERRUPTED: return "interrupted";
     }
     return "unknown status";
 }

@@ -19,8 +19,10 @@ typedef enum lm_status {
     LM_ERR_BACKEND = -6,     /* compute backend failure (e.g. OpenCL) */
     LM_ERR_NUMERIC = -7,     /* NaN / inf where a finite value is required */
     LM_ERR_UNSUPPORTED = -8, /* valid request this build cannot serve */
-    LM_ERR_WRITE = -9        /* an output could not be written (disk full, permissions, a
+    LM_ERR_WRITE = -9,       /* an output could not be written (disk full, permissions, a
                               * missing folder): not bad input, unlike LM_ERR_IO on a read */
+    LM_ERR_INTERRUPTED = -10 /* stopped on request (a signal's flag) after saving what it could;
+                              * the message says what was kept */
 } lm_status;
 
 /* Short constant text for a status ("shape error", ...). Never NULL. */

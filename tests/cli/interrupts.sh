@@ -72,4 +72,55 @@ check "resume without a checkpoint: says so: $(cat "$T/nock.out")" \
 check "resume without a checkpoint: trained 3: $(cat "$T/nock.out")" \
   grep -q "for 3 iterations" "$T/nock.out"
 
+# ---- study: a signal reaches the workers, which checkpoint; the study waits and reports ------
+printf '{"version": 1, "presets": ["rt-8", "linear"], "data": "%s", "iterations": 100000, "patch": [33, 32], "train": {"batch": 2, "accum_steps": 1, "val_interval": 0, "checkpoint_interval": 0, "val_patches": 1}}' \
+  "$CAVE" > "$T/study.json"
+workers_of() { pgrep -f -- "--output $1 .*--worker" > /dev/null; }
+trained() { # trained DIR: the run's log has at least 3 rows (it is past its start)
+  [ -f "$1/log.csv" ] && [ "$(wc -l < "$1/log.csv")" -gt 3 ]
+}
+for sg in TERM INT; do
+  S=$T/study_$sg
+  "$LM" study --config "$T/study.json" --output "$S" --jobs 2 --threads 1 --no-charts --quiet \
+    > "$S.out" 2> "$S.err" &
+  pid=$!
+  watch $pid
+  wait_for trained "$S/runs/rt-8"
+  wait_for trained "$S/runs/linear"
+  kill -$sg $pid
+  wait $pid
+  rc=$?
+  kill $dog
+  want=$([ $sg = INT ] && echo 130 || echo 143)
+  check "study --jobs 2, SIG$sg: exit $rc, want $want: $(cat "$S.err")" [ $rc -eq $want ]
+  check "study --jobs 2, SIG$sg: says so: $(cat "$S.err")" \
+    grep -q "lumosaic study: interrupted (SIG$sg): the workers checkpointed" "$S.err"
+  check_not "study --jobs 2, SIG$sg: no worker left running" workers_of "$S"
+  for p in rt-8 linear; do
+    check "study --jobs 2, SIG$sg: $p's worker said so: $(cat "$S.err")" \
+      grep -q "interrupted (SIG$sg): $p stopped at iteration [1-9]" "$S.err"
+    n=$(sed -n "s/.*$p stopped at iteration \([0-9]*\),.*/\1/p" "$S.err")
+    "$LM" train --resume "$S/runs/$p" --iterations $((${n:-0} + 1)) --quiet > "$S.$p" 2>&1
+    check "study --jobs 2, SIG$sg: $p resumes after iteration $n: $(cat "$S.$p")" \
+      grep -q "for $((${n:-0} + 1)) iterations" "$S.$p"
+  done
+done
+# one job: the training in the study's own process checkpoints; the study says so
+S=$T/study_one
+"$LM" study --config "$T/study.json" --output "$S" --threads 1 --no-charts --quiet \
+  > "$S.out" 2> "$S.err" &
+pid=$!
+watch $pid
+wait_for trained "$S/runs/rt-8"
+kill -INT $pid
+wait $pid
+rc=$?
+kill $dog
+check "study, SIGINT: exit $rc: $(cat "$S.err")" [ $rc -eq 130 ]
+check "study, SIGINT: one line about it: $(cat "$S.err")" [ "$(grep -c interrupted "$S.err")" -eq 1 ]
+check "study, SIGINT: says what was kept: $(cat "$S.err")" \
+  grep -q "interrupted (SIGINT): rt-8 stopped at iteration [1-9][0-9]*, checkpoint written" "$S.err"
+
+# whatever failed above: no worker of this test outlives it
+for p in $(pgrep -f -- "--output $T/study"); do kill -KILL "$p" 2> /dev/null; done
 finish
