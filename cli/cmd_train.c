@@ -170,15 +170,27 @@ int lm_cmd_train(int argc, char **argv)
                        .hold = lm_cli_signals_hold, .restart = restart, .data_parallel = 1};
     lm_train_result res;
     lm_status st = lm_train_session(&cfg, &o, &res, &e);
+    int sig = atomic_load(lm_cli_signal_flag());
+    if (st == LM_ERR_INTERRUPTED && sig) {
+        lm_cli_error(&c, "interrupted (%s): %s", lm_cli_signal_name(sig), e.msg);
+        return 128 + sig;
+    }
     if (st) { /* a NaN loss is the run failing (1), not bad input */
         if (rank) lm_cli_error(&c, "rank %d: %s", rank, e.msg);
         else lm_cli_error(&c, "%s", e.msg);
         return st == LM_ERR_NUMERIC ? LM_EXIT_FAILED : lm_cli_exit_status(st);
     }
-    int sig = atomic_load(lm_cli_signal_flag());
     if (rank) return sig ? 128 + sig : 0; /* rank 0 reports */
     if (sig) { /* SIGINT / SIGTERM: the step finished and the checkpoint is on disk */
-        if (res.interrupted)
+        if (res.closed_form && res.interrupted)
+            lm_cli_error(&c, "interrupted (%s): the closed-form fit stopped reading after %ld of "
+                         "%ld training patches and was solved from them; the model is written "
+                         "to %s", lm_cli_signal_name(sig), res.fit_patches,
+                         res.fit_patches_asked, cfg.output);
+        else if (res.closed_form)
+            lm_cli_error(&c, "interrupted (%s) as the fit ended: the model is written to %s",
+                         lm_cli_signal_name(sig), cfg.output);
+        else if (res.interrupted)
             lm_cli_error(&c, "interrupted (%s) at iteration %ld: checkpoint written to %s "
                          "(continue with --resume %s)", lm_cli_signal_name(sig),
                          res.iterations_done, cfg.output, cfg.output);
@@ -190,6 +202,9 @@ int lm_cmd_train(int argc, char **argv)
     if (res.closed_form) {
         printf("fitted %s in closed form (%.1f s); fit.json has every noise level\n", cfg.model,
                res.seconds);
+        if (res.budget_spent)
+            printf("the time budget (--minutes %g) ended the reading after %ld of %ld training "
+                   "patches\n", (double)cfg.minutes, res.fit_patches, res.fit_patches_asked);
         if (res.validated)
             printf("validation (clean, interior pixels): PSNR %.3f dB\n", res.val.psnr);
         printf("checkpoint: %s\n", ck);

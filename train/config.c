@@ -111,7 +111,8 @@ static const field fields[] = {
     FLD("snapshots", F_STR, snapshots, "M,M,...", "weights at these minutes of training into "
         "<output>/snapshots/<M>min/", 0, 0),
     FLD("minutes", F_FLOAT, minutes, "M", "time budget in minutes (0 = none; the schedule "
-        "spans it)", 0, 1e6),
+        "spans it; a closed-form fit reads training patches until then and solves from them)",
+        0, 1e6),
     FLD("clock", F_STR, clock, "C", "what minutes and snapshots count: wall | cpu (CPU time of "
         "the process, all threads; not shrunk by a busy machine)", 0, 0),
     FLD("doe", F_STR, doe, "FILE", "qdo presets: DOE description (default: bundled; a run's "

@@ -144,8 +144,11 @@ static lm_status write_fit_report(const lm_train_cfg *cfg, const lm_lmmse_fit_re
                               : json_null(), "val_psnr",
                               isfinite(r->val_psnr[l]) ? json_real(r->val_psnr[l]) : json_null(),
                               "interpolated", !isfinite(r->ridge[l])));
-    json_t *root = json_pack("{s:s, s:i, s:I, s:I, s:I, s:f, s:f, s:b, s:o}", "model", cfg->model,
-                             "window", K, "patches", (json_int_t)r->patches,
+    json_t *root = json_pack("{s:s, s:i, s:I, s:I, s:s, s:I, s:I, s:f, s:f, s:b, s:o}",
+                             "model", cfg->model, "window", K, "patches", (json_int_t)r->patches,
+                             "patches_asked", (json_int_t)r->patches_asked, "stopped",
+                             r->interrupted ? "interrupted" : r->budget_spent ? "time budget"
+                             : "no",
                              "val_patches", (json_int_t)r->val_patches, "rows", (json_int_t)r->rows,
                              "seconds", r->seconds, "seconds_solve", r->seconds_solve, "ridge_from_validation", r->val_patches > 0,
                              "levels", lv);
@@ -180,8 +183,11 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     sensor.clip = cfg->sensor_clip;
     sensor.bits = cfg->sensor_bits;
     char made[LM_TRAIN_PATH_LEN] = ""; /* the run folder is made once the fit has worked */
-    lm_status st = lm_lmmse_fit(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches, cfg->batch,
-                                cfg->fit_synth, &sensor, &r, err);
+    lm_lmmse_fit_ctl ctl = {.progress = opts->progress ? out : NULL, .name = cfg->model,
+                            .interrupt = opts->interrupt, .budget_s = cfg->minutes * 60.0,
+                            .cpu_clock = !strcmp(cfg->clock, "cpu")};
+    lm_status st = lm_lmmse_fit_ctl_run(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches,
+                                        cfg->batch, cfg->fit_synth, &sensor, &ctl, &r, err);
     if (!st) st = lm_train_make_dir_top(cfg->output, made, sizeof made, err);
     if (opts->hold) opts->hold(1);
     if (!st) st = lm_train_cfg_save(cfg, path, err);
@@ -208,6 +214,10 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     res->validated = r.val_patches > 0;
     res->closed_form = 1;
     res->val.psnr = r.val_psnr[0];
+    res->interrupted = r.interrupted;
+    res->budget_spent = r.budget_spent;
+    res->fit_patches = r.patches;
+    res->fit_patches_asked = r.patches_asked;
     return LM_OK;
 }
 

@@ -325,6 +325,8 @@ typedef struct lm_train_result {
     int closed_form;           /* fitted in closed form (lmmse): no iterations, val.psnr only */
     int budget_spent;          /* stopped because cfg.minutes of training time were spent */
     int interrupted;           /* stopped by opts->interrupt (its value), 0 otherwise */
+    long fit_patches, fit_patches_asked; /* closed form: training patches read / asked for
+                                * (fewer when interrupted or out of time) */
 } lm_train_result;
 
 /* Train `model` (created by the caller from cfg->model with the run's mosaic) on `src`.

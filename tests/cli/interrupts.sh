@@ -121,6 +121,47 @@ check "study, SIGINT: one line about it: $(cat "$S.err")" [ "$(grep -c interrupt
 check "study, SIGINT: says what was kept: $(cat "$S.err")" \
   grep -q "interrupted (SIGINT): rt-8 stopped at iteration [1-9][0-9]*, checkpoint written" "$S.err"
 
+# ---- the closed-form fit: progress with an ETA, SIGINT, --minutes ----------------------------
+F="--data $CAVE --fit-patches 1000000 --threads 1"
+progress_line() { grep -q "training patches read.*ETA" "$1"; }
+d=$T/fit_int
+"$LM" train --model lmmse $F --output "$d" > "$d.out" 2> "$d.err" &
+pid=$!
+watch $pid
+wait_for progress_line "$d.err"
+check "fit: a progress line with an ETA: $(tail -2 "$d.err")" progress_line "$d.err"
+kill -INT $pid
+wait $pid
+rc=$?
+kill $dog
+check "fit SIGINT: exit $rc: $(tail -2 "$d.err")" [ $rc -eq 130 ]
+check "fit SIGINT: says what was kept: $(tail -1 "$d.err")" \
+  grep -q "interrupted (SIGINT): the closed-form fit stopped reading after [0-9]* of 1000000 training patches and was solved from them; the model is written to $d" "$d.err"
+check "fit SIGINT: the model: $(ls "$d")" [ -s "$d/model.safetensors" ]
+check "fit SIGINT: fit.json says so" grep -q '"stopped": "interrupted"' "$d/fit.json"
+# random features: each level is a pass of its own; stopped in the first, nothing is written
+d=$T/fit_rf
+"$LM" train --model lmmse-rf $F --output "$d" > "$d.out" 2> "$d.err" &
+pid=$!
+watch $pid
+wait_for progress_line "$d.err"
+kill -TERM $pid
+wait $pid
+rc=$?
+kill $dog
+check "fit lmmse-rf SIGTERM: exit $rc: $(tail -1 "$d.err")" [ $rc -eq 143 ]
+check "fit lmmse-rf SIGTERM: says nothing was fitted: $(tail -1 "$d.err")" \
+  grep -q "interrupted (SIGTERM): the closed-form fit of lmmse-rf was stopped in pass 1 of 6.*nothing was fitted" "$d.err"
+check "fit lmmse-rf SIGTERM: no run folder" [ ! -e "$d" ]
+# --minutes: reading stops at the budget, the filters are solved from what was read
+d=$T/fit_min
+timeout 60 "$LM" train --model lmmse $F --minutes 0.05 --output "$d" > "$d.out" 2> "$d.err"
+rc=$?
+check "fit --minutes: exit $rc: $(tail -1 "$d.err")" [ $rc -eq 0 ]
+check "fit --minutes: says so: $(cat "$d.out")" \
+  grep -q "the time budget (--minutes 0.05) ended the reading after [0-9]* of 1000000" "$d.out"
+check "fit --minutes: fit.json says so" grep -q '"stopped": "time budget"' "$d/fit.json"
+
 # whatever failed above: no worker of this test outlives it
 for p in $(pgrep -f -- "--output $T/study"); do kill -KILL "$p" 2> /dev/null; done
 finish
