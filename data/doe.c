@@ -250,6 +250,8 @@ lm_status lm_doe_load(const char *path, lm_doe *doe, lm_err *err)
 {
     memset(doe, 0, sizeof *doe);
     parser p = {path, err, 1};
+    lm_status fchk = lm_file_check(path, "a DOE description (.json)", err);
+    if (fchk) return fchk;
     json_error_t je;
     json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &je);
     if (!root && json_error_code(&je) == json_error_cannot_open_file)

@@ -39,7 +39,7 @@ static lm_status check_regular_file(const char *path, lm_err *e)
     if (stat(path, &st) != 0) return lm_err_set(e, LM_ERR_IO, "%s: no such file", path);
     if (S_ISDIR(st.st_mode))
         return lm_err_set(e, LM_ERR_IO, "%s: is a directory, expected an image file", path);
-    return LM_OK;
+    return lm_file_check(path, "an image file", e);
 }
 
 /* OpenImageIO messages can span lines; keep the first line only. */

@@ -14,16 +14,19 @@
 #define SIDECAR_MAX_BYTES (1 << 20)
 #define SIDECAR_PATH_MAX 4096
 
+/* Anything at the path counts (a folder or a FIFO there is an error when it is read). */
 static int is_file(const char *path)
 {
     struct stat st;
-    return stat(path, &st) == 0 && !S_ISDIR(st.st_mode);
+    return stat(path, &st) == 0;
 }
 
 /* The whole file, NUL-terminated, into *text (malloc'd). */
 static lm_status slurp(const char *path, char **text, lm_err *e)
 {
     *text = NULL;
+    lm_status fchk = lm_file_check(path, "a wavelength list", e);
+    if (fchk) return fchk;
     FILE *f = fopen(path, "rb");
     if (!f) return lm_err_set(e, LM_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     char *buf = malloc(SIDECAR_MAX_BYTES + 1);

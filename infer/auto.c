@@ -310,6 +310,8 @@ static lm_status load_root(json_t *r, lm_auto_calib *a, const char **what)
 lm_status lm_auto_load(const char *path, lm_auto_calib *a, lm_err *err)
 {
     memset(a, 0, sizeof *a);
+    lm_status fchk = lm_file_check(path, "a calibration (.json)", err);
+    if (fchk) return fchk;
     FILE *f = fopen(path, "rb");
     if (!f) return lm_err_set(err, LM_ERR_IO, "auto: cannot open calibration '%s'", path);
     json_error_t je;

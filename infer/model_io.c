@@ -23,6 +23,8 @@ static lm_status read_meta(const char *path, lm_infer_model *im, char *preset, s
 {
     if (lm_is_dir(path)) snprintf(im->weights, sizeof im->weights, "%s/model.safetensors", path);
     else snprintf(im->weights, sizeof im->weights, "%s", path);
+    lm_status fchk = lm_file_check(im->weights, "a .safetensors file", err);
+    if (fchk) return fchk;
     if (!is_file(im->weights))
         return lm_err_set(err, LM_ERR_IO, "%s: no such model (a run folder with "
                           "model.safetensors, or a .safetensors file)", im->weights);

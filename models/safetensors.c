@@ -161,6 +161,8 @@ static lm_status load_one(lm_param *e, json_t *ent, FILE *f, int64_t data_start,
 
 lm_status lm_params_load(lm_params *p, const char *path, int allow_extra, lm_err *err)
 {
+    lm_status fchk = lm_file_check(path, "a .safetensors file", err);
+    if (fchk) return fchk;
     FILE *f = fopen(path, "rb");
     if (!f) return lm_err_set(err, LM_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     int64_t data_start = 0, file_size = 0;
@@ -189,6 +191,7 @@ lm_status lm_params_load(lm_params *p, const char *path, int allow_extra, lm_err
 
 char *lm_safetensors_meta(const char *path, const char *key, lm_err *err)
 {
+    if (lm_file_check(path, "a .safetensors file", err)) return NULL;
     FILE *f = fopen(path, "rb");
     if (!f) {
         lm_err_set(err, LM_ERR_IO, "%s: cannot open: %s", path, strerror(errno));

@@ -41,6 +41,12 @@ lm_status lm_err_set(lm_err *e, lm_status s, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 static inline void lm_err_clear(lm_err *e) { if (e) { e->status = LM_OK; e->msg[0] = 0; } }
 
+/* Before a file input is opened: LM_OK when `path` is a regular file (or a link to one), or
+ * does not exist (the opener reports that in its own words); else LM_ERR_IO, "<path>: is a
+ * folder, expected <what>" or "<path>: is a FIFO (a device, a socket), not a regular file".
+ * Only stat(2) is used: a FIFO or a device is refused without being opened, so never blocks. */
+lm_status lm_file_check(const char *path, const char *what, lm_err *e);
+
 #ifdef __cplusplus
 }
 #endif

@@ -467,6 +467,8 @@ lm_status lm_train_cfg_parse(lm_train_cfg *c, const char *text, const char *labe
 
 lm_status lm_train_cfg_load(lm_train_cfg *c, const char *path, lm_err *err)
 {
+    lm_status fchk = lm_file_check(path, "a run config (.json)", err);
+    if (fchk) return fchk;
     json_error_t je;
     json_t *root = json_load_file(path, 0, &je);
     if (!root) {

@@ -155,7 +155,7 @@ check "fit lmmse-rf SIGTERM: says nothing was fitted: $(tail -1 "$d.err")" \
 check "fit lmmse-rf SIGTERM: no run folder" [ ! -e "$d" ]
 # --minutes: reading stops at the budget, the filters are solved from what was read
 d=$T/fit_min
-timeout 60 "$LM" train --model lmmse $F --minutes 0.05 --output "$d" > "$d.out" 2> "$d.err"
+timeout -k 5 60 "$LM" train --model lmmse $F --minutes 0.05 --output "$d" > "$d.out" 2> "$d.err"
 rc=$?
 check "fit --minutes: exit $rc: $(tail -1 "$d.err")" [ $rc -eq 0 ]
 check "fit --minutes: says so: $(cat "$d.out")" \
