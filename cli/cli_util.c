@@ -3,6 +3,7 @@
 #define _GNU_SOURCE /* nftw flags */
 #include "cli/cli_util.h"
 #include "tensor/tensor.h"
+#include "data/util.h"
 #include <dirent.h>
 #include <errno.h>
 #include <ftw.h>
@@ -101,25 +102,9 @@ int lm_cli_flag(lm_cli *c, const char *name, int *flag)
     return 1;
 }
 
-int lm_cli_parse_ll(const char *s, long long *out)
-{
-    char *end;
-    errno = 0;
-    long long v = strtoll(s, &end, 10);
-    if (!*s || *end || errno) return -1;
-    *out = v;
-    return 0;
-}
+int lm_cli_parse_ll(const char *s, long long *out) { return lm_parse_int(s, out); }
 
-int lm_cli_parse_real(const char *s, double *out)
-{
-    char *end;
-    errno = 0;
-    double v = strtod(s, &end);
-    if (!*s || *end || errno || !isfinite(v)) return -1;
-    *out = v;
-    return 0;
-}
+int lm_cli_parse_real(const char *s, double *out) { return lm_parse_real(s, out); }
 
 int lm_cli_int(lm_cli *c, const char *name, long long lo, long long hi, long long *out)
 {

@@ -13,6 +13,7 @@
 #include <string.h>
 #include <unistd.h>
 #include "data/dataset.h"
+#include "data/util.h"
 
 typedef enum ftype { F_INT, F_LONG, F_U64, F_FLOAT, F_STR, F_LIST, F_PATCH, F_NOISE } ftype;
 
@@ -199,21 +200,9 @@ int lm_train_cfg_given(const lm_train_cfg *c, const char *key)
     return (int)(c->given[idx / 64] >> (idx % 64) & 1);
 }
 
-static int parse_long(const char *s, long long *v)
-{
-    char *end;
-    errno = 0;
-    *v = strtoll(s, &end, 10);
-    return errno == 0 && end != s && *end == 0;
-}
+static int parse_long(const char *s, long long *v) { return lm_parse_int(s, v) == 0; }
 
-static int parse_double(const char *s, double *v)
-{
-    char *end;
-    errno = 0;
-    *v = strtod(s, &end);
-    return end != s && *end == 0 && isfinite(*v);
-}
+static int parse_double(const char *s, double *v) { return lm_parse_real(s, v) == 0; }
 
 /* "lo..hi" of a field. */
 static const char *range_text(const field *f, char *buf, size_t n)
@@ -536,9 +525,10 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     if (!(c->fit_synth == -1.0f || (c->fit_synth >= 0.0f && c->fit_synth <= 1.0f)))
         BAD("'fit_synth': must be -1 (chosen on validation) or in [0, 1] (got %g)",
             (double)c->fit_synth);
-    for (const char *p = c->snapshots; *p; p++)
-        if (!strchr("0123456789.,", *p))
-            BAD("'snapshots': must be minutes separated by commas (got '%s')", c->snapshots);
+    double marks[64];
+    char why[128];
+    if (c->snapshots[0] && lm_parse_list(c->snapshots, 0, 1e6, marks, 64, why, sizeof why) < 0)
+        BAD("'snapshots': must be minutes separated by commas (got '%s': %s)", c->snapshots, why);
     if (strcmp(c->doe_quantise, "progressive") && strcmp(c->doe_quantise, "ste") &&
         strcmp(c->doe_quantise, "none"))
         BAD("'doe_quantise': must be progressive, ste or none (got '%s')", c->doe_quantise);

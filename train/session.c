@@ -342,6 +342,10 @@ static lm_status resolve_buckets(lm_train_cfg *c, lm_err *err)
 {
     size_t n = strlen(c->model);
     int b2 = n > 3 && !strcmp(c->model + n - 3, "-b2");
+    if (b2 && c->buckets != 2 && lm_train_cfg_given(c, "buckets"))
+        return lm_err_set(err, LM_ERR_ARG, "config: 'buckets' %d conflicts with model %s, a "
+                          "two-bucket preset (drop 'buckets', or use the model without -b2)",
+                          c->buckets, c->model);
     if (b2) c->buckets = 2;
     if (b2 || c->buckets != 2) return LM_OK;
     char name[sizeof c->model + 4];
@@ -360,6 +364,10 @@ static lm_status resolve_frames(lm_train_cfg *c, lm_err *err)
 {
     size_t n = strlen(c->model);
     int mf = n > 4 && !strcmp(c->model + n - 4, "-mf3");
+    if (mf && c->frames != 3 && lm_train_cfg_given(c, "frames"))
+        return lm_err_set(err, LM_ERR_ARG, "config: 'frames' %d conflicts with model %s, a "
+                          "three-frame preset (drop 'frames', or use the model without -mf3)",
+                          c->frames, c->model);
     if (mf) c->frames = 3;
     if (c->frames == 2)
         return lm_err_set(err, LM_ERR_ARG, "config: field 'frames': 1 or 3 (got 2)");

@@ -2,7 +2,10 @@
 # inputs.sh — what every command does with its input paths and list options before any work:
 # a FIFO, a device or a folder where a file is expected is refused at once (exit 2, one line
 # naming it; nothing is opened, so nothing blocks), for frames, cubes, models, system files,
-# configs, calibrations, DOE descriptions, spectra and wavelength sidecars.
+# configs, calibrations, DOE descriptions, spectra and wavelength sidecars; a wavelength sidecar
+# that is a folder is an error too. Every list option is parsed strictly (no empty element, no
+# hexadecimal); flags that contradict the preset and an output named for another format are
+# one-line errors.
 # usage: inputs.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 MODEL=$(cd "$(dirname "$0")/../.." && pwd)/models/demo/rt16nc-lmmse.safetensors
@@ -50,5 +53,49 @@ expect_error "eval: a FIFO model" 2 "m.safetensors: is a FIFO" "$T/o15" -- \
   $W "$LM" eval --model "$F/m.safetensors" "$CAVE" --output "$T/o15"
 expect_error "infer: a device as a frame" 2 "null.png: is a device, not a regular file" "$T/o16" -- \
   $W "$LM" infer --model "$MODEL" --input "$T/null.png" --output "$T/o16"
+
+# ---- a sidecar path that is a folder -----------------------------------------------------------
+mkdir -p "$T/sc2" && cp -r "$CAVE" "$T/sc2/" && mkdir "$T/sc2/balloons_crop100.wavelengths.txt"
+expect_error "render: a folder as the wavelength sidecar" 2 \
+  "balloons_crop100.wavelengths.txt: is a folder, expected a wavelength list" "$T/p1.png" -- \
+  "$LM" render --input "$T/sc2/balloons_crop100" --output "$T/p1.png"
+
+# ---- lists: strict, one parser ---------------------------------------------------------------
+E="$LM eval --model $MODEL $CAVE --split all --rainbow 0"
+expect_error "eval --noise '0,,5'" 2 "--noise '0,,5': element 2 is empty" "$T/l1" -- \
+  $E --noise '0,,5' --output "$T/l1"
+expect_error "eval --noise 0x5" 2 "--noise '0x5': '0x5' is not a decimal number" "$T/l2" -- \
+  $E --noise 0x5 --output "$T/l2"
+expect_error "eval --motion '0,,60'" 2 "--motion '0,,60': element 2 is empty" "$T/l3" -- \
+  $E --noise 0 --motion '0,,60' --output "$T/l3"
+expect_error "eval --motion '60,'" 2 "--motion '60,': element 2 is empty" "$T/l4" -- \
+  $E --noise 0 --motion '60,' --output "$T/l4"
+expect_error "eval --motion ',60'" 2 "--motion ',60': element 1 is empty" "$T/l5" -- \
+  $E --noise 0 --motion ',60' --output "$T/l5"
+expect_error "eval --motion 0x10" 2 "--motion '0x10': '0x10' is not a decimal number" "$T/l6" -- \
+  $E --noise 0 --motion 0x10 --output "$T/l6"
+expect_error "eval --noise inf" 2 "'inf' is not a decimal number" "$T/l7" -- \
+  $E --noise inf --output "$T/l7"
+expect_error "simulate --motion translate:0x10,0" 2 "every number in -1e6..1e6" "$T/l8" -- \
+  "$LM" simulate --input "$CAVE" --crop --video --frames 2 --motion translate:0x10,0 --output "$T/l8"
+expect_error "calibrate --chart-corners with an empty element" 2 "--chart-corners: need 8 numbers" \
+  "$T/l9.json" -- "$LM" calibrate "$CAVE" --chart-corners 1,2,,3,4,5,6,7,8 --output "$T/l9.json"
+expect_error "fit-auto --models 'a,,b'" 2 "--models 'x,,y': an empty element" "$T/l10.json" -- \
+  "$LM" fit-auto --models 'x,,y' --synth 1 --output "$T/l10.json"
+expect_error "fit-auto --test-tol '0,'" 2 "--test-tol '0,': element 2 is empty" "$T/l11.json" -- \
+  "$LM" fit-auto --models "$MODEL,$MODEL" --synth 1 --test-tol '0,' --output "$T/l11.json"
+expect_error "train --lr 0x1p-3" 2 "'lr': must be a finite number" "$T/l12" -- \
+  "$LM" train --model linear --data "$CAVE" --lr 0x1p-3 --iterations 1 --output "$T/l12"
+expect_error "train --snapshots '1,,2'" 2 "'snapshots': must be minutes separated by commas" \
+  "$T/l13" -- "$LM" train --model linear --data "$CAVE" --snapshots '1,,2' --iterations 1 --output "$T/l13"
+
+# ---- conflicting flags, an output named for another format --------------------------------
+expect_error "train rt-8-b2 --buckets 1" 2 "'buckets' 1 conflicts with model rt-8-b2" "$T/c1" -- \
+  "$LM" train --model rt-8-b2 --buckets 1 --data "$CAVE" --iterations 1 --output "$T/c1"
+expect_error "train rt-8-mf3 --frames 1" 2 "'frames' 1 conflicts with model rt-8-mf3" "$T/c2" -- \
+  "$LM" train --model rt-8-mf3 --frames 1 --data "$CAVE" --iterations 1 --output "$T/c2"
+mkdir -p "$T/out"
+expect_error "calibrate --write-chart chart.png" 2 "--write-chart $T/out/chart.png: the chart is a spectral OpenEXR cube; name it .exr" \
+  "$T/out/chart.png" -- "$LM" calibrate --write-chart "$T/out/chart.png"
 
 finish
