@@ -409,11 +409,20 @@ static void json_motion(FILE *f, const eval_opts *o, const lm_eval_motion *m, co
                 m[k].unaligned.sam, k + 1 < motion_rows(o) ? "," : "");
 }
 
+/* A path as an absolute one (the result file is read from anywhere), as given if it does not
+ * resolve. */
+static void json_path(FILE *f, const char *p)
+{
+    char *abs = realpath(p, NULL);
+    json_str(f, abs ? abs : p);
+    free(abs);
+}
+
 static void write_json(FILE *f, const eval_run *r)
 {
     const eval_opts *o = r->o;
     fprintf(f, "{\n  \"model\": ");
-    json_str(f, r->im.weights);
+    json_path(f, r->im.weights);
     fprintf(f, ",\n  \"split\": \"%s\",\n  \"seed\": %lld,\n  \"noise_percent\": [",
             split_names[o->split], o->com.seed);
     for (int n = 0; n < o->nnoise; n++) fprintf(f, "%s%g", n ? ", " : "", 100.0 * o->k[n]);
@@ -423,7 +432,7 @@ static void write_json(FILE *f, const eval_run *r)
         fprintf(f, "    {\"name\": ");
         json_str(f, r->sc[i].name);
         fprintf(f, ", \"path\": ");
-        json_str(f, r->sc[i].path);
+        json_path(f, r->sc[i].path);
         fprintf(f, ", \"height\": %d, \"width\": %d, \"results\": [\n", r->sc[i].height,
                 r->sc[i].width);
         json_metrics(f, o, r->sc[i].m, "      ");

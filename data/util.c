@@ -136,3 +136,39 @@ int lm_parse_list(const char *s, double lo, double hi, double *v, int max, char 
         p += len + 1;
     }
 }
+
+int lm_path_relative(const char *from_dir, const char *to, char *out, size_t n)
+{
+    char *a = realpath(from_dir, NULL), *b = realpath(to, NULL);
+    int rc = -1;
+    if (a && b) {
+        size_t i = 0, common = 0; /* where the shared folders end (at a '/' or the end) */
+        while (a[i] == b[i]) {
+            if (!a[i]) {
+                common = i;
+                break;
+            }
+            if (a[i] == '/') common = i;
+            i++;
+        }
+        if (a[i] != b[i] && ((!a[i] && b[i] == '/') || (!b[i] && a[i] == '/'))) common = i;
+        char buf[4096] = "";
+        size_t k = 0;
+        for (const char *p = a + common; *p; p++) /* one ".." per component left in a */
+            if (*p == '/' && p[1] && k + 3 < sizeof buf)
+                k += (size_t)snprintf(buf + k, sizeof buf - k, "../");
+        const char *rest = b + common;
+        while (*rest == '/') rest++;
+        int m = snprintf(buf + k, sizeof buf - k, "%s", rest);
+        k += (size_t)(m > 0 ? m : 0);
+        if (k && buf[k - 1] == '/') buf[--k] = 0;
+        if (!k) snprintf(buf, sizeof buf, ".");
+        if (k < sizeof buf - 1 && strlen(buf) < n) {
+            snprintf(out, n, "%s", buf);
+            rc = 0;
+        }
+    }
+    free(a);
+    free(b);
+    return rc;
+}

@@ -46,4 +46,9 @@ int lm_parse_int(const char *s, long long *v);
  * range (0..100)", "more than 8 values". */
 int lm_parse_list(const char *s, double lo, double hi, double *v, int max, char *why, size_t n);
 
+/* `to` as a path relative to the folder `from_dir`, both resolved with realpath(3) first (so
+ * links and "..": the real locations); e.g. from /a/b/run to /a/data/x: "../../data/x". 0, or
+ * -1 when either does not resolve or out (n bytes) is too small (out is then unchanged). */
+int lm_path_relative(const char *from_dir, const char *to, char *out, size_t n);
+
 #endif

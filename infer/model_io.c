@@ -38,7 +38,12 @@ static lm_status read_meta(const char *path, lm_infer_model *im, char *preset, s
     snprintf(preset, np, "%s", p);
     free(p);
     char *s = lm_safetensors_meta(im->weights, "system", &e2);
-    snprintf(im->system_path, sizeof im->system_path, "%s", s ? s : "");
+    const char *slash = strrchr(im->weights, '/');
+    if (s && s[0] && s[0] != '/' && slash) /* recorded relative to the weights' folder */
+        snprintf(im->system_path, sizeof im->system_path, "%.*s/%s",
+                 (int)(slash - im->weights), im->weights, s);
+    else
+        snprintf(im->system_path, sizeof im->system_path, "%s", s ? s : "");
     free(s);
     char *h = lm_safetensors_meta(im->weights, "system_hash", &e2);
     *hash = h ? strtoull(h, NULL, 16) : 0;

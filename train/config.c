@@ -546,7 +546,40 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
 }
 #undef BAD
 
-lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
+/* The run's paths (data, system, base, DOE) made relative to `dir` where they resolve, so that
+ * a run folder moved or cloned with its data beside it keeps working. */
+static void paths_relative_to(lm_train_cfg *c, const char *dir)
+{
+    char *paths[LM_TRAIN_MAX_PATHS + 3];
+    int n = 0;
+    for (int i = 0; i < c->ndata; i++) paths[n++] = c->data[i];
+    paths[n++] = c->system;
+    paths[n++] = c->base;
+    if (strcmp(c->doe, "default")) paths[n++] = c->doe;
+    for (int i = 0; i < n; i++) {
+        char rel[LM_TRAIN_PATH_LEN];
+        if (paths[i][0] && !lm_path_relative(dir, paths[i], rel, sizeof rel)) strcpy(paths[i], rel);
+    }
+}
+
+static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err);
+
+lm_status lm_train_cfg_save(const lm_train_cfg *cfg, const char *path, lm_err *err)
+{
+    lm_train_cfg *c = malloc(sizeof *c);
+    if (!c) return lm_err_set(err, LM_ERR_NOMEM, "%s: out of memory", path);
+    *c = *cfg;
+    char dir[LM_TRAIN_PATH_LEN];
+    const char *slash = strrchr(path, '/');
+    if (!slash) snprintf(dir, sizeof dir, ".");
+    else snprintf(dir, sizeof dir, "%.*s", slash == path ? 1 : (int)(slash - path), path);
+    paths_relative_to(c, dir);
+    lm_status st = cfg_save(c, path, err);
+    free(c);
+    return st;
+}
+
+static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
 {
     json_t *data = json_array();
     for (int i = 0; i < c->ndata; i++) json_array_append_new(data, json_string(c->data[i]));

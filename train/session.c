@@ -8,6 +8,7 @@
 #include "train/dist.h"
 #include "train/fit_lmmse.h"
 #include "data/mosaic.h"
+#include "data/util.h"
 #include <errno.h>
 #include <jansson.h>
 #include <math.h>
@@ -234,7 +235,14 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         lm_system_free(&sys);
         return err->status;
     }
-    opts.system_path = syspath;
+    /* the checkpoint records the bundled default as "" (found on any machine), another
+     * system by a path relative to the checkpoint's folder */
+    char def[LM_TRAIN_PATH_LEN];
+    lm_err e_def = {0};
+    int bundled = !cfg->system[0] ||
+                  (!lm_data_path("systems/default.json", def, sizeof def, &e_def) &&
+                   lm_path_relative(def, syspath, def, sizeof def) == 0 && !strcmp(def, "."));
+    opts.system_path = bundled ? "" : syspath;
     opts.system_hash = lm_file_hash(syspath);
     lm_mosaic mo;
     lm_model *m = NULL;
