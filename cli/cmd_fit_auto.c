@@ -19,6 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include "cli/cli_util.h"
 #include "data/util.h"
 #include "cli/commands.h"
@@ -132,6 +133,9 @@ static int check_opts(lm_cli *c, cal_opts *o)
         return lm_cli_error(c, "--synth-size '%s': want HxW, from 66x64 to 4096x4096",
                             o->size_s);
     if (parse_tol(c, o)) return 2;
+    struct stat sb; /* an output that cannot be written is known before the fit */
+    if (stat(o->output, &sb) == 0 && !S_ISREG(sb.st_mode))
+        return lm_cli_error(c, "--output %s: exists and is not a file", o->output);
     return 1;
 }
 

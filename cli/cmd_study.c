@@ -8,6 +8,7 @@
 #include <omp.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/stat.h>
 #include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "study/charts.h"
@@ -215,7 +216,17 @@ int lm_cmd_study(int argc, char **argv)
     if (!dir)
         return lm_cli_error(&c, "no output folder: pass --output DIR or set \"output\" in %s",
                             a.config);
-    if (a.dry_run) return print_plan(&cfg, dir);
+    if (a.dry_run) { /* the plan's paths are checked as a run would find them */
+        struct stat sb;
+        for (int i = 0; i < cfg.train.ndata; i++)
+            if (stat(cfg.train.data[i], &sb) != 0)
+                return lm_cli_error(&c, "data %s: no such file or folder", cfg.train.data[i]);
+        if (cfg.train.system[0] && stat(cfg.train.system, &sb) != 0)
+            return lm_cli_error(&c, "system %s: no such file", cfg.train.system);
+        if (stat(dir, &sb) == 0 && !S_ISDIR(sb.st_mode))
+            return lm_cli_error(&c, "output %s: exists and is not a folder", dir);
+        return print_plan(&cfg, dir);
+    }
     /* SIGINT / SIGTERM: training checkpoints and the study stops (workers get the signal and
      * are waited for); a second signal stops at once, after any checkpoint being written */
     if (lm_cli_signals_init(&c, 1)) return lm_cli_error(&c, "cannot install signal handlers"), 1;

@@ -446,7 +446,7 @@ static lm_status parse_root(lm_train_cfg *c, json_t *root, const char *label, co
 lm_status lm_train_cfg_parse(lm_train_cfg *c, const char *text, const char *label, lm_err *err)
 {
     json_error_t je;
-    json_t *root = json_loads(text, 0, &je);
+    json_t *root = json_loads(text, JSON_REJECT_DUPLICATES, &je);
     if (!root)
         return lm_err_set(err, LM_ERR_FORMAT, "config %s: line %d: %s", label, je.line, je.text);
     lm_status st = parse_root(c, root, label, NULL, err);
@@ -459,7 +459,7 @@ lm_status lm_train_cfg_load(lm_train_cfg *c, const char *path, lm_err *err)
     lm_status fchk = lm_file_check(path, "a run config (.json)", err);
     if (fchk) return fchk;
     json_error_t je;
-    json_t *root = json_load_file(path, 0, &je);
+    json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &je);
     if (!root) {
         FILE *f = fopen(path, "rb");
         if (!f) return lm_err_set(err, LM_ERR_IO, "config %s: cannot open: %s", path,

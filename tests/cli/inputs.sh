@@ -5,7 +5,10 @@
 # configs, calibrations, DOE descriptions, spectra and wavelength sidecars; a wavelength sidecar
 # that is a folder is an error too. Every list option is parsed strictly (no empty element, no
 # hexadecimal); flags that contradict the preset and an output named for another format are
-# one-line errors.
+# one-line errors. Checks where a mistake was accepted: a 1-bit frame, buckets in two formats,
+# an automatic calibration of one model, study --dry-run on missing data or a file as its
+# output, duplicate keys in a JSON config, fit-auto onto a folder, a truncated .safetensors
+# (the file's real size), a sidecar's bad token (named whole, no stray character).
 # usage: inputs.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 MODEL=$(cd "$(dirname "$0")/../.." && pwd)/models/demo/rt16nc-lmmse.safetensors
@@ -97,5 +100,61 @@ expect_error "train rt-8-mf3 --frames 1" 2 "'frames' 1 conflicts with model rt-8
 mkdir -p "$T/out"
 expect_error "calibrate --write-chart chart.png" 2 "--write-chart $T/out/chart.png: the chart is a spectral OpenEXR cube; name it .exr" \
   "$T/out/chart.png" -- "$LM" calibrate --write-chart "$T/out/chart.png"
+
+# ---- checks where a mistake was accepted ------------------------------------------------------
+# png W H BITS FILE: a grey PNG of constant value 1 at BITS bits per sample
+png() {
+  python3 - "$@" <<'PY'
+import struct, sys, zlib
+w, h, bits, out = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+row = b'\x00' + (b'\xff' * ((w * bits + 7) // 8))
+chunk = lambda t, d: struct.pack('>I', len(d)) + t + d + struct.pack('>I', zlib.crc32(t + d) & 0xffffffff)
+data = b'\x89PNG\r\n\x1a\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', w, h, bits, 0, 0, 0, 0))
+data += chunk(b'IDAT', zlib.compress(row * h)) + chunk(b'IEND', b'')
+open(out, 'wb').write(data)
+PY
+}
+"$LM" simulate --input "$CAVE" --crop --bucket0 --output "$T/sim" > /dev/null 2>&1
+check "simulate fixture" [ -s "$T/sim/bucket0/frame_0000.png" ]
+WH=$(python3 -c "import struct,sys; b=open(sys.argv[1],'rb').read(24); print(*struct.unpack('>II', b[16:24]))" "$T/sim/frames/frame_0000.png")
+png $WH 1 "$T/one_bit.png"
+png $WH 8 "$T/b0_8bit.png"
+expect_error "infer: a 1-bit PNG frame" 2 "one_bit.png: a 1-bit image; a coded frame is 8- or 16-bit" \
+  "$T/k1" -- "$LM" infer --model "$MODEL" --input "$T/one_bit.png" --output "$T/k1"
+"$LM" train --model lmmse-b2 --data "$CAVE" --fit-patches 16 --batch 8 --val-patches 1 --quiet \
+  --output "$T/b2" > /dev/null 2>&1
+check "lmmse-b2 fixture" [ -s "$T/b2/model.safetensors" ]
+expect_error "infer: an 8-bit bucket 0 with a 16-bit bucket 1" 2 \
+  "b0_8bit.png: bucket 0 is 8-bit, bucket 1 ($T/sim/frames/frame_0000.png) 16-bit" "$T/k2" -- \
+  "$LM" infer --model "$T/b2" --input "$T/sim/frames/frame_0000.png" --bucket0 "$T/b0_8bit.png" --output "$T/k2"
+printf '{"version": 1, "measure": "grad", "window": [66, 64], "stride": [33, 32], "edges": [], "windows": [1], "models": [{"model": "%s", "cost_s_per_window": 1, "psnr": [30]}]}' \
+  "$MODEL" > "$T/auto1.json"
+expect_error "infer --auto with one model" 2 "missing or bad field: models (2..8 objects" "$T/k3" -- \
+  "$LM" infer --model auto --auto "$T/auto1.json" --input "$T/sim/frames/frame_0000.png" --output "$T/k3"
+touch "$T/afile"
+printf '{"version": 1, "presets": ["linear"], "data": "%s/nowhere", "iterations": 2}' "$T" > "$T/st1.json"
+printf '{"version": 1, "presets": ["linear"], "data": "%s", "iterations": 2}' "$CAVE" > "$T/st2.json"
+expect_error "study --dry-run: missing data" 2 "data $T/nowhere: no such file or folder" "$T/k4" -- \
+  "$LM" study --config "$T/st1.json" --output "$T/k4" --dry-run
+expect_error "study --dry-run: a file as the output" 2 "output $T/afile: exists and is not a folder" \
+  "$T/k5" -- "$LM" study --config "$T/st2.json" --output "$T/afile" --dry-run
+printf '{"version": 1, "batch": 2, "batch": 4}' > "$T/dup.json"
+expect_error "train: a duplicate key in the config" 2 "duplicate object key" "$T/k6" -- \
+  "$LM" train --config "$T/dup.json" --model linear --data "$CAVE" --iterations 1 --output "$T/k6"
+printf '{"version": 1, "presets": ["linear"], "presets": ["rt-8"], "data": "%s"}' "$CAVE" > "$T/dup2.json"
+expect_error "study: a duplicate key in the config" 2 "duplicate object key" "$T/k7" -- \
+  "$LM" study --config "$T/dup2.json" --output "$T/k7" --dry-run
+mkdir -p "$T/outdir"
+expect_error "fit-auto --output onto a folder: at once" 2 "--output $T/outdir: exists and is not a file" \
+  "$T/none" -- timeout 10 "$LM" fit-auto --models "$MODEL,$MODEL" --synth 4 --output "$T/outdir"
+head -c 3000 "$MODEL" > "$T/trunc.safetensors"
+expect_error "a truncated .safetensors: the file's size" 2 "trunc.safetensors: truncated: tensor" "$T/k8" -- \
+  "$LM" infer --model "$T/trunc.safetensors" --input "$T/sim/frames/frame_0000.png" --output "$T/k8"
+expect_error "a truncated .safetensors: 3000 bytes" 2 "the file has 3000 bytes" "$T/k9" -- \
+  "$LM" infer --model "$T/trunc.safetensors" --input "$T/sim/frames/frame_0000.png" --output "$T/k9"
+mkdir -p "$T/sc3" && cp -r "$CAVE" "$T/sc3/"
+printf '400 abc\n410\n' > "$T/sc3/balloons_crop100.wavelengths.txt"
+expect_error "a sidecar's bad token, whole" 2 "balloons_crop100.wavelengths.txt: 'abc' is not a number" \
+  "$T/k10.png" -- "$LM" render --input "$T/sc3/balloons_crop100" --output "$T/k10.png"
 
 finish
