@@ -8,7 +8,8 @@
 # one-line errors. Checks where a mistake was accepted: a 1-bit frame, buckets in two formats,
 # an automatic calibration of one model, study --dry-run on missing data or a file as its
 # output, duplicate keys in a JSON config, fit-auto onto a folder, a truncated .safetensors
-# (the file's real size), a sidecar's bad token (named whole, no stray character).
+# (the file's real size), a sidecar's bad token (named whole, no stray character). A DOE's grid
+# is bounded by what finishes in reasonable time (8192 ran for minutes at ~1 GB).
 # usage: inputs.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 MODEL=$(cd "$(dirname "$0")/../.." && pwd)/models/demo/rt16nc-lmmse.safetensors
@@ -156,5 +157,12 @@ mkdir -p "$T/sc3" && cp -r "$CAVE" "$T/sc3/"
 printf '400 abc\n410\n' > "$T/sc3/balloons_crop100.wavelengths.txt"
 expect_error "a sidecar's bad token, whole" 2 "balloons_crop100.wavelengths.txt: 'abc' is not a number" \
   "$T/k10.png" -- "$LM" render --input "$T/sc3/balloons_crop100" --output "$T/k10.png"
+
+# ---- a DOE grid beyond what finishes in reasonable time ----------------------------------------
+SRC=$(cd "$(dirname "$0")/../.." && pwd)
+sed 's/"grid": 1536/"grid": 8192/' "$SRC/data/systems/qdo_default.json" > "$T/doe8192.json"
+check "DOE fixture" grep -q '"grid": 8192' "$T/doe8192.json"
+expect_error "simulate --doe with grid 8192: refused at once" 2 "grid: must be an integer in 16..4096" \
+  "$T/d1" -- timeout -k 5 30 "$LM" simulate --input "$CAVE" --crop --doe "$T/doe8192.json" --threads 1 --output "$T/d1"
 
 finish
