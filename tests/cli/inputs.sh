@@ -9,7 +9,7 @@
 # an automatic calibration of one model, study --dry-run on missing data or a file as its
 # output, duplicate keys in a JSON config, fit-auto onto a folder, a truncated .safetensors
 # (the file's real size), a sidecar's bad token (named whole, no stray character). A DOE's grid
-# is bounded by what finishes in reasonable time (8192 ran for minutes at ~1 GB).
+# is bounded by what finishes in reasonable time (8192 runs for minutes at ~1 GB).
 # usage: inputs.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 MODEL=$(cd "$(dirname "$0")/../.." && pwd)/models/demo/rt16nc-lmmse.safetensors
@@ -23,7 +23,7 @@ cp -r "$CAVE" "$F/scene/"
 mkfifo "$F/scene/balloons_crop100.wavelengths.txt"
 mkfifo "$F/data/x.exr"
 ln -s /dev/null "$T/null.png"
-# each under a timeout: before, each of these blocked in open() for ever
+# each under a timeout: a command blocking in open() fails its case instead of hanging
 W="timeout -k 5 20"
 expect_error "infer: a FIFO frame" 2 "f.png: is a FIFO, not a regular file" "$T/o1" -- \
   $W "$LM" infer --model "$MODEL" --input "$F/f.png" --output "$T/o1"
