@@ -3,6 +3,7 @@
 #define _GNU_SOURCE /* nftw flags */
 #include "cli/cli_util.h"
 #include "tensor/tensor.h"
+#include "data/util.h"
 #include <dirent.h>
 #include <errno.h>
 #include <ftw.h>
@@ -17,6 +18,8 @@
 #include <string.h>
 #include <strings.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
 
 void lm_cli_init(lm_cli *c, const char *prog, int argc, char **argv)
@@ -99,25 +102,9 @@ int lm_cli_flag(lm_cli *c, const char *name, int *flag)
     return 1;
 }
 
-int lm_cli_parse_ll(const char *s, long long *out)
-{
-    char *end;
-    errno = 0;
-    long long v = strtoll(s, &end, 10);
-    if (!*s || *end || errno) return -1;
-    *out = v;
-    return 0;
-}
+int lm_cli_parse_ll(const char *s, long long *out) { return lm_parse_int(s, out); }
 
-int lm_cli_parse_real(const char *s, double *out)
-{
-    char *end;
-    errno = 0;
-    double v = strtod(s, &end);
-    if (!*s || *end || errno || !isfinite(v)) return -1;
-    *out = v;
-    return 0;
-}
+int lm_cli_parse_real(const char *s, double *out) { return lm_parse_real(s, out); }
 
 int lm_cli_int(lm_cli *c, const char *name, long long lo, long long hi, long long *out)
 {
@@ -226,15 +213,51 @@ static int dir_is_empty(const char *dir)
 /* ---- signals ------------------------------------------------------------------------ */
 /* The handler only counts and records (async-signal-safe); a waiting thread does the rest
  * (removing files, printing) in an ordinary thread context. The staging folder in use is
- * guarded by `mu`: committing it (a rename) and removing it on a signal never interleave. */
+ * guarded by `mu`: committing it (a rename) and removing it on a signal never interleave. A
+ * hold (lm_cli_signals_hold) makes the waiter wait before it ends the program; the children
+ * tracked receive the signal that ends it and are waited for. */
+#define SIG_MAX_CHILDREN 64
 static struct {
     const char *prog;
     int graceful;
-    atomic_int count, first;
+    atomic_int count, first, last;
     sem_t wake;
     pthread_mutex_t mu;
+    pthread_cond_t released;
+    int hold;                          /* lm_cli_signals_hold depth */
+    long child[SIG_MAX_CHILDREN];      /* tracked child processes (0 = free slot) */
+    void (*note)(char *buf, size_t n); /* graceful: what a stop at once leaves */
     char stage[1200];                  /* staging folder in use ("" = none) */
-} sig = {.mu = PTHREAD_MUTEX_INITIALIZER};
+} sig = {.mu = PTHREAD_MUTEX_INITIALIZER, .released = PTHREAD_COND_INITIALIZER};
+
+void lm_cli_signals_hold(int on)
+{
+    pthread_mutex_lock(&sig.mu);
+    sig.hold += on ? 1 : -1;
+    if (sig.hold <= 0) {
+        sig.hold = 0;
+        pthread_cond_broadcast(&sig.released);
+    }
+    pthread_mutex_unlock(&sig.mu);
+}
+
+void lm_cli_signals_track(long pid, int on)
+{
+    pthread_mutex_lock(&sig.mu);
+    for (int i = 0; i < SIG_MAX_CHILDREN; i++)
+        if (on ? sig.child[i] == 0 : sig.child[i] == pid) {
+            sig.child[i] = on ? pid : 0;
+            break;
+        }
+    pthread_mutex_unlock(&sig.mu);
+}
+
+void lm_cli_signals_note(void (*note)(char *buf, size_t n))
+{
+    pthread_mutex_lock(&sig.mu);
+    sig.note = note;
+    pthread_mutex_unlock(&sig.mu);
+}
 
 static void set_stage(const char *tmp)
 {
@@ -302,7 +325,23 @@ static void on_signal(int s)
 {
     int n = atomic_fetch_add(&sig.count, 1);
     if (n == 0) atomic_store(&sig.first, s);
+    atomic_store(&sig.last, s);
     if (!sig.graceful || n > 0) sem_post(&sig.wake);
+}
+
+/* The tracked children get signal s and are waited for (up to 60 s; then SIGKILL). */
+static void stop_children(int s)
+{
+    for (int i = 0; i < SIG_MAX_CHILDREN; i++)
+        if (sig.child[i] > 0) kill((pid_t)sig.child[i], s);
+    for (int i = 0; i < SIG_MAX_CHILDREN; i++) {
+        pid_t p = (pid_t)sig.child[i];
+        if (p <= 0) continue;
+        int k = 0;
+        while (waitpid(p, NULL, WNOHANG) == 0 && k++ < 1200)
+            nanosleep(&(struct timespec){0, 50000000}, NULL);
+        if (k > 1200) kill(p, SIGKILL), waitpid(p, NULL, 0);
+    }
 }
 
 /* Woken by a signal that ends the program: the staging folder goes (moved aside first, so the
@@ -311,8 +350,10 @@ static void *sig_waiter(void *arg)
 {
     (void)arg;
     while (sem_wait(&sig.wake) != 0) continue;
-    int s = atomic_load(&sig.first);
+    int s = atomic_load(&sig.first), s2 = atomic_load(&sig.last);
     pthread_mutex_lock(&sig.mu); /* held until _exit: no commit can start */
+    while (sig.hold > 0) pthread_cond_wait(&sig.released, &sig.mu);
+    stop_children(sig.graceful ? s2 : s);
     int staged = sig.stage[0] != 0;
     if (staged) {
         char trash[1300];
@@ -321,11 +362,21 @@ static void *sig_waiter(void *arg)
         for (int k = 0; k < 5 && access(dir, F_OK) == 0; k++)
             nftw(dir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
     }
-    fprintf(stderr, "%s: interrupted (%s)%s\n", sig.prog, lm_cli_signal_name(s),
-            staged ? ": partial output removed"
-                   : sig.graceful ? " again: stopped at once (the last checkpoint is kept)" : "");
+    char note[1400] = "";
+    if (!staged && sig.graceful && sig.note) sig.note(note, sizeof note);
+    if (staged)
+        fprintf(stderr, "%s: interrupted (%s): partial output removed\n", sig.prog,
+                lm_cli_signal_name(s));
+    else if (sig.graceful && s2 != s)
+        fprintf(stderr, "%s: interrupted (%s after %s): stopped at once%s%s\n", sig.prog,
+                lm_cli_signal_name(s2), lm_cli_signal_name(s), note[0] ? ": " : "", note);
+    else if (sig.graceful)
+        fprintf(stderr, "%s: interrupted (%s) again: stopped at once%s%s\n", sig.prog,
+                lm_cli_signal_name(s), note[0] ? ": " : "", note);
+    else
+        fprintf(stderr, "%s: interrupted (%s)\n", sig.prog, lm_cli_signal_name(s));
     fflush(stderr);
-    _exit(128 + s);
+    _exit(128 + (sig.graceful ? s2 : s));
 }
 
 int lm_cli_signals_init(const lm_cli *c, int graceful)

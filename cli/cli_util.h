@@ -101,8 +101,20 @@ void lm_cli_remove_tree(const char *dir);
  * "<prog>: interrupted (SIGINT): partial output removed" and exits at once with 128 + the
  * signal's number (130, 143). Graceful (train): the first signal only sets the flag of
  * lm_cli_signal_flag (the command finishes its step, saves and exits 128 + the number
- * itself); a second one exits at once as above. Returns 0, or -1 (cannot install). */
+ * itself); a second one exits at once with 128 + its own number, after any hold is released
+ * (lm_cli_signals_hold), naming both signals when they differ. Returns 0, or -1 (cannot
+ * install). */
 int lm_cli_signals_init(const lm_cli *c, int graceful);
+/* Graceful commands: hold(1) ... hold(0) around writes that must not be cut short (a
+ * checkpoint and its config); a signal that ends the program waits for the hold to be
+ * released. Holds nest. */
+void lm_cli_signals_hold(int on);
+/* Child processes (on = 1: started, 0: waited for) that a signal ending the program is
+ * forwarded to; it then waits for them before it exits (at most 64 at a time). */
+void lm_cli_signals_track(long pid, int on);
+/* Graceful commands: `note` writes what a stop at once leaves behind (e.g. "the checkpoint in
+ * X is kept"), appended to the line "interrupted (SIGINT) again: stopped at once: <note>". */
+void lm_cli_signals_note(void (*note)(char *buf, size_t n));
 /* 0, or the number of the first signal received. */
 const atomic_int *lm_cli_signal_flag(void);
 /* "SIGINT", "SIGTERM" or "signal N" */

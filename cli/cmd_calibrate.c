@@ -12,6 +12,7 @@
 #include <string.h>
 #include <unistd.h>
 #include "cli/cli_util.h"
+#include "data/util.h"
 #include "cli/commands.h"
 #include "data/calib.h"
 #include "data/cube_io.h"
@@ -96,6 +97,9 @@ static int parse(lm_cli *c, cal_args *a)
     if (a->chart) {
         if (a->nin || a->output || a->patches)
             return lm_cli_error(c, "--write-chart takes no frames, --output or --patches");
+        if (!lm_cli_has_ext(a->chart, ".exr"))
+            return lm_cli_error(c, "--write-chart %s: the chart is a spectral OpenEXR cube; name "
+                                "it .exr", a->chart);
         return 1;
     }
     if (!a->nin) return lm_cli_error(c, "no frames given (see 'lumosaic calibrate --help')");
@@ -107,14 +111,8 @@ static int parse(lm_cli *c, cal_args *a)
 
 static int parse_corners(const lm_cli *c, const char *s, double out[8])
 {
-    char buf[512], *save = NULL;
-    snprintf(buf, sizeof buf, "%s", s);
-    int n = 0;
-    for (char *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
-        if (n == 8 || lm_cli_parse_real(t, &out[n])) n = 9;
-        if (n == 9) break;
-        n++;
-    }
+    char why[128];
+    int n = lm_parse_list(s, -1e6, 1e6, out, 8, why, sizeof why);
     if (n != 8)
         return lm_cli_error(c, "--chart-corners: need 8 numbers X1,Y1,X2,Y2,X3,Y3,X4,Y4 (got "
                             "'%s')", s);

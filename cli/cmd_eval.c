@@ -116,18 +116,13 @@ static const char *const align_names[] = {"confident", "plain", NULL};
 /* A list of noise levels in % into k (fractions), at most max; flag names the option. */
 static int parse_levels(lm_cli *c, const char *flag, const char *s, float *k, int *n, int max)
 {
-    *n = 0;
-    char buf[512];
-    if (strlen(s) >= sizeof buf || !*s) return lm_cli_error(c, "%s: bad list '%s'", flag, s);
-    strcpy(buf, s);
-    for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
-        double v;
-        if (lm_cli_parse_real(t, &v) || v < 0 || v > 100)
-            return lm_cli_error(c, "%s: '%s' is not a level in 0..100 (%%)", flag, t);
-        if (*n == max) return lm_cli_error(c, "%s: more than %d levels", flag, max);
-        k[(*n)++] = (float)(v / 100.0);
-    }
-    if (!*n) return lm_cli_error(c, "%s: bad list '%s'", flag, s);
+    double v[64];
+    char why[128];
+    *n = lm_parse_list(s, 0, 100, v, max < 64 ? max : 64, why, sizeof why);
+    if (*n < 0)
+        return *n = 0, lm_cli_error(c, "%s '%s': %s (levels in %% from 0 to 100, e.g. 0,5,10)",
+                                    flag, s, why);
+    for (int i = 0; i < *n; i++) k[i] = (float)(v[i] / 100.0);
     return 0;
 }
 
@@ -138,19 +133,11 @@ static int parse_noise(lm_cli *c, const char *s, eval_opts *o)
 
 static int parse_motion(lm_cli *c, const char *s, eval_opts *o)
 {
-    o->nmotion = 0;
-    char buf[512];
-    if (strlen(s) >= sizeof buf || !*s) return lm_cli_error(c, "--motion: bad list '%s'", s);
-    strcpy(buf, s);
-    for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
-        double v;
-        if (lm_cli_parse_real(t, &v) || v < 0 || v > 10000)
-            return lm_cli_error(c, "--motion: '%s' is not a speed in 0..10000 (px/s)", t);
-        if (o->nmotion == LM_EVAL_MAX_MOTION)
-            return lm_cli_error(c, "--motion: more than %d speeds", LM_EVAL_MAX_MOTION);
-        o->speed[o->nmotion++] = v;
-    }
-    if (!o->nmotion) return lm_cli_error(c, "--motion: bad list '%s'", s);
+    char why[128];
+    o->nmotion = lm_parse_list(s, 0, 10000, o->speed, LM_EVAL_MAX_MOTION, why, sizeof why);
+    if (o->nmotion < 0)
+        return o->nmotion = 0, lm_cli_error(c, "--motion '%s': %s (speeds in px/s from 0 to "
+                                            "10000, e.g. 0,60,240)", s, why);
     return 0;
 }
 
@@ -422,11 +409,20 @@ static void json_motion(FILE *f, const eval_opts *o, const lm_eval_motion *m, co
                 m[k].unaligned.sam, k + 1 < motion_rows(o) ? "," : "");
 }
 
+/* A path as an absolute one (the result file is read from anywhere), as given if it does not
+ * resolve. */
+static void json_path(FILE *f, const char *p)
+{
+    char *abs = realpath(p, NULL);
+    json_str(f, abs ? abs : p);
+    free(abs);
+}
+
 static void write_json(FILE *f, const eval_run *r)
 {
     const eval_opts *o = r->o;
     fprintf(f, "{\n  \"model\": ");
-    json_str(f, r->im.weights);
+    json_path(f, r->im.weights);
     fprintf(f, ",\n  \"split\": \"%s\",\n  \"seed\": %lld,\n  \"noise_percent\": [",
             split_names[o->split], o->com.seed);
     for (int n = 0; n < o->nnoise; n++) fprintf(f, "%s%g", n ? ", " : "", 100.0 * o->k[n]);
@@ -436,7 +432,7 @@ static void write_json(FILE *f, const eval_run *r)
         fprintf(f, "    {\"name\": ");
         json_str(f, r->sc[i].name);
         fprintf(f, ", \"path\": ");
-        json_str(f, r->sc[i].path);
+        json_path(f, r->sc[i].path);
         fprintf(f, ", \"height\": %d, \"width\": %d, \"results\": [\n", r->sc[i].height,
                 r->sc[i].width);
         json_metrics(f, o, r->sc[i].m, "      ");

@@ -19,7 +19,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include "cli/cli_util.h"
+#include "data/util.h"
 #include "cli/commands.h"
 #include "data/cube_io.h"
 #include "data/dataset.h"
@@ -99,20 +101,12 @@ static int parse_opt(lm_cli *c, cal_opts *o)
 /* --test-tol LIST into o->tol. 0 ok, else 2 (printed). */
 static int parse_tol(lm_cli *c, cal_opts *o)
 {
-    char buf[512];
     const char *s = o->tol_s ? o->tol_s : "0,0.25,0.5,1,2";
-    o->ntol = 0;
-    if (strlen(s) >= sizeof buf || !*s) return lm_cli_error(c, "--test-tol: bad list '%s'", s);
-    strcpy(buf, s);
-    for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
-        double v;
-        if (lm_cli_parse_real(t, &v) || !(v >= 0.0 && v <= 1e6))
-            return lm_cli_error(c, "--test-tol: '%s' is not a tolerance in 0..1e6 dB", t);
-        if (o->ntol == MAX_TOL)
-            return lm_cli_error(c, "--test-tol: more than %d tolerances", MAX_TOL);
-        o->tol[o->ntol++] = v;
-    }
-    if (!o->ntol) return lm_cli_error(c, "--test-tol: bad list '%s'", s);
+    char why[128];
+    o->ntol = lm_parse_list(s, 0, 1e6, o->tol, MAX_TOL, why, sizeof why);
+    if (o->ntol < 0)
+        return o->ntol = 0, lm_cli_error(c, "--test-tol '%s': %s (tolerances in dB, e.g. "
+                                         "0,0.5,1)", s, why);
     return 0;
 }
 
@@ -139,6 +133,9 @@ static int check_opts(lm_cli *c, cal_opts *o)
         return lm_cli_error(c, "--synth-size '%s': want HxW, from 66x64 to 4096x4096",
                             o->size_s);
     if (parse_tol(c, o)) return 2;
+    struct stat sb; /* an output that cannot be written is known before the fit */
+    if (stat(o->output, &sb) == 0 && !S_ISREG(sb.st_mode))
+        return lm_cli_error(c, "--output %s: exists and is not a file", o->output);
     return 1;
 }
 
@@ -181,6 +178,10 @@ static int load_models(cal_run *r, lm_err *e)
     if (snprintf(buf, sizeof buf, "%s", r->o->models) >= (int)sizeof buf)
         return lm_cli_error(r->c, "--models: list too long");
     lm_auto_calib *a = &r->cal;
+    size_t len = strlen(buf);
+    if (!len || buf[0] == ',' || buf[len - 1] == ',' || strstr(buf, ",,"))
+        return lm_cli_error(r->c, "--models '%s': an empty element (models separated by single "
+                            "commas)", r->o->models);
     for (char *s = strtok(buf, ","); s; s = strtok(NULL, ",")) {
         if (a->nmodels == LM_AUTO_MAX_MODELS)
             return lm_cli_error(r->c, "--models: at most %d models", LM_AUTO_MAX_MODELS);

@@ -378,7 +378,9 @@ static lm_status auto_frame(infer_run *r, const float *in, int H, int W, lm_tile
 }
 
 /* Two-bucket models: frame i's bucket 0 after bucket 1 (in) in r->in2; *in points at it. */
-static lm_status with_bucket0(infer_run *r, int i, const float **in, int H, int W, lm_err *e)
+/* bits, is_float: bucket 1's frame (bits 0: not known) */
+static lm_status with_bucket0(infer_run *r, int i, const float **in, int H, int W, int bits,
+                              int is_float, lm_err *e)
 {
     if (!r->seq0.count) return LM_OK;
     lm_frame f0;
@@ -387,6 +389,11 @@ static lm_status with_bucket0(infer_run *r, int i, const float **in, int H, int 
     if (f0.height != H || f0.width != W)
         st = lm_err_set(e, LM_ERR_SHAPE, "%s: bucket 0 is %d x %d, bucket 1 (%s) %d x %d",
                         r->seq0.paths[i], f0.width, f0.height, r->seq.paths[i], W, H);
+    else if (bits && (f0.bits != bits || f0.is_float != is_float))
+        st = lm_err_set(e, LM_ERR_FORMAT, "%s: bucket 0 is %d-bit%s, bucket 1 (%s) %d-bit%s: the "
+                        "two buckets of a frame come from one read-out, in one format",
+                        r->seq0.paths[i], f0.bits, f0.is_float ? " float" : "",
+                        r->seq.paths[i], bits, is_float ? " float" : "");
     if (!st) {
         const size_t n = (size_t)H * W;
         memcpy(r->in2, *in, sizeof(float) * n);
@@ -445,7 +452,7 @@ static int run_frames(infer_run *r)
         }
         double ta = omp_get_wtime();
         const int H = f.height ? f.height : r->seq.height, W = f.width ? f.width : r->seq.width;
-        st = with_bucket0(r, i, &in, H, W, &e);
+        st = with_bucket0(r, i, &in, H, W, f.height ? f.bits : 0, f.is_float, &e);
         if (st) {
             lm_frame_free(&f);
             return fail(r->c, &e, 0);

@@ -18,6 +18,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 #include "cli/cli_util.h"
+#include "data/util.h"
 #include "cli/commands.h"
 #include "data/cube_io.h"
 #include "data/frames.h"
@@ -95,15 +96,8 @@ typedef struct sim_opts {
 /* Parse "a,b,c" into up to max reals, each in -1e6..1e6; returns the count or -1. */
 static int parse_reals(const char *s, double *v, int max)
 {
-    char buf[256];
-    if (snprintf(buf, sizeof buf, "%s", s) >= (int)sizeof buf) return -1;
-    int n = 0;
-    for (char *save = NULL, *tok = strtok_r(buf, ",", &save); tok;
-         tok = strtok_r(NULL, ",", &save)) {
-        if (n == max || lm_cli_parse_real(tok, &v[n]) != 0 || fabs(v[n]) > 1e6) return -1;
-        n++;
-    }
-    return n;
+    char why[128];
+    return lm_parse_list(s, -1e6, 1e6, v, max, why, sizeof why);
 }
 
 static int set_centre(lm_motion *m, const double *v, int n)

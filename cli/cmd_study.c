@@ -8,6 +8,7 @@
 #include <omp.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/stat.h>
 #include "cli/cli_util.h"
 #include "cli/commands.h"
 #include "study/charts.h"
@@ -43,6 +44,9 @@ static void help(void)
            "  --dry-run      check the config and print the plan; nothing is run or written\n"
            "  --quiet        no training progress\n"
            "  --help         this text\n\n"
+           "SIGINT/SIGTERM: the training in progress (every worker's, with --jobs: each gets the\n"
+           "signal) finishes its iteration and checkpoints, the study waits for the workers and\n"
+           "exits 130/143; running it again continues (a second signal stops at once).\n"
            "Exit status: 0 done, 1 a run or the charts failed (e.g. gnuplot missing), 2 bad\n"
            "options, config or data.\n");
 }
@@ -139,9 +143,17 @@ static int run(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const ch
     lm_err e = {0};
     lm_study s;
     lm_study_opts o = {.threads = (int)a->com.threads, .progress = !a->com.quiet, .log = stderr,
-                       .jobs = a->jobs > 1 ? (int)a->jobs : 1};
+                       .jobs = a->jobs > 1 ? (int)a->jobs : 1, .interrupt = lm_cli_signal_flag(),
+                       .hold = lm_cli_signals_hold, .track = lm_cli_signals_track};
     lm_status st = lm_study_run(cfg, dir, &o, &s, &e);
     if (st) {
+        int sig = atomic_load(lm_cli_signal_flag());
+        if (sig) { /* whatever the status: the run stopped on the signal */
+            lm_cli_error(c, "interrupted (%s): %s (run the study again to continue)",
+                         lm_cli_signal_name(sig), st == LM_ERR_INTERRUPTED ? e.msg
+                         : "stopped; the finished runs and checkpoints are kept");
+            return 128 + sig;
+        }
         lm_cli_error(c, "%s", e.msg);
         return status_code(st);
     }
@@ -163,17 +175,31 @@ static int run(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const ch
     return rc;
 }
 
+/* The study's folder, for the line a second signal prints. */
+static char study_dir[LM_TRAIN_PATH_LEN];
+
+static void stop_note(char *buf, size_t n)
+{
+    snprintf(buf, n, "the runs' last checkpoints in %s/runs are kept", study_dir);
+}
+
 /* --worker NAME: one preset's training for a study run with --jobs. */
 static int worker(lm_cli *c, const study_args *a, const lm_study_cfg *cfg, const char *dir)
 {
     double stop = a->stop > 0 ? a->stop : 0.0;
     lm_cli_common_apply(&a->com);
     mallopt(M_MMAP_THRESHOLD, 128 * 1024);
-    lm_study_opts o = {.threads = (int)a->com.threads, .progress = !a->com.quiet, .log = stderr, .jobs = 1};
+    lm_study_opts o = {.threads = (int)a->com.threads, .progress = !a->com.quiet, .log = stderr,
+                       .jobs = 1, .interrupt = lm_cli_signal_flag(), .hold = lm_cli_signals_hold};
     lm_err e = {0};
     lm_status st = lm_study_train_one(cfg, dir, a->worker, stop, &o, &e);
+    int sig = atomic_load(lm_cli_signal_flag());
+    if (st == LM_ERR_INTERRUPTED && sig) {
+        lm_cli_error(c, "interrupted (%s): %s", lm_cli_signal_name(sig), e.msg);
+        return 128 + sig;
+    }
     if (st) lm_cli_error(c, "%s", e.msg);
-    return st ? status_code(st) : 0;
+    return st ? status_code(st) : sig ? 128 + sig : 0;
 }
 
 int lm_cmd_study(int argc, char **argv)
@@ -190,7 +216,22 @@ int lm_cmd_study(int argc, char **argv)
     if (!dir)
         return lm_cli_error(&c, "no output folder: pass --output DIR or set \"output\" in %s",
                             a.config);
-    if (a.dry_run) return print_plan(&cfg, dir);
+    if (a.dry_run) { /* the plan's paths are checked as a run would find them */
+        struct stat sb;
+        for (int i = 0; i < cfg.train.ndata; i++)
+            if (stat(cfg.train.data[i], &sb) != 0)
+                return lm_cli_error(&c, "data %s: no such file or folder", cfg.train.data[i]);
+        if (cfg.train.system[0] && stat(cfg.train.system, &sb) != 0)
+            return lm_cli_error(&c, "system %s: no such file", cfg.train.system);
+        if (stat(dir, &sb) == 0 && !S_ISDIR(sb.st_mode))
+            return lm_cli_error(&c, "output %s: exists and is not a folder", dir);
+        return print_plan(&cfg, dir);
+    }
+    /* SIGINT / SIGTERM: training checkpoints and the study stops (workers get the signal and
+     * are waited for); a second signal stops at once, after any checkpoint being written */
+    if (lm_cli_signals_init(&c, 1)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
+    snprintf(study_dir, sizeof study_dir, "%s", dir);
+    lm_cli_signals_note(stop_note);
     if (a.worker) return worker(&c, &a, &cfg, dir);
     lm_dist_init(NULL, NULL); /* under mpirun: presets trained by the ranks in turn */
     if (!a.no_charts && !lm_charts_gnuplot_available()) {

@@ -20,13 +20,15 @@ static void help(void)
            "  --config FILE                  JSON run config (\"version\": 1 and any fields below,\n"
            "                                 with '_' for '-'; data/system paths are relative to it)\n"
            "  --resume DIR                   continue the run in DIR from its last checkpoint (its\n"
-           "                                 config.json; flags override, e.g. --iterations)\n"
+           "                                 config.json; flags override, e.g. --iterations); a\n"
+           "                                 folder without one starts again from its config\n"
            "  --stop-after N                 stop after N iterations of this invocation\n"
            "  --quiet                        no progress output\n");
     lm_train_cfg_print_help(stdout);
     printf("  --help                         this text\n\n"
            "SIGINT/SIGTERM: the current iteration finishes, a checkpoint is written, exit 130/143\n"
-           "(a second signal stops at once).\n"
+           "(a second signal stops at once, after any checkpoint being written; the run folder\n"
+           "always resumes: a checkpoint of iteration 0 is written before training starts).\n"
            "Exit status: 0 done, 1 training failed (e.g. NaN loss: the last good checkpoint is\n"
            "kept; an output that cannot be written), 2 bad options, config or data.\n");
 }
@@ -89,6 +91,26 @@ static int second_pass(lm_cli *c, train_args *a, lm_train_cfg *cfg)
     return 1;
 }
 
+/* The run folder, for the line a second signal prints. */
+static char run_dir[LM_TRAIN_PATH_LEN];
+
+static void stop_note(char *buf, size_t n)
+{
+    char p[LM_TRAIN_PATH_LEN + 32];
+    snprintf(p, sizeof p, "%s/model.safetensors", run_dir);
+    if (access(p, F_OK) == 0) {
+        snprintf(buf, n, "the last checkpoint in %s is kept (continue with --resume %s)", run_dir,
+                 run_dir);
+        return;
+    }
+    snprintf(p, sizeof p, "%s/config.json", run_dir);
+    if (access(p, F_OK) == 0)
+        snprintf(buf, n, "%s has no checkpoint yet (--resume %s starts the run again)", run_dir,
+                 run_dir);
+    else
+        snprintf(buf, n, "no run folder was written");
+}
+
 static int load_base(lm_cli *c, const train_args *a, lm_train_cfg *cfg)
 {
     lm_err e = {0};
@@ -132,24 +154,43 @@ int lm_cmd_train(int argc, char **argv)
     if (!a.resume && access(ck, F_OK) == 0)
         return lm_cli_error(&c, "%s already holds a checkpoint (continue it with --resume %s, "
                             "or choose another --output)", cfg.output, cfg.output);
+    /* a run stopped before its first checkpoint: it starts again from its config */
+    int restart = a.resume && access(ck, F_OK) != 0;
+    if (restart && !a.com.quiet && rank == 0)
+        printf("train: %s has no checkpoint yet: the run starts from its beginning\n",
+               cfg.output);
+    snprintf(run_dir, sizeof run_dir, "%s", cfg.output);
     /* A fixed mmap threshold: glibc's dynamic one moves big per-step buffers onto the heap,
      * where trimming and regrowing them made steps 2-30x slower here (bench_train). */
     mallopt(M_MMAP_THRESHOLD, 128 * 1024);
     if (lm_cli_signals_init(&c, 1)) return lm_cli_error(&c, "cannot install signal handlers"), 1;
-    lm_train_opts o = {.resume = a.resume, .stop_after = (long)a.stop_after,
+    lm_cli_signals_note(stop_note);
+    lm_train_opts o = {.resume = restart ? NULL : a.resume, .stop_after = (long)a.stop_after,
                        .progress = !a.com.quiet && rank == 0, .interrupt = lm_cli_signal_flag(),
-                       .data_parallel = 1};
+                       .hold = lm_cli_signals_hold, .restart = restart, .data_parallel = 1};
     lm_train_result res;
     lm_status st = lm_train_session(&cfg, &o, &res, &e);
+    int sig = atomic_load(lm_cli_signal_flag());
+    if (st == LM_ERR_INTERRUPTED && sig) {
+        lm_cli_error(&c, "interrupted (%s): %s", lm_cli_signal_name(sig), e.msg);
+        return 128 + sig;
+    }
     if (st) { /* a NaN loss is the run failing (1), not bad input */
         if (rank) lm_cli_error(&c, "rank %d: %s", rank, e.msg);
         else lm_cli_error(&c, "%s", e.msg);
         return st == LM_ERR_NUMERIC ? LM_EXIT_FAILED : lm_cli_exit_status(st);
     }
-    int sig = atomic_load(lm_cli_signal_flag());
     if (rank) return sig ? 128 + sig : 0; /* rank 0 reports */
     if (sig) { /* SIGINT / SIGTERM: the step finished and the checkpoint is on disk */
-        if (res.interrupted)
+        if (res.closed_form && res.interrupted)
+            lm_cli_error(&c, "interrupted (%s): the closed-form fit stopped reading after %ld of "
+                         "%ld training patches and was solved from them; the model is written "
+                         "to %s", lm_cli_signal_name(sig), res.fit_patches,
+                         res.fit_patches_asked, cfg.output);
+        else if (res.closed_form)
+            lm_cli_error(&c, "interrupted (%s) as the fit ended: the model is written to %s",
+                         lm_cli_signal_name(sig), cfg.output);
+        else if (res.interrupted)
             lm_cli_error(&c, "interrupted (%s) at iteration %ld: checkpoint written to %s "
                          "(continue with --resume %s)", lm_cli_signal_name(sig),
                          res.iterations_done, cfg.output, cfg.output);
@@ -161,6 +202,9 @@ int lm_cmd_train(int argc, char **argv)
     if (res.closed_form) {
         printf("fitted %s in closed form (%.1f s); fit.json has every noise level\n", cfg.model,
                res.seconds);
+        if (res.budget_spent)
+            printf("the time budget (--minutes %g) ended the reading after %ld of %ld training "
+                   "patches\n", (double)cfg.minutes, res.fit_patches, res.fit_patches_asked);
         if (res.validated)
             printf("validation (clean, interior pixels): PSNR %.3f dB\n", res.val.psnr);
         printf("checkpoint: %s\n", ck);

@@ -53,6 +53,8 @@ lm_status lm_calib_grid(const double corners[8], double frac, lm_calib_rect out[
 
 lm_status lm_calib_rects_load(const char *path, lm_calib_rect out[NP], lm_err *err)
 {
+    lm_status fchk = lm_file_check(path, "a JSON file", err);
+    if (fchk) return fchk;
     json_error_t je;
     json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &je);
     if (!root)

@@ -57,6 +57,9 @@ static lm_status read_frame(const char *path, long long max_pixels, lm_frame *f,
     if (im.channels != 1)
         s = lm_err_set(e, LM_ERR_FORMAT, "%s: has %d channels, expected a single-channel frame",
                        path, im.channels);
+    else if (!im.is_float && im.bits < 8)
+        s = lm_err_set(e, LM_ERR_FORMAT, "%s: a %d-bit image; a coded frame is 8- or 16-bit "
+                       "(or float) sensor data", path, im.bits);
     size_t n = (size_t)im.width * im.height;
     for (size_t i = 0; s == LM_OK && i < n; i++)
         if (!isfinite(im.data[i]))

@@ -39,7 +39,7 @@ static lm_status check_regular_file(const char *path, lm_err *e)
     if (stat(path, &st) != 0) return lm_err_set(e, LM_ERR_IO, "%s: no such file", path);
     if (S_ISDIR(st.st_mode))
         return lm_err_set(e, LM_ERR_IO, "%s: is a directory, expected an image file", path);
-    return LM_OK;
+    return lm_file_check(path, "an image file", e);
 }
 
 /* OpenImageIO messages can span lines; keep the first line only. */
@@ -169,6 +169,7 @@ static lm_status read_png(const char *path, const lm_image_want *want, lm_image 
     } else {
         png_init_io(p, f);
         png_read_info(p, info);
+        const int file_bits = png_get_bit_depth(p, info); /* 1, 2, 4 are expanded to 8 */
         png_set_expand(p);
         if (png_get_bit_depth(p, info) == 16) png_set_swap(p); /* little-endian host */
         png_set_interlace_handling(p);
@@ -176,7 +177,7 @@ static lm_status read_png(const char *path, const lm_image_want *want, lm_image 
         img->width = (int)png_get_image_width(p, info);
         img->height = (int)png_get_image_height(p, info);
         img->channels = png_get_channels(p, info);
-        img->bits = png_get_bit_depth(p, info);
+        img->bits = file_bits < 8 ? file_bits : png_get_bit_depth(p, info);
         size_t n = (size_t)img->width * img->height * img->channels, rb = png_get_rowbytes(p, info);
         img->names = img->channels >= 1 && img->channels <= 4
                          ? (char(*)[LM_IMAGE_NAME_LEN])calloc((size_t)img->channels,

@@ -260,6 +260,8 @@ lm_status lm_cube_read_exr(const char *path, lm_cube *cube, lm_err *e)
     if (stat(path, &st) != 0) return lm_err_set(e, LM_ERR_IO, "%s: no such file", path);
     if (S_ISDIR(st.st_mode))
         return lm_err_set(e, LM_ERR_IO, "%s: is a directory, expected an .exr file", path);
+    lm_status fchk = lm_file_check(path, "an .exr file", e);
+    if (fchk) return fchk;
     exr_context_initializer_t init = exr_init(1);
     exr_context_t ctx = NULL;
     exr_result_t rv = exr_start_read(&ctx, path, &init);

@@ -309,6 +309,9 @@ lm_status lm_mat_check(const char *path, const char *const *keys, lm_mat_kind *k
                        long long *file_bytes, lm_err *e)
 {
     *kind = LM_MAT_UNKNOWN;
+    *file_bytes = 0;
+    lm_status fchk = lm_file_check(path, "a .mat file", e);
+    if (fchk) return fchk;
     *file_bytes = lm_file_bytes(path);
     mat_file m = {fopen(path, "rb"), path, *file_bytes, 0};
     if (!m.f || m.size < 0) {

@@ -14,6 +14,7 @@
 /* ---- CSV loading ----------------------------------------------------------------------- */
 static char *read_all(const char *path, long *len, lm_err *err)
 {
+    if (lm_file_check(path, "a spectra file (.csv)", err)) return NULL;
     FILE *f = fopen(path, "rb");
     if (!f) {
         lm_err_set(err, LM_ERR_IO, "spectra file '%s': cannot open (%s)", path, strerror(errno));

@@ -545,6 +545,8 @@ lm_status lm_system_load(const char *path, lm_system *sys, lm_err *err)
     else snprintf(ld.dir, sizeof ld.dir, "%.*s", (int)(slash - path), path);
     snprintf(sys->path, sizeof sys->path, "%s", path);
     json_error_t je;
+    lm_status fchk = lm_file_check(path, "a system file (.json)", err);
+    if (fchk) return fchk;
     json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &je);
     if (!root) {
         if (json_error_code(&je) == json_error_cannot_open_file)
@@ -557,7 +559,7 @@ lm_status lm_system_load(const char *path, lm_system *sys, lm_err *err)
 
 uint64_t lm_file_hash(const char *path)
 {
-    FILE *f = path && path[0] ? fopen(path, "rb") : NULL;
+    FILE *f = path && path[0] && !lm_file_check(path, NULL, NULL) ? fopen(path, "rb") : NULL;
     if (!f) return 0;
     uint64_t h = LM_FNV1A_BASIS_SHORT;
     unsigned char buf[4096];

@@ -1,6 +1,6 @@
 /* util.h — small utilities shared by data/ and the layers above it, written once: the FNV-1a
- * hash (of strings, bytes and whole files), "is this a folder", mkdir -p, and the one-line
- * error of a configuration file's field.
+ * hash (of strings, bytes and whole files), "is this a folder", mkdir -p, the one-line
+ * error of a configuration file's field, and strict parsing of numbers and lists of them.
  * What it is not: file formats (cube_io.h) or dataset logic (dataset.h). */
 #ifndef LM_DATA_UTIL_H
 #define LM_DATA_UTIL_H
@@ -34,5 +34,21 @@ lm_status lm_err_field(lm_err *e, lm_status s, const char *kind, const char *lab
     __attribute__((format(printf, 6, 7)));
 lm_status lm_err_fieldv(lm_err *e, lm_status s, const char *kind, const char *label,
                         const char *field, const char *fmt, va_list ap);
+
+/* Strict numbers, the one parser of every flag, config value and list: the whole text, in
+ * decimal ([+-]digits[.digits][e[+-]digits], digits on at least one side of the point); no
+ * spaces, hexadecimal, inf or nan. 0, or -1 (not such a number, or out of the type's range). */
+int lm_parse_real(const char *s, double *v);
+int lm_parse_int(const char *s, long long *v);
+/* A comma-separated list of at most `max` such reals, each in [lo, hi]: every element present
+ * ("0,,5", ",5" and "5," are refused). Returns the count (>= 1), or -1 with the problem in why
+ * (n bytes), e.g. "element 2 is empty", "'0x5' is not a decimal number", "'120' is out of
+ * range (0..100)", "more than 8 values". */
+int lm_parse_list(const char *s, double lo, double hi, double *v, int max, char *why, size_t n);
+
+/* `to` as a path relative to the folder `from_dir`, both resolved with realpath(3) first (so
+ * links and "..": the real locations); e.g. from /a/b/run to /a/data/x: "../../data/x". 0, or
+ * -1 when either does not resolve or out (n bytes) is too small (out is then unchanged). */
+int lm_path_relative(const char *from_dir, const char *to, char *out, size_t n);
 
 #endif

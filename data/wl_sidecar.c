@@ -4,6 +4,7 @@
  * the list. What it is not: the check that the list matches the cube's band count (the reader
  * does that, knowing the cube), or resampling (resample.c). */
 #include "data/resample.h"
+#include "data/util.h"
 #include <errno.h>
 #include <jansson.h>
 #include <stdio.h>
@@ -14,16 +15,19 @@
 #define SIDECAR_MAX_BYTES (1 << 20)
 #define SIDECAR_PATH_MAX 4096
 
+/* Anything at the path counts (a folder or a FIFO there is an error when it is read). */
 static int is_file(const char *path)
 {
     struct stat st;
-    return stat(path, &st) == 0 && !S_ISDIR(st.st_mode);
+    return stat(path, &st) == 0;
 }
 
 /* The whole file, NUL-terminated, into *text (malloc'd). */
 static lm_status slurp(const char *path, char **text, lm_err *e)
 {
     *text = NULL;
+    lm_status fchk = lm_file_check(path, "a wavelength list", e);
+    if (fchk) return fchk;
     FILE *f = fopen(path, "rb");
     if (!f) return lm_err_set(e, LM_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     char *buf = malloc(SIDECAR_MAX_BYTES + 1);
@@ -55,16 +59,18 @@ static lm_status parse_txt(const char *path, const char *t, double *wl, int *n, 
             s++;
             continue;
         }
-        char *end;
-        double v = strtod(s, &end);
-        if (end == s)
-            return lm_err_set(e, LM_ERR_FORMAT, "%s: '%.20s' is not a number (expected "
-                              "wavelengths in nm)", path, s);
+        size_t len = strcspn(s, " \t\r\n,#"); /* one token, in the strict decimal form */
+        char tok[64];
+        double v;
+        snprintf(tok, sizeof tok, "%.*s", (int)(len < 63 ? len : 63), s);
+        if (len > 63 || lm_parse_real(tok, &v))
+            return lm_err_set(e, LM_ERR_FORMAT, "%s: '%.20s%s' is not a number (expected "
+                              "wavelengths in nm)", path, tok, len > 20 ? "..." : "");
         if (*n == LM_RESAMPLE_MAX_BANDS)
             return lm_err_set(e, LM_ERR_FORMAT, "%s: more than %d wavelengths", path,
                               LM_RESAMPLE_MAX_BANDS);
         wl[(*n)++] = v;
-        s = end;
+        s += len;
     }
     return LM_OK;
 }
@@ -73,7 +79,7 @@ static lm_status parse_txt(const char *path, const char *t, double *wl, int *n, 
 static lm_status parse_json(const char *path, const char *t, double *wl, int *n, lm_err *e)
 {
     json_error_t je;
-    json_t *root = json_loads(t, 0, &je);
+    json_t *root = json_loads(t, JSON_REJECT_DUPLICATES, &je);
     if (!root)
         return lm_err_set(e, LM_ERR_FORMAT, "%s: line %d: %s", path, je.line, je.text);
     json_t *a = json_is_object(root) ? json_object_get(root, "wavelengths") : root;

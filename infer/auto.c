@@ -298,8 +298,9 @@ static lm_status load_root(json_t *r, lm_auto_calib *a, const char **what)
     for (int b = 0; b < a->nbins; b++) /* counts: NaN and negatives as 0, at most 1e15 */
         a->windows[b] = cnt[b] > 0 ? (long)fmin(cnt[b], 1e15) : 0;
     json_t *ml = json_object_get(r, "models");
-    *what = "models (1..8 objects with model, cost_s_per_window, psnr per bin)";
-    if (!json_is_array(ml) || json_array_size(ml) < 1 || json_array_size(ml) > LM_AUTO_MAX_MODELS)
+    *what = "models (2..8 objects with model, cost_s_per_window, psnr per bin: a choice needs "
+            "two, as fit-auto writes)";
+    if (!json_is_array(ml) || json_array_size(ml) < 2 || json_array_size(ml) > LM_AUTO_MAX_MODELS)
         return LM_ERR_FORMAT;
     a->nmodels = (int)json_array_size(ml);
     for (int m = 0; m < a->nmodels; m++)
@@ -310,10 +311,12 @@ static lm_status load_root(json_t *r, lm_auto_calib *a, const char **what)
 lm_status lm_auto_load(const char *path, lm_auto_calib *a, lm_err *err)
 {
     memset(a, 0, sizeof *a);
+    lm_status fchk = lm_file_check(path, "a calibration (.json)", err);
+    if (fchk) return fchk;
     FILE *f = fopen(path, "rb");
     if (!f) return lm_err_set(err, LM_ERR_IO, "auto: cannot open calibration '%s'", path);
     json_error_t je;
-    json_t *r = json_loadf(f, 0, &je);
+    json_t *r = json_loadf(f, JSON_REJECT_DUPLICATES, &je);
     fclose(f);
     if (!r)
         return lm_err_set(err, LM_ERR_FORMAT, "auto: '%s' is not JSON (line %d: %s)", path,

@@ -23,6 +23,8 @@ static lm_status read_meta(const char *path, lm_infer_model *im, char *preset, s
 {
     if (lm_is_dir(path)) snprintf(im->weights, sizeof im->weights, "%s/model.safetensors", path);
     else snprintf(im->weights, sizeof im->weights, "%s", path);
+    lm_status fchk = lm_file_check(im->weights, "a .safetensors file", err);
+    if (fchk) return fchk;
     if (!is_file(im->weights))
         return lm_err_set(err, LM_ERR_IO, "%s: no such model (a run folder with "
                           "model.safetensors, or a .safetensors file)", im->weights);
@@ -36,7 +38,12 @@ static lm_status read_meta(const char *path, lm_infer_model *im, char *preset, s
     snprintf(preset, np, "%s", p);
     free(p);
     char *s = lm_safetensors_meta(im->weights, "system", &e2);
-    snprintf(im->system_path, sizeof im->system_path, "%s", s ? s : "");
+    const char *slash = strrchr(im->weights, '/');
+    if (s && s[0] && s[0] != '/' && slash) /* recorded relative to the weights' folder */
+        snprintf(im->system_path, sizeof im->system_path, "%.*s/%s",
+                 (int)(slash - im->weights), im->weights, s);
+    else
+        snprintf(im->system_path, sizeof im->system_path, "%s", s ? s : "");
     free(s);
     char *h = lm_safetensors_meta(im->weights, "system_hash", &e2);
     *hash = h ? strtoull(h, NULL, 16) : 0;

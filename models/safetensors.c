@@ -143,16 +143,20 @@ static lm_status load_one(lm_param *e, json_t *ent, FILE *f, int64_t data_start,
     else if (!get_offset(ja, &a) || !get_offset(jb, &b) || b < a ||
              (uint64_t)(b - a) != (uint64_t)cnt * 4)
         why = "do not span the tensor's bytes";
-    else if (__builtin_add_overflow(data_start, b, &end) || end > file_size)
-        why = "run past the end of the file";
+    else if (__builtin_add_overflow(data_start, b, &end))
+        why = "run past any file";
+    else if (end > file_size)
+        return lm_err_set(err, LM_ERR_FORMAT, "%s: truncated: tensor %s ends at byte %lld, the "
+                          "file has %lld bytes", path, e->name, (long long)end,
+                          (long long)file_size);
     if (why) {
         char sa[32] = "?", sb[32] = "?";
         if (json_is_integer(ja))
             snprintf(sa, sizeof sa, "%" JSON_INTEGER_FORMAT, json_integer_value(ja));
         if (json_is_integer(jb))
             snprintf(sb, sizeof sb, "%" JSON_INTEGER_FORMAT, json_integer_value(jb));
-        return lm_err_set(err, LM_ERR_FORMAT, "%s: tensor %s: data offsets [%s, %s) %s (%zu "
-                          "bytes)", path, e->name, sa, sb, why, cnt * 4);
+        return lm_err_set(err, LM_ERR_FORMAT, "%s: tensor %s: data offsets [%s, %s) %s (the "
+                          "tensor has %zu bytes)", path, e->name, sa, sb, why, cnt * 4);
     }
     if (fseek(f, (long)(data_start + a), SEEK_SET) != 0 || fread(e->t.data, 4, cnt, f) != cnt)
         return lm_err_set(err, LM_ERR_IO, "%s: tensor %s: read failed", path, e->name);
@@ -161,6 +165,8 @@ static lm_status load_one(lm_param *e, json_t *ent, FILE *f, int64_t data_start,
 
 lm_status lm_params_load(lm_params *p, const char *path, int allow_extra, lm_err *err)
 {
+    lm_status fchk = lm_file_check(path, "a .safetensors file", err);
+    if (fchk) return fchk;
     FILE *f = fopen(path, "rb");
     if (!f) return lm_err_set(err, LM_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     int64_t data_start = 0, file_size = 0;
@@ -189,6 +195,7 @@ lm_status lm_params_load(lm_params *p, const char *path, int allow_extra, lm_err
 
 char *lm_safetensors_meta(const char *path, const char *key, lm_err *err)
 {
+    if (lm_file_check(path, "a .safetensors file", err)) return NULL;
     FILE *f = fopen(path, "rb");
     if (!f) {
         lm_err_set(err, LM_ERR_IO, "%s: cannot open: %s", path, strerror(errno));

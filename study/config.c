@@ -337,7 +337,9 @@ lm_status lm_study_cfg_load(lm_study_cfg *cfg, const char *path, lm_err *err)
     char w[LM_TRAIN_PATH_LEN + 16];
     snprintf(w, sizeof w, "config %s", path);
     json_error_t je;
-    json_t *root = json_load_file(path, 0, &je);
+    lm_status fchk = lm_file_check(path, "a study config (.json)", err);
+    if (fchk) return fchk;
+    json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &je);
     if (!root) {
         FILE *f = fopen(path, "r");
         if (!f) return lm_err_set(err, LM_ERR_IO, "%s: cannot open", w);

@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
 #include <omp.h>
 #include "study/study.h"
@@ -27,7 +28,14 @@ static lm_status spawn_one(const char *exe, const lm_study_cfg *cfg, const char 
     char *argv[] = {(char *)exe, "study", "--config", (char *)cfg->path, "--output", (char *)dir,
                     "--threads", thr, "--worker", (char *)name, "--stop-seconds", stop,
                     "--no-charts", o->progress ? NULL : "--quiet", NULL};
-    int rc = posix_spawn(pid, exe, NULL, NULL, argv, environ);
+    /* its own process group: a terminal's Ctrl-C reaches the study alone, which forwards it
+     * once (twice would stop a worker at once) */
+    posix_spawnattr_t at;
+    int rc = posix_spawnattr_init(&at);
+    if (!rc) rc = posix_spawnattr_setflags(&at, POSIX_SPAWN_SETPGROUP);
+    if (!rc) rc = posix_spawnattr_setpgroup(&at, 0);
+    if (!rc) rc = posix_spawn(pid, exe, NULL, &at, argv, environ);
+    posix_spawnattr_destroy(&at);
     if (rc != 0)
         return lm_err_set(err, LM_ERR_IO, "study: cannot start a worker for %s (%s): %s", name,
                           exe, strerror(rc));
@@ -50,23 +58,38 @@ lm_status lm_study_spawn(const lm_study_cfg *cfg, const char *dir, const char *c
     }
     pid_t *pid = calloc((size_t)n, sizeof *pid);
     if (!pid) return lm_err_set(err, LM_ERR_NOMEM, "study: out of memory");
-    int next = 0, running = 0, bad = -1, bad_status = 0;
+    int next = 0, running = 0, bad = -1, bad_status = 0, forwarded = 0;
     lm_status st = LM_OK;
-    while (running > 0 || (next < n && !st && bad < 0)) {
-        while (!st && bad < 0 && running < o->jobs && next < n) {
+    while (running > 0 || (next < n && !st && bad < 0 && !forwarded)) {
+        while (!st && bad < 0 && !forwarded && running < o->jobs && next < n) {
             st = spawn_one(exe, cfg, dir, names[next], stop_s, o, &pid[next], err);
+            if (!st && o->track) o->track((long)pid[next], 1);
             if (!st) next++, running++;
         }
         if (running == 0) break;
+        /* a signal: every running worker gets it (each finishes its iteration, checkpoints
+         * and exits), no other starts */
+        int sig = o->interrupt ? atomic_load(o->interrupt) : 0;
+        if (sig && !forwarded) {
+            for (int i = 0; i < next; i++)
+                if (pid[i] > 0) kill(pid[i], sig);
+            forwarded = sig;
+        }
         int status = 0;
-        pid_t w = waitpid(-1, &status, 0);
+        pid_t w = waitpid(-1, &status, WNOHANG); /* polled: the flag is read between waits */
+        if (w == 0) {
+            nanosleep(&(struct timespec){0, 50000000}, NULL);
+            continue;
+        }
         if (w < 0 && errno == EINTR) continue;
         if (w < 0) break;
         for (int i = 0; i < next; i++) {
             if (pid[i] != w) continue;
             running--;
             pid[i] = 0;
-            if ((!WIFEXITED(status) || WEXITSTATUS(status) != 0) && bad < 0)
+            if (o->track) o->track((long)w, 0);
+            int stopped = forwarded && WIFEXITED(status) && WEXITSTATUS(status) == 128 + forwarded;
+            if ((!WIFEXITED(status) || WEXITSTATUS(status) != 0) && !stopped && bad < 0)
                 bad = i, bad_status = status;
         }
     }
@@ -79,6 +102,9 @@ lm_status lm_study_spawn(const lm_study_cfg *cfg, const char *dir, const char *c
              : lm_err_set(err, WEXITSTATUS(bad_status) == 2 ? LM_ERR_ARG : LM_ERR_NUMERIC,
                           "study: the worker training %s failed (exit %d; its message is "
                           "above)", names[bad], WEXITSTATUS(bad_status));
+    if (!st && forwarded)
+        st = lm_err_set(err, LM_ERR_INTERRUPTED, "the workers checkpointed their runs in %s/runs "
+                        "and exited", dir);
     free(pid);
     return st;
 }

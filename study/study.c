@@ -516,7 +516,8 @@ static lm_status train_preset(const lm_study_cfg *cfg, const char *dir, const ru
         return LM_OK;
     }
     lm_train_opts to = {.resume = resume ? rundir : NULL, .progress = o->progress,
-                        .progress_out = o->log, .stop_seconds = stop_s};
+                        .progress_out = o->log, .stop_seconds = stop_s,
+                        .interrupt = o->interrupt, .hold = o->hold};
     lm_train_result res;
     if (tc.minutes > 0)
         fprintf(o->log, "study: %s: %s %g minutes of training%s into %s\n", preset,
@@ -526,6 +527,9 @@ static lm_status train_preset(const lm_study_cfg *cfg, const char *dir, const ru
         fprintf(o->log, "study: %s: %s %ld iterations into %s\n", preset,
                 resume ? "continuing to" : "training for", tc.iterations, rundir);
     if (lm_train_session(&tc, &to, &res, err)) return err->status;
+    if (res.interrupted)
+        return lm_err_set(err, LM_ERR_INTERRUPTED, "%s stopped at iteration %ld, checkpoint "
+                          "written to %s", preset, res.iterations_done, rundir);
     json_t *t = json_pack("{s:I, s:f, s:b, s:o, s:o, s:b}", "iterations",
                           (json_int_t)res.iterations_done, "seconds", res.seconds,
                           "resumed", resume, "first_loss", jnum(res.first_loss),
@@ -707,6 +711,13 @@ static lm_status drop_phase(const lm_study_cfg *cfg, const char *dir, const run_
     return st;
 }
 
+/* LM_ERR_INTERRUPTED once a signal has come (between the study's steps). */
+static lm_status check_interrupt(const lm_study_opts *o, lm_err *err)
+{
+    if (!o->interrupt || !atomic_load(o->interrupt)) return LM_OK;
+    return lm_err_set(err, LM_ERR_INTERRUPTED, "stopped between runs; the finished runs are kept");
+}
+
 lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_opts *opts,
                        lm_study *out, lm_err *err)
 {
@@ -757,6 +768,7 @@ lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_
     out->runs = json_array();
     for (int i = 0; !st && i < cfg->npresets; i++) {
         json_t *rec = NULL;
+        if ((st = check_interrupt(&o, err))) break;
         st = run_preset(cfg, dir, &rs[i], &h, &o, dropped[i], drop_psnr[i], &rec, err);
         if (!st) json_array_append_new(out->runs, rec);
     }
@@ -767,6 +779,7 @@ lm_status lm_study_run(const lm_study_cfg *cfg, const char *dir, const lm_study_
         snprintf(name, sizeof name, "%s@synth%03d", cfg->nb_preset,
                  (int)lrintf(100.0f * cfg->nb_fraction[i]));
         run_spec nb = {cfg->nb_preset, name, cfg->nb_fraction[i], NULL};
+        if ((st = check_interrupt(&o, err))) break;
         st = run_preset(cfg, dir, &nb, &h, &o, 0, NAN, &rec, err);
         if (!st) json_array_append_new(out->narrowband, rec);
     }

@@ -87,6 +87,13 @@ typedef struct lm_study_opts {
                       * each in a child `lumosaic study --worker` process with `threads`
                       * threads; evaluation and timing stay serial, after the training */
     const char *exe; /* jobs > 1: the lumosaic program the workers run (NULL: this one) */
+    const atomic_int *interrupt; /* NULL, or a flag a signal handler sets (the signal's
+                      * number): a training in this process finishes its iteration and
+                      * checkpoints, workers are sent that signal (they do the same) and
+                      * waited for, and the study returns LM_ERR_INTERRUPTED */
+    void (*hold)(int on);         /* passed to training (lm_train_opts.hold) */
+    void (*track)(long pid, int on); /* NULL, or told of each worker started (1) and waited
+                      * for (0), e.g. so that a signal ending the program reaches them */
 } lm_study_opts;
 
 /* The outcome: a description of the held-out set and one record per preset (config order). */

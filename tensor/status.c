@@ -2,6 +2,7 @@
 #include "tensor/status.h"
 #include <stdarg.h>
 #include <stdio.h>
+#include <sys/stat.h>
 
 const char *lm_status_str(lm_status s)
 {
@@ -16,6 +17,7 @@ const char *lm_status_str(lm_status s)
     case LM_ERR_NUMERIC: return "numeric error";
     case LM_ERR_UNSUPPORTED: return "unsupported";
     case LM_ERR_WRITE: return "write error";
+    case LM_ERR_INTERRUPTED: return "interrupted";
     }
     return "unknown status";
 }
@@ -33,4 +35,16 @@ lm_status lm_err_set(lm_err *e, lm_status s, const char *fmt, ...)
     for (char *p = e->msg; *p; p++)
         if ((unsigned char)*p < 0x20 || *p == 0x7f) *p = '?';
     return s;
+}
+
+lm_status lm_file_check(const char *path, const char *what, lm_err *e)
+{
+    struct stat st;
+    if (!path || stat(path, &st) != 0 || S_ISREG(st.st_mode)) return LM_OK;
+    if (S_ISDIR(st.st_mode))
+        return lm_err_set(e, LM_ERR_IO, "%s: is a folder, expected %s", path,
+                          what ? what : "a file");
+    return lm_err_set(e, LM_ERR_IO, "%s: is %s, not a regular file", path,
+                      S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISSOCK(st.st_mode) ? "a socket"
+                      : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device" : "special");
 }

@@ -19,8 +19,10 @@ typedef enum lm_status {
     LM_ERR_BACKEND = -6,     /* compute backend failure (e.g. OpenCL) */
     LM_ERR_NUMERIC = -7,     /* NaN / inf where a finite value is required */
     LM_ERR_UNSUPPORTED = -8, /* valid request this build cannot serve */
-    LM_ERR_WRITE = -9        /* an output could not be written (disk full, permissions, a
+    LM_ERR_WRITE = -9,       /* an output could not be written (disk full, permissions, a
                               * missing folder): not bad input, unlike LM_ERR_IO on a read */
+    LM_ERR_INTERRUPTED = -10 /* stopped on request (a signal's flag) after saving what it could;
+                              * the message says what was kept */
 } lm_status;
 
 /* Short constant text for a status ("shape error", ...). Never NULL. */
@@ -38,6 +40,12 @@ typedef struct lm_err {
 lm_status lm_err_set(lm_err *e, lm_status s, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 static inline void lm_err_clear(lm_err *e) { if (e) { e->status = LM_OK; e->msg[0] = 0; } }
+
+/* Before a file input is opened: LM_OK when `path` is a regular file (or a link to one), or
+ * does not exist (the opener reports that in its own words); else LM_ERR_IO, "<path>: is a
+ * folder, expected <what>" or "<path>: is a FIFO (a device, a socket), not a regular file".
+ * Only stat(2) is used: a FIFO or a device is refused without being opened, so never blocks. */
+lm_status lm_file_check(const char *path, const char *what, lm_err *e);
 
 #ifdef __cplusplus
 }

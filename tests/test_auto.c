@@ -138,6 +138,7 @@ static lm_status load_text(const char *text, lm_err *e)
 
 #define GOOD_HEAD "{\"version\": 1, \"measure\": \"grad\", \"window\": [66, 64], \"stride\": [30, 32], "
 #define GOOD_MODEL "{\"model\": \"x\", \"cost_s_per_window\": 0.001, \"psnr\": [30, 20]}"
+#define GOOD_MODELS GOOD_MODEL ", " GOOD_MODEL /* a choice needs two */
 
 static void test_file(void)
 {
@@ -158,7 +159,7 @@ static void test_file(void)
     CHECK_CLOSE(b.models[2].cost, 1e-2, 1e-12, 0);
     /* the good minimal file loads; each broken variant is refused with a message */
     lm_err_clear(&e);
-    CHECK(load_text(GOOD_HEAD "\"edges\": [0.5], \"windows\": [3, 3], \"models\": [" GOOD_MODEL
+    CHECK(load_text(GOOD_HEAD "\"edges\": [0.5], \"windows\": [3, 3], \"models\": [" GOOD_MODELS
                     "]}", &e) == LM_OK);
     CHECK(lm_auto_load("/nonexistent/auto.json", &a, &e) == LM_ERR_IO);
     CHECK(strstr(e.msg, "/nonexistent/auto.json") != NULL);
@@ -167,17 +168,18 @@ static void test_file(void)
         "[1, 2]",
         "{\"version\": 2, \"measure\": \"grad\"}",
         GOOD_HEAD "\"edges\": [0.5], \"windows\": [3, 3], \"models\": []}",
-        GOOD_HEAD "\"edges\": [0.5, 0.4], \"windows\": [3, 3, 3], \"models\": [" GOOD_MODEL "]}",
-        GOOD_HEAD "\"edges\": [0.5, 0.6], \"windows\": [3, 3, 3], \"models\": [" GOOD_MODEL "]}",
-        GOOD_HEAD "\"edges\": [0.5], \"windows\": [3], \"models\": [" GOOD_MODEL "]}",
+        GOOD_HEAD "\"edges\": [0.5], \"windows\": [3, 3], \"models\": [" GOOD_MODEL "]}",
+        GOOD_HEAD "\"edges\": [0.5, 0.4], \"windows\": [3, 3, 3], \"models\": [" GOOD_MODELS "]}",
+        GOOD_HEAD "\"edges\": [0.5, 0.6], \"windows\": [3, 3, 3], \"models\": [" GOOD_MODELS "]}",
+        GOOD_HEAD "\"edges\": [0.5], \"windows\": [3], \"models\": [" GOOD_MODELS "]}",
         GOOD_HEAD "\"edges\": [0.5], \"windows\": [3, 3], \"models\": [{\"model\": \"x\", "
-                  "\"cost_s_per_window\": 0, \"psnr\": [30, 20]}]}",
+                  "\"cost_s_per_window\": 0, \"psnr\": [30, 20]}, " GOOD_MODEL "]}",
         GOOD_HEAD "\"edges\": [0.5], \"windows\": [3, 3], \"models\": [{\"model\": \"x\", "
-                  "\"psnr\": [30, 20]}]}",
+                  "\"psnr\": [30, 20]}, " GOOD_MODEL "]}",
         "{\"version\": 1, \"measure\": \"fft\", \"window\": [66, 64], \"stride\": [30, 32], "
-        "\"edges\": [0.5], \"windows\": [3, 3], \"models\": [" GOOD_MODEL "]}",
+        "\"edges\": [0.5], \"windows\": [3, 3], \"models\": [" GOOD_MODELS "]}",
         "{\"version\": 1, \"measure\": \"grad\", \"window\": [0, 64], \"stride\": [30, 32], "
-        "\"edges\": [0.5], \"windows\": [3, 3], \"models\": [" GOOD_MODEL "]}",
+        "\"edges\": [0.5], \"windows\": [3, 3], \"models\": [" GOOD_MODELS "]}",
     };
     for (int i = 0; i < (int)(sizeof bad / sizeof bad[0]); i++) {
         lm_err_clear(&e);

@@ -349,7 +349,8 @@ static void test_hostile_lists(void)
     write_mat(tpath(p, "h.mat"), "cube", wl, 31, 0, NULL, NULL, 0);
     const char *side[][2] = {
         {"400 410 405 430", "not increasing"},
-        {"400 nan 420", "wavelength 2 is NaN"},
+        {"400 nan 420", "'nan' is not a number"},
+        {"400 0x19a 420", "'0x19a' is not a number"},
         {"400 410 420", "lists 3 wavelengths but 'cube' has 31 bands"},
         {"400 410 abc", "'abc' is not a number"},
         {"# nothing\n", "no wavelengths"},

@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include "train/dist.h"
+#include "data/util.h"
 
 #define CKPT_FORMAT "lumosaic-checkpoint-1"
 
@@ -57,6 +58,8 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
     snprintf(seed, sizeof seed, "%" PRIu64, cfg->seed);
     snprintf(thr, sizeof thr, "%d", cfg->threads);
     const char *sys = opts && opts->system_path ? opts->system_path : "";
+    char sys_rel[LM_TRAIN_PATH_LEN]; /* relative to the checkpoint: the folder can move */
+    if (sys[0] && !lm_path_relative(dir, sys, sys_rel, sizeof sys_rel)) sys = sys_rel;
     snprintf(hash, sizeof hash, "%016" PRIx64, opts ? opts->system_hash : 0);
     if (opt) {
         lm_params v;

@@ -13,6 +13,7 @@
 #include <string.h>
 #include <unistd.h>
 #include "data/dataset.h"
+#include "data/util.h"
 
 typedef enum ftype { F_INT, F_LONG, F_U64, F_FLOAT, F_STR, F_LIST, F_PATCH, F_NOISE } ftype;
 
@@ -111,7 +112,8 @@ static const field fields[] = {
     FLD("snapshots", F_STR, snapshots, "M,M,...", "weights at these minutes of training into "
         "<output>/snapshots/<M>min/", 0, 0),
     FLD("minutes", F_FLOAT, minutes, "M", "time budget in minutes (0 = none; the schedule "
-        "spans it)", 0, 1e6),
+        "spans it; a closed-form fit reads training patches until then and solves from them)",
+        0, 1e6),
     FLD("clock", F_STR, clock, "C", "what minutes and snapshots count: wall | cpu (CPU time of "
         "the process, all threads; not shrunk by a busy machine)", 0, 0),
     FLD("precision", F_STR, precision, "P", "fp32 | bf16: bf16 operands (fp32 sums, master "
@@ -202,21 +204,9 @@ int lm_train_cfg_given(const lm_train_cfg *c, const char *key)
     return (int)(c->given[idx / 64] >> (idx % 64) & 1);
 }
 
-static int parse_long(const char *s, long long *v)
-{
-    char *end;
-    errno = 0;
-    *v = strtoll(s, &end, 10);
-    return errno == 0 && end != s && *end == 0;
-}
+static int parse_long(const char *s, long long *v) { return lm_parse_int(s, v) == 0; }
 
-static int parse_double(const char *s, double *v)
-{
-    char *end;
-    errno = 0;
-    *v = strtod(s, &end);
-    return end != s && *end == 0 && isfinite(*v);
-}
+static int parse_double(const char *s, double *v) { return lm_parse_real(s, v) == 0; }
 
 /* "lo..hi" of a field. */
 static const char *range_text(const field *f, char *buf, size_t n)
@@ -460,7 +450,7 @@ static lm_status parse_root(lm_train_cfg *c, json_t *root, const char *label, co
 lm_status lm_train_cfg_parse(lm_train_cfg *c, const char *text, const char *label, lm_err *err)
 {
     json_error_t je;
-    json_t *root = json_loads(text, 0, &je);
+    json_t *root = json_loads(text, JSON_REJECT_DUPLICATES, &je);
     if (!root)
         return lm_err_set(err, LM_ERR_FORMAT, "config %s: line %d: %s", label, je.line, je.text);
     lm_status st = parse_root(c, root, label, NULL, err);
@@ -470,8 +460,10 @@ lm_status lm_train_cfg_parse(lm_train_cfg *c, const char *text, const char *labe
 
 lm_status lm_train_cfg_load(lm_train_cfg *c, const char *path, lm_err *err)
 {
+    lm_status fchk = lm_file_check(path, "a run config (.json)", err);
+    if (fchk) return fchk;
     json_error_t je;
-    json_t *root = json_load_file(path, 0, &je);
+    json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &je);
     if (!root) {
         FILE *f = fopen(path, "rb");
         if (!f) return lm_err_set(err, LM_ERR_IO, "config %s: cannot open: %s", path,
@@ -539,9 +531,10 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     if (!(c->fit_synth == -1.0f || (c->fit_synth >= 0.0f && c->fit_synth <= 1.0f)))
         BAD("'fit_synth': must be -1 (chosen on validation) or in [0, 1] (got %g)",
             (double)c->fit_synth);
-    for (const char *p = c->snapshots; *p; p++)
-        if (!strchr("0123456789.,", *p))
-            BAD("'snapshots': must be minutes separated by commas (got '%s')", c->snapshots);
+    double marks[64];
+    char why[128];
+    if (c->snapshots[0] && lm_parse_list(c->snapshots, 0, 1e6, marks, 64, why, sizeof why) < 0)
+        BAD("'snapshots': must be minutes separated by commas (got '%s': %s)", c->snapshots, why);
     if (strcmp(c->doe_quantise, "progressive") && strcmp(c->doe_quantise, "ste") &&
         strcmp(c->doe_quantise, "none"))
         BAD("'doe_quantise': must be progressive, ste or none (got '%s')", c->doe_quantise);
@@ -559,7 +552,40 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
 }
 #undef BAD
 
-lm_status lm_train_cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
+/* The run's paths (data, system, base, DOE) made relative to `dir` where they resolve, so that
+ * a run folder moved or cloned with its data beside it keeps working. */
+static void paths_relative_to(lm_train_cfg *c, const char *dir)
+{
+    char *paths[LM_TRAIN_MAX_PATHS + 3];
+    int n = 0;
+    for (int i = 0; i < c->ndata; i++) paths[n++] = c->data[i];
+    paths[n++] = c->system;
+    paths[n++] = c->base;
+    if (strcmp(c->doe, "default")) paths[n++] = c->doe;
+    for (int i = 0; i < n; i++) {
+        char rel[LM_TRAIN_PATH_LEN];
+        if (paths[i][0] && !lm_path_relative(dir, paths[i], rel, sizeof rel)) strcpy(paths[i], rel);
+    }
+}
+
+static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err);
+
+lm_status lm_train_cfg_save(const lm_train_cfg *cfg, const char *path, lm_err *err)
+{
+    lm_train_cfg *c = malloc(sizeof *c);
+    if (!c) return lm_err_set(err, LM_ERR_NOMEM, "%s: out of memory", path);
+    *c = *cfg;
+    char dir[LM_TRAIN_PATH_LEN];
+    const char *slash = strrchr(path, '/');
+    if (!slash) snprintf(dir, sizeof dir, ".");
+    else snprintf(dir, sizeof dir, "%.*s", slash == path ? 1 : (int)(slash - path), path);
+    paths_relative_to(c, dir);
+    lm_status st = cfg_save(c, path, err);
+    free(c);
+    return st;
+}
+
+static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
 {
     json_t *data = json_array();
     for (int i = 0; i < c->ndata; i++) json_array_append_new(data, json_string(c->data[i]));

@@ -59,6 +59,12 @@ typedef struct fitter {
     long cap;
     const float *feat;      /* D > 0: feature maps of the batch, nb x D x ph x pw */
     int clip, bits;         /* sensor: applied after sampled noise */
+    const lm_lmmse_fit_ctl *ctl; /* progress, interruption, budget (never NULL) */
+    double c0, t0, shown;   /* budget clock and wall clock at the start; last progress line */
+    long done, total;       /* training patches read, over every pass / to read */
+    int pass, passes;       /* accumulation pass (1-based) and how many there are */
+    int stopped;            /* 1: no more training patches (budget or interruption) */
+    lm_lmmse_fit_report *rep;
 } fitter;
 
 static double now(void)
@@ -66,6 +72,61 @@ static double now(void)
     struct timespec t;
     clock_gettime(CLOCK_MONOTONIC, &t);
     return t.tv_sec + 1e-9 * t.tv_nsec;
+}
+
+/* The budget's clock: the wall, or the process's CPU time. */
+static double budget_clock(const fitter *f)
+{
+    struct timespec t;
+    if (!f->ctl->cpu_clock || clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t)) return now();
+    return t.tv_sec + 1e-9 * t.tv_nsec;
+}
+
+static void fmt_time(char *buf, size_t n, double s)
+{
+    if (!(s >= 0) || s > 1e7) snprintf(buf, n, "?");
+    else if (s >= 3600) snprintf(buf, n, "%dh%02dm", (int)(s / 3600), (int)fmod(s / 60, 60));
+    else snprintf(buf, n, "%dm%02ds", (int)(s / 60), (int)fmod(s, 60));
+}
+
+/* A progress line: after the first batch, then every 10 s (and the last, final = 1). */
+static void show_progress(fitter *f, int final)
+{
+    FILE *out = f->ctl->progress;
+    double t = now(), el = t - f->t0;
+    if (!out || (!final && f->shown > 0 && t - f->shown < 10.0)) return;
+    f->shown = t;
+    double rate = el > 0 ? f->done / el : 0, left = rate > 0 ? (f->total - f->done) / rate : -1;
+    if (f->ctl->budget_s > 0) { /* the budget ends the accumulation at the latest */
+        double rest = f->ctl->budget_s - (budget_clock(f) - f->c0);
+        if (rest < 0) rest = 0;
+        if (left < 0 || rest < left) left = rest;
+    }
+    char els[32], eta[32], pass[32] = "";
+    fmt_time(els, sizeof els, el);
+    fmt_time(eta, sizeof eta, left);
+    const char *name = f->ctl->name ? f->ctl->name : "lmmse";
+    if (f->passes > 1) snprintf(pass, sizeof pass, " (pass %d of %d)", f->pass, f->passes);
+    if (final)
+        fprintf(out, "train: fitting %s: %ld of %ld training patches read in %s%s\n", name,
+                f->done, f->total, els, f->rep->interrupted ? " (interrupted: solving with them)"
+                : f->rep->budget_spent ? " (the time budget is spent: solving with them)" : "");
+    else
+        fprintf(out, "train: fitting %s: %ld/%ld training patches read%s  elapsed %s  ETA %s\n",
+                name, f->done, f->total, pass, els, eta);
+    fflush(out);
+}
+
+/* Whether to stop reading training patches: interrupted, or the budget spent. */
+static int stop_reading(fitter *f)
+{
+    int sig = f->ctl->interrupt ? atomic_load(f->ctl->interrupt) : 0;
+    if (sig) f->rep->interrupted = sig;
+    else if (f->ctl->budget_s > 0 && budget_clock(f) - f->c0 >= f->ctl->budget_s)
+        f->rep->budget_spent = 1;
+    else return 0;
+    f->stopped = 1;
+    return 1;
 }
 
 static lm_status fitter_init(fitter *f, const lm_model *m, int ph, int pw, int batch, lm_err *err)
@@ -358,13 +419,19 @@ static lm_status accumulate_all(fitter *f, lm_model *m, lm_ctx *c, lm_dataset *d
     long nbatches = (patches + batch - 1) / batch;
     int *idx = malloc(sizeof(int) * (size_t)batch);
     lm_status st = idx ? LM_OK : lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: out of memory");
+    long read = 0;
     for (long k = 0; k < nbatches && !st; k++) {
+        if (k > 0 && stop_reading(f)) break; /* at least one batch: the system is solvable */
         int nb = (int)(k + 1 < nbatches ? batch : patches - k * batch);
         if ((st = lm_dataset_batch(d, k, batch, raw, tgt, err))) break;
         add_noise(f, raw, nb * plane, s, &r);
         if (f->D && (st = features(f, m, c, raw, nb, fbuf, err))) break;
         st = accumulate_train(f, k * batch, raw, tgt, nb, idx, err);
+        read += nb, f->done += nb;
+        show_progress(f, 0);
     }
+    if (f->pass == 1) f->rep->patches = read;
+    if (!st && f->pass == f->passes) show_progress(f, 1);
     int nv = lm_dataset_eval_count(d, LM_SPLIT_VAL);
     for (int i = 0; i < nv && !st; i++) {
         if ((st = lm_dataset_eval_sample(d, LM_SPLIT_VAL, i, raw, tgt, err))) break;
@@ -392,11 +459,27 @@ static lm_status fit_features(fitter *f, lm_model *m, lm_dataset *d, long patche
     lm_status st = fbuf && coef ? LM_OK : lm_err_set(err, LM_ERR_NOMEM, "lmmse fit: no memory");
     int nv = lm_dataset_eval_count(d, LM_SPLIT_VAL);
     const float *sig = lm_lmmse_levels(m);
+    f->passes = N_RF_LEVELS;
+    f->total = patches * N_RF_LEVELS;
+    double budget = f->ctl->budget_s;
     for (int q = 0; q < N_RF_LEVELS && !st; q++) {
         const int l = rf_levels[q];
         stats_clear(f);
-        st = accumulate_all(f, m, &c, d, patches, batch, sig[l], 0x5eed0000u + l,
-                            raw, tgt, fbuf, err);
+        f->pass = q + 1;
+        /* the first pass takes its share of the budget; the others read as many patches */
+        lm_lmmse_fit_ctl one = *f->ctl;
+        const lm_lmmse_fit_ctl *keep = f->ctl;
+        if (q == 0) one.budget_s = budget / N_RF_LEVELS;
+        else one.budget_s = 0;
+        f->ctl = &one;
+        st = accumulate_all(f, m, &c, d, q ? rep->patches : patches, batch, sig[l],
+                            0x5eed0000u + l, raw, tgt, fbuf, err);
+        f->ctl = keep;
+        if (!st && q == 0) f->total = rep->patches * N_RF_LEVELS;
+        if (!st && rep->interrupted && q + 1 < N_RF_LEVELS)
+            st = lm_err_set(err, LM_ERR_INTERRUPTED, "the closed-form fit of %s was stopped in "
+                            "pass %d of %d (each noise level of the family is read again); "
+                            "nothing was fitted", m->preset, q + 1, N_RF_LEVELS);
         if (!st) st = fit_levels(f, m, nv > 0, l, coef + per * q, rep, err);
     }
     double *w = st ? NULL : malloc(sizeof(double) * f->F1 * O);
@@ -419,7 +502,17 @@ static lm_status fit_features(fitter *f, lm_model *m, lm_dataset *d, long patche
 lm_status lm_lmmse_fit(lm_model *m, lm_dataset *d, int ph, int pw, long patches, int batch,
                        double synth, const lm_noise_opts *sensor, lm_lmmse_fit_report *rep, lm_err *err)
 {
+    return lm_lmmse_fit_ctl_run(m, d, ph, pw, patches, batch, synth, sensor, NULL, rep, err);
+}
+
+lm_status lm_lmmse_fit_ctl_run(lm_model *m, lm_dataset *d, int ph, int pw, long patches,
+                               int batch, double synth, const lm_noise_opts *sensor,
+                               const lm_lmmse_fit_ctl *ctl, lm_lmmse_fit_report *rep,
+                               lm_err *err)
+{
+    static const lm_lmmse_fit_ctl none;
     memset(rep, 0, sizeof *rep);
+    rep->patches_asked = patches;
     if (!lm_lmmse_window(m))
         return lm_err_set(err, LM_ERR_ARG, "lmmse fit: model %s is not an lmmse model", m->preset);
     if (patches < 1 || batch < 1)
@@ -438,13 +531,17 @@ lm_status lm_lmmse_fit(lm_model *m, lm_dataset *d, int ph, int pw, long patches,
     if (sensor) f.clip = sensor->clip, f.bits = sensor->bits;
     f.d = d;
     f.synth = synth;
+    f.ctl = ctl ? ctl : &none;
+    f.rep = rep;
+    f.t0 = now(), f.c0 = budget_clock(&f);
+    f.pass = f.passes = 1;
+    f.total = patches;
     if (!st && (f.D > 0 || f.clip || f.bits)) {
         st = fit_features(&f, m, d, patches, batch, raw, tgt, rep, err);
     } else if (!st) {
         st = accumulate_all(&f, m, NULL, d, patches, batch, 0.0, 0, raw, tgt, NULL, err);
         if (!st) st = fit_levels(&f, m, nv > 0, -1, NULL, rep, err);
     }
-    rep->patches = patches;
     rep->val_patches = nv;
     for (int p = 0; p < f.P; p++) rep->rows += f.tr[p].n + f.ts[p].n;
     rep->seconds = now() - t0;

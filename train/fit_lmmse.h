@@ -8,6 +8,8 @@
 #define LM_FIT_LMMSE_H
 #include "models/model.h"
 #include "data/forward.h"
+#include <stdatomic.h>
+#include <stdio.h>
 
 typedef struct lm_lmmse_fit_report {
     long patches, val_patches;   /* training / validation patches read */
@@ -20,7 +22,26 @@ typedef struct lm_lmmse_fit_report {
                                        * the level's sd); NaN without a validation split */
     double seconds;              /* the whole fit */
     double seconds_solve;        /* of which solving (ridge and share search, every level) */
+    long patches_asked;          /* the training patches asked for (patches: those read) */
+    int budget_spent;            /* 1: accumulation stopped at ctl->budget_s (fitted from
+                                  * the patches read by then) */
+    int interrupted;             /* the value of ctl->interrupt when it stopped the
+                                  * accumulation (0: not interrupted) */
 } lm_lmmse_fit_report;
+
+/* Control of a long fit (all optional: zeros = none). */
+typedef struct lm_lmmse_fit_ctl {
+    FILE *progress;              /* progress lines (patches read, elapsed, ETA), or NULL */
+    const char *name;            /* the model's name in them */
+    const atomic_int *interrupt; /* once nonzero, no more training patches are read: the
+                                  * filters are solved from those read so far (with random
+                                  * features or a sensor model, whose levels need passes of
+                                  * their own: LM_ERR_INTERRUPTED unless the last pass was
+                                  * under way) */
+    double budget_s;             /* > 0: stop reading training patches once this many
+                                  * seconds have passed, and solve from those read */
+    int cpu_clock;               /* the budget counts the process's CPU time, not the wall */
+} lm_lmmse_fit_ctl;
 
 typedef struct lm_dataset lm_dataset;
 /* Fit m (an lmmse model) from `patches` training patches of d (batches 0.. of `batch`; d must
@@ -33,5 +54,10 @@ typedef struct lm_dataset lm_dataset;
  * or as sampled without one). */
 lm_status lm_lmmse_fit(lm_model *m, lm_dataset *d, int ph, int pw, long patches, int batch,
                        double synth, const lm_noise_opts *sensor, lm_lmmse_fit_report *rep, lm_err *err);
+/* The same under control (ctl NULL: as lm_lmmse_fit). */
+lm_status lm_lmmse_fit_ctl_run(lm_model *m, lm_dataset *d, int ph, int pw, long patches,
+                               int batch, double synth, const lm_noise_opts *sensor,
+                               const lm_lmmse_fit_ctl *ctl, lm_lmmse_fit_report *rep,
+                               lm_err *err);
 
 #endif

@@ -8,6 +8,7 @@
 #include "train/dist.h"
 #include "train/fit_lmmse.h"
 #include "data/mosaic.h"
+#include "data/util.h"
 #include <errno.h>
 #include <jansson.h>
 #include <math.h>
@@ -144,8 +145,11 @@ static lm_status write_fit_report(const lm_train_cfg *cfg, const lm_lmmse_fit_re
                               : json_null(), "val_psnr",
                               isfinite(r->val_psnr[l]) ? json_real(r->val_psnr[l]) : json_null(),
                               "interpolated", !isfinite(r->ridge[l])));
-    json_t *root = json_pack("{s:s, s:i, s:I, s:I, s:I, s:f, s:f, s:b, s:o}", "model", cfg->model,
-                             "window", K, "patches", (json_int_t)r->patches,
+    json_t *root = json_pack("{s:s, s:i, s:I, s:I, s:s, s:I, s:I, s:f, s:f, s:b, s:o}",
+                             "model", cfg->model, "window", K, "patches", (json_int_t)r->patches,
+                             "patches_asked", (json_int_t)r->patches_asked, "stopped",
+                             r->interrupted ? "interrupted" : r->budget_spent ? "time budget"
+                             : "no",
                              "val_patches", (json_int_t)r->val_patches, "rows", (json_int_t)r->rows,
                              "seconds", r->seconds, "seconds_solve", r->seconds_solve, "ridge_from_validation", r->val_patches > 0,
                              "levels", lv);
@@ -180,12 +184,17 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     sensor.clip = cfg->sensor_clip;
     sensor.bits = cfg->sensor_bits;
     char made[LM_TRAIN_PATH_LEN] = ""; /* the run folder is made once the fit has worked */
-    lm_status st = lm_lmmse_fit(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches, cfg->batch,
-                                cfg->fit_synth, &sensor, &r, err);
+    lm_lmmse_fit_ctl ctl = {.progress = opts->progress ? out : NULL, .name = cfg->model,
+                            .interrupt = opts->interrupt, .budget_s = cfg->minutes * 60.0,
+                            .cpu_clock = !strcmp(cfg->clock, "cpu")};
+    lm_status st = lm_lmmse_fit_ctl_run(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches,
+                                        cfg->batch, cfg->fit_synth, &sensor, &ctl, &r, err);
     if (!st) st = lm_train_make_dir_top(cfg->output, made, sizeof made, err);
+    if (opts->hold) opts->hold(1);
     if (!st) st = lm_train_cfg_save(cfg, path, err);
     if (!st) st = lm_train_save_checkpoint(cfg->output, m, NULL, 0, 0, opts, cfg, err);
     if (!st) st = write_fit_report(cfg, &r, lm_lmmse_window(m), err);
+    if (opts->hold) opts->hold(0);
     if (st) {
         lm_train_discard_dir(cfg->output, made);
         return st;
@@ -206,6 +215,10 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     res->validated = r.val_patches > 0;
     res->closed_form = 1;
     res->val.psnr = r.val_psnr[0];
+    res->interrupted = r.interrupted;
+    res->budget_spent = r.budget_spent;
+    res->fit_patches = r.patches;
+    res->fit_patches_asked = r.patches_asked;
     return LM_OK;
 }
 
@@ -222,7 +235,14 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         lm_system_free(&sys);
         return err->status;
     }
-    opts.system_path = syspath;
+    /* the checkpoint records the bundled default as "" (found on any machine), another
+     * system by a path relative to the checkpoint's folder */
+    char def[LM_TRAIN_PATH_LEN];
+    lm_err e_def = {0};
+    int bundled = !cfg->system[0] ||
+                  (!lm_data_path("systems/default.json", def, sizeof def, &e_def) &&
+                   lm_path_relative(def, syspath, def, sizeof def) == 0 && !strcmp(def, "."));
+    opts.system_path = bundled ? "" : syspath;
     opts.system_hash = lm_file_hash(syspath);
     lm_mosaic mo;
     lm_model *m = NULL;
@@ -330,6 +350,10 @@ static lm_status resolve_buckets(lm_train_cfg *c, lm_err *err)
 {
     size_t n = strlen(c->model);
     int b2 = n > 3 && !strcmp(c->model + n - 3, "-b2");
+    if (b2 && c->buckets != 2 && lm_train_cfg_given(c, "buckets"))
+        return lm_err_set(err, LM_ERR_ARG, "config: 'buckets' %d conflicts with model %s, a "
+                          "two-bucket preset (drop 'buckets', or use the model without -b2)",
+                          c->buckets, c->model);
     if (b2) c->buckets = 2;
     if (b2 || c->buckets != 2) return LM_OK;
     char name[sizeof c->model + 4];
@@ -348,6 +372,10 @@ static lm_status resolve_frames(lm_train_cfg *c, lm_err *err)
 {
     size_t n = strlen(c->model);
     int mf = n > 4 && !strcmp(c->model + n - 4, "-mf3");
+    if (mf && c->frames != 3 && lm_train_cfg_given(c, "frames"))
+        return lm_err_set(err, LM_ERR_ARG, "config: 'frames' %d conflicts with model %s, a "
+                          "three-frame preset (drop 'frames', or use the model without -mf3)",
+                          c->frames, c->model);
     if (mf) c->frames = 3;
     if (c->frames == 2)
         return lm_err_set(err, LM_ERR_ARG, "config: field 'frames': 1 or 3 (got 2)");

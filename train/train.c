@@ -84,7 +84,8 @@ lm_status lm_train_make_dir(const char *path, lm_err *err)
 void lm_train_discard_dir(const char *dir, const char *top)
 {
     static const char *const files[] = {"config.json", "log.csv", "fit.json",
-                                        "model.safetensors", "optimizer.safetensors"};
+                                        "model.safetensors", "optimizer.safetensors",
+                                        "doe.json", "doe_heights.png", "doe_state.safetensors"};
     char p[LM_TRAIN_PATH_LEN + 32];
     for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
         snprintf(p, sizeof p, "%s/%s", dir, files[i]);
@@ -97,6 +98,17 @@ void lm_train_discard_dir(const char *dir, const char *top)
         char *s = strrchr(p, '/');
         if (!s) break;
         *s = 0;
+    }
+}
+
+void lm_train_discard_checkpoint(const char *dir)
+{
+    static const char *const files[] = {"model.safetensors", "optimizer.safetensors", "doe.json",
+                                        "doe_heights.png", "doe_state.safetensors"};
+    char p[LM_TRAIN_PATH_LEN + 32];
+    for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
+        snprintf(p, sizeof p, "%s/%s", dir, files[i]);
+        remove(p);
     }
 }
 
@@ -134,7 +146,7 @@ static void set_noise(loop *L, int B)
 /* "the last good checkpoint (iteration N) in DIR is kept" or "no checkpoint ..." */
 static void kept_text(const loop *L, char *buf, size_t n)
 {
-    if (L->saved >= 0)
+    if (L->saved > 0 || (L->saved == 0 && L->opts->resume))
         snprintf(buf, n, "the last good checkpoint (iteration %ld) in %.400s is kept", L->saved,
                  L->cfg->output);
     else
@@ -428,7 +440,34 @@ static void teardown(loop *L)
     free(L->held);
 }
 
-/* Fresh run: config.json; resume: checkpoint state. Sets *start (iterations done). */
+/* Seconds of training so far, over every invocation (resume restores the checkpoint's). */
+static double elapsed(const loop *L) { return L->seconds0 + (train_s(L) - L->t_train0); }
+
+static void hold(const loop *L, int on)
+{
+    if (L->opts->hold) L->opts->hold(on);
+}
+
+/* The checkpoint of iteration `it` (rank 0): the front's state, the weights (the average when
+ * there is one) and the optimizer's, written under a hold. */
+static lm_status checkpoint(loop *L, long it, lm_err *err)
+{
+    const lm_train_cfg *cfg = L->cfg;
+    lm_train_opts o2 = *L->opts;
+    o2.elapsed = elapsed(L);
+    hold(L, 1);
+    lm_status st = L->src->front ? L->src->front->save(L->src->user, cfg->output, err) : LM_OK;
+    lm_adam_ema_swap(&L->opt, &L->model->params); /* the file holds the average */
+    if (!st) st = lm_train_save_checkpoint(cfg->output, L->model, &L->opt, it,
+                                           it * cfg->accum_steps, &o2, cfg, err);
+    lm_adam_ema_swap(&L->opt, &L->model->params);
+    hold(L, 0);
+    if (!st) L->saved = it;
+    return st;
+}
+
+/* Fresh run: config.json and the checkpoint of iteration 0, so that the folder resumes however
+ * early the run is stopped; resume: checkpoint state. Sets *start (iterations done). */
 static lm_status begin(loop *L, long *start, lm_err *err)
 {
     const lm_train_cfg *cfg = L->cfg;
@@ -437,8 +476,12 @@ static lm_status begin(loop *L, long *start, lm_err *err)
         char path[LM_TRAIN_PATH_LEN + 16];
         snprintf(path, sizeof path, "%s/config.json", cfg->output);
         if (L->rank) return LM_OK; /* rank 0 writes the run folder */
-        if (lm_train_cfg_save(cfg, path, err)) return err->status;
-        return open_log(L, 0, 0, err);
+        hold(L, 1);
+        lm_status st = lm_train_cfg_save(cfg, path, err);
+        if (!st) st = checkpoint(L, 0, err);
+        if (!st) st = open_log(L, 0, 0, err);
+        hold(L, 0);
+        return st;
     }
     long nb = 0;
     uint64_t seed = 0;
@@ -467,8 +510,6 @@ static lm_status begin(loop *L, long *start, lm_err *err)
     return L->rank ? LM_OK : open_log(L, 1, *start, err);
 }
 
-/* Seconds of training so far, over every invocation (resume restores the checkpoint's). */
-static double elapsed(const loop *L) { return L->seconds0 + (train_s(L) - L->t_train0); }
 
 /* Time budget: at 3 % and 50 % of it (training time over all invocations), and half-way
  * through each resolved schedule while more than a tenth of the budget is left, the schedule's
@@ -509,7 +550,9 @@ static void resolve_budget(loop *L, long done, double *next_mark, long *end)
     snprintf(path, sizeof path, "%s/config.json", cfg->output);
     lm_err e2;
     lm_err_clear(&e2);
+    hold(L, 1);
     if (!L->rank) lm_train_cfg_save(&rc, path, &e2); /* best effort: resume needs the checkpoint */
+    hold(L, 0);
 }
 
 /* Snapshots: the weights at each mark of cfg->snapshots (minutes of training time), into
@@ -532,7 +575,9 @@ static lm_status snapshots(loop *L, long it, lm_err *err)
             o2.elapsed = el;
             if (lm_train_make_dir(dir, err)) return err->status;
             lm_adam_ema_swap(&L->opt, &L->model->params);
+            hold(L, 1);
             lm_status st = lm_train_save_checkpoint(dir, L->model, NULL, it, 0, &o2, cfg, err);
+            hold(L, 0);
             lm_adam_ema_swap(&L->opt, &L->model->params);
             if (st) return st;
         }
@@ -598,18 +643,8 @@ static lm_status run_loop(loop *L, long start, lm_train_result *res, lm_err *err
         progress(L, it + 1, loss, lr, last);
         if (snapshots(L, it + 1, err)) return err->status;
         if (((cfg->checkpoint_interval > 0 && (it + 1) % cfg->checkpoint_interval == 0) || last) &&
-            !L->rank) {
-            lm_train_opts o2 = *L->opts;
-            o2.elapsed = elapsed(L);
-            if (L->src->front && L->src->front->save(L->src->user, cfg->output, err))
-                return err->status;
-            lm_adam_ema_swap(&L->opt, &L->model->params); /* the file holds the average */
-            st = lm_train_save_checkpoint(cfg->output, L->model, &L->opt, it + 1,
-                                          (it + 1) * cfg->accum_steps, &o2, cfg, err);
-            lm_adam_ema_swap(&L->opt, &L->model->params);
-            if (st) return st;
-            L->saved = it + 1;
-        }
+            !L->rank && checkpoint(L, it + 1, err))
+            return err->status;
         res->budget_spent = out_of_time;
     }
     return LM_OK;
@@ -648,8 +683,11 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
     if (L.opt.ema && !st) /* the caller's model: the average, as model.safetensors holds it */
         lm_adam_ema_swap(&L.opt, &L.model->params);
     teardown(&L);
-    /* a fresh run that failed before its first iteration completed leaves no run folder */
-    if (st && !L.rank && !opts->resume && L.saved < 0 && res->iterations_done == 0)
-        lm_train_discard_dir(cfg->output, L.made);
+    /* a fresh run that failed before its first iteration completed leaves no run folder (a
+     * restarted one its config) */
+    if (st && !L.rank && !opts->resume && L.saved <= 0 && res->iterations_done == 0) {
+        if (opts->restart) lm_train_discard_checkpoint(cfg->output);
+        else lm_train_discard_dir(cfg->output, L.made);
+    }
     return st;
 }

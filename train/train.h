@@ -304,6 +304,13 @@ typedef struct lm_train_opts {
                                 * (nonzero, e.g. the signal's number): the run finishes the
                                 * current iteration, writes its checkpoint and returns LM_OK
                                 * with res->interrupted = the flag's value */
+    void (*hold)(int on);      /* NULL, or called with 1 before and 0 after the run folder's
+                                * files that must agree are written (config.json and the
+                                * checkpoint), so that a signal ending the program at once
+                                * waits for them (cli: lm_cli_signals_hold) */
+    int restart;               /* 1: cfg.output holds config.json (and maybe log.csv) but no
+                                * checkpoint: the run starts from its beginning there, and a
+                                * failure leaves the folder's config.json in place */
     int data_parallel;         /* 1: this process is one of lm_dist_size() data-parallel ranks
                                 * of one run (`mpirun ... lumosaic train`); 0: it trains alone
                                 * (also under mpirun, e.g. a study's rank training its preset) */
@@ -319,6 +326,8 @@ typedef struct lm_train_result {
     int closed_form;           /* fitted in closed form (lmmse): no iterations, val.psnr only */
     int budget_spent;          /* stopped because cfg.minutes of training time were spent */
     int interrupted;           /* stopped by opts->interrupt (its value), 0 otherwise */
+    long fit_patches, fit_patches_asked; /* closed form: training patches read / asked for
+                                * (fewer when interrupted or out of time) */
 } lm_train_result;
 
 /* Train `model` (created by the caller from cfg->model with the run's mosaic) on `src`.
@@ -367,5 +376,7 @@ lm_status lm_train_make_dir_top(const char *path, char *top, size_t n, lm_err *e
  * log.csv, fit.json, the checkpoints) and the folders from dir up to `top` (as made by
  * lm_train_make_dir_top; "" = none were created). Other files are left alone. */
 void lm_train_discard_dir(const char *dir, const char *top);
+/* Remove the checkpoint files of `dir` (weights, optimizer state, a DOE's state). */
+void lm_train_discard_checkpoint(const char *dir);
 
 #endif

@@ -3,7 +3,7 @@
  * resolves there: h.png, a valid 3 x 3 16-bit map, is written beside it), and parsed from text.
  * A failure must be one line naming the label; a success must give a height map of the
  * aperture's size with every height finite and in [0, max_height). No PSF is computed (a
- * valid grid of 8192 would make each input cost seconds). */
+ * valid grid of 4096 would make each input cost seconds). */
 #include "tests/fuzz/fuzz_util.h"
 #include "data/doe.h"
 #include "data/image.h"
