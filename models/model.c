@@ -97,6 +97,7 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     /* tile resolution, noise-conditioned: the phase planes of each tile, `width` channels */
     {"tn-64-nc", build_tile, CL, {0, 0, 0, 0, 0}, 64},
     {"tn-96-nc", build_tile, CL, {0, 0, 0, 0, 0}, 96},
+    {"tn-160-nc", build_tile, CL, {0, 0, 0, 0, 0}, 160},
 };
 #undef B2
 #undef CL
@@ -161,7 +162,8 @@ static const struct { const char *name, *purpose; } purposes[] = {
     {"rt-8-nc", "rt-8 that also sees the noise level"},
     {"rt-16-nc", "rt-16 that also sees the noise level: the bundled demo residual on lmmse"},
     {"tn-64-nc", "tile-resolution residual, 64 channels, sees the noise level (1/3 han-tiny's cost)"},
-    {"tn-96-nc", "tile-resolution residual, 96 channels, sees the noise level (3/4 han-tiny's cost)"},
+    {"tn-96-nc", "tile-resolution residual, 96 channels, sees the noise level: best residual on lmmse"},
+    {"tn-160-nc", "tile-resolution residual, 160 channels, sees the noise level (2x han-tiny's cost)"},
 };
 
 const char *lm_model_preset_purpose(const char *name)

@@ -54,9 +54,13 @@ static void test_parameter_counts(void)
     check_count("han-tiny-nc", 44223 + 16, 44223 + 16); /* one per head channel */
     check_count("han-g3b2c32-nc", 218135 + 32, 218135 + 32); /* one per head channel */
     /* tile resolution: head 3x3 12 -> C, four 3x3 C -> C, 1x1 C -> 33 x 12, C noise weights */
-    for (int C = 64; C <= 96; C += 32) {
+    static const int tn_width[3] = {64, 96, 160};
+    for (int i = 0; i < 3; i++) {
+        const int C = tn_width[i];
         long n = (9L * 12 * C + C) + 4 * (9L * C * C + C) + ((long)C * 396 + 396) + C;
-        check_count(C == 64 ? "tn-64-nc" : "tn-96-nc", n, n);
+        char nm[16];
+        snprintf(nm, sizeof nm, "tn-%d-nc", C);
+        check_count(nm, n, n);
     }
 }
 
