@@ -554,14 +554,20 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
 
 /* The run's paths (data, system, base, DOE) made relative to `dir` where they resolve, so that
  * a run folder moved or cloned with its data beside it keeps working. */
-static void paths_relative_to(lm_train_cfg *c, const char *dir)
+int lm_train_cfg_paths(lm_train_cfg *c, char **paths)
 {
-    char *paths[LM_TRAIN_MAX_PATHS + 3];
     int n = 0;
     for (int i = 0; i < c->ndata; i++) paths[n++] = c->data[i];
     paths[n++] = c->system;
     paths[n++] = c->base;
     if (strcmp(c->doe, "default")) paths[n++] = c->doe;
+    return n;
+}
+
+static void paths_relative_to(lm_train_cfg *c, const char *dir)
+{
+    char *paths[LM_TRAIN_MAX_PATHS + 3];
+    const int n = lm_train_cfg_paths(c, paths);
     for (int i = 0; i < n; i++) {
         char rel[LM_TRAIN_PATH_LEN];
         if (paths[i][0] && !lm_path_relative(dir, paths[i], rel, sizeof rel)) strcpy(paths[i], rel);

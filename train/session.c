@@ -332,11 +332,7 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
 static void absolute_paths(lm_train_cfg *c)
 {
     char *paths[LM_TRAIN_MAX_PATHS + 3];
-    int n = 0;
-    for (int i = 0; i < c->ndata; i++) paths[n++] = c->data[i];
-    paths[n++] = c->system;
-    paths[n++] = c->base;
-    if (strcmp(c->doe, "default")) paths[n++] = c->doe;
+    const int n = lm_train_cfg_paths(c, paths);
     for (int i = 0; i < n; i++) {
         char *abs = paths[i][0] ? realpath(paths[i], NULL) : NULL;
         if (abs && strlen(abs) < LM_TRAIN_PATH_LEN) strcpy(paths[i], abs);

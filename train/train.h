@@ -171,6 +171,9 @@ int lm_train_cfg_has(const char *key);
 /* Cross-field checks (errors name the field). */
 lm_status lm_train_cfg_validate(const lm_train_cfg *cfg, lm_err *err);
 /* Write the resolved config as JSON (atomic). */
+/* The config's paths in place (data..., system, base, and the DOE unless "default"): pointers
+ * into c, at most LM_TRAIN_MAX_PATHS + 3. Returns how many. */
+int lm_train_cfg_paths(lm_train_cfg *c, char **paths);
 lm_status lm_train_cfg_save(const lm_train_cfg *cfg, const char *path, lm_err *err);
 /* Help text of every field: "  --batch N   ..." lines. */
 void lm_train_cfg_print_help(FILE *f);
