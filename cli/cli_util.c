@@ -38,8 +38,11 @@ int lm_cli_is_help(const lm_cli *c)
     return !strcmp(a, "--help") || !strcmp(a, "-h");
 }
 
+static void yield_to_signal(void);
+
 int lm_cli_error(const lm_cli *c, const char *fmt, ...)
 {
+    yield_to_signal();
     char msg[1024];
     va_list ap;
     va_start(ap, fmt);
@@ -229,6 +232,16 @@ static struct {
     void (*note)(char *buf, size_t n); /* graceful: what a stop at once leaves */
     char stage[1200];                  /* staging folder in use ("" = none) */
 } sig = {.mu = PTHREAD_MUTEX_INITIALIZER, .released = PTHREAD_COND_INITIALIZER};
+
+/* A command that stops at once on a signal (not graceful): once a signal has arrived, an
+ * error of the main thread is most likely the teardown itself (the staging folder removed
+ * under a write), so it is not reported: the calling thread waits while the signal's thread
+ * removes what was staged, says so in its one line and ends the program. */
+static void yield_to_signal(void)
+{
+    if (!sig.prog || sig.graceful || atomic_load(&sig.count) == 0) return;
+    for (;;) pause();
+}
 
 void lm_cli_signals_hold(int on)
 {

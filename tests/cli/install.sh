@@ -22,7 +22,9 @@ done
 
 export PKG_CONFIG_PATH=$libdir/pkgconfig
 flags=$(pkg-config --cflags --libs lumosaic)
-cc -std=c11 -Wall -Wextra -Werror "$src/examples/reconstruct.c" $flags -o "$tmp/reconstruct"
+# LM_EXAMPLE_CFLAGS: the sanitizer build's library needs its runtime in the program too
+cc -std=c11 -Wall -Wextra -Werror ${LM_EXAMPLE_CFLAGS:-} "$src/examples/reconstruct.c" $flags \
+  -o "$tmp/reconstruct"
 loaded=$(ldd "$tmp/reconstruct" | awk '$1 ~ /^liblumosaic\.so/ { print $3 }')
 [ -n "$loaded" ] && [ "$(realpath "$loaded")" = "$(realpath "$libdir/liblumosaic.so")" ] || {
   echo "reconstruct does not load the installed library ($loaded)"; exit 1; }
