@@ -76,8 +76,6 @@ void lm_bf16_pack_b(int K, int n, const float *B, long ldb, lm_bf16 *Bp)
     const int K2 = (K + 1) / 2, NP = pad16(n);
 #if LM_HAVE_BF16_KERNEL
     const int vec = lm_isa_active() >= LM_ISA_AVX512;
-#else
-    const int vec = 0;
 #endif
     for (int q = 0; q < K2; q++) {
         lm_bf16 *d = Bp + (size_t)q * NP * 2;
@@ -93,7 +91,6 @@ void lm_bf16_pack_b(int K, int n, const float *B, long ldb, lm_bf16 *Bp)
         }
         memset(d + 2 * n, 0, sizeof(lm_bf16) * 2 * (size_t)(NP - n));
     }
-    (void)vec;
 }
 
 /* ---- fp32 twin: the same sums, pair by pair (a1 b1 first, then a0 b0, as vdpbf16ps) ----- */
