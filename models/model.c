@@ -98,6 +98,7 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     {"tn-64-nc", build_tile, CL, {0, 0, 0, 0, 0}, 64},
     {"tn-96-nc", build_tile, CL, {0, 0, 0, 0, 0}, 96},
     {"tn-160-nc", build_tile, CL, {0, 0, 0, 0, 0}, 160},
+    {"tn-96-nc-b2", build_tile, CL | B2, {0, 0, 0, 0, 0}, 96},
 };
 #undef B2
 #undef CL
@@ -164,6 +165,7 @@ static const struct { const char *name, *purpose; } purposes[] = {
     {"tn-64-nc", "tile-resolution residual, 64 channels, sees the noise level (1/3 han-tiny's cost)"},
     {"tn-96-nc", "tile-resolution residual, 96 channels, sees the noise level: best residual on lmmse"},
     {"tn-160-nc", "tile-resolution residual, 160 channels, sees the noise level (2x han-tiny's cost)"},
+    {"tn-96-nc-b2", "tn-96-nc reading both buckets: the residual on lmmse-b2"},
 };
 
 const char *lm_model_preset_purpose(const char *name)
