@@ -60,6 +60,7 @@ static void bench(const char *preset, const lm_mosaic *mo, int threads, int reps
         fprintf(stderr, "%s\n", e.msg);
         return;
     }
+    m->noise_sigma = 0.05f; /* "-nc" presets read the input's noise level */
     lm_ctx c;
     lm_ctx_init(&c, threads);
     const char *prec = getenv("LM_BENCH_PRECISION"); /* bf16: the bf16 Winograd products */

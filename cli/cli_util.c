@@ -154,6 +154,14 @@ int lm_cli_common_opt(lm_cli *c, unsigned which, long long seed_max, lm_cli_comm
     if ((which & LM_CLI_DEVICE) && (r = lm_cli_value(c, "--device", &o->device))) return r;
     if ((which & LM_CLI_SEED) && (r = lm_cli_int(c, "--seed", 0, seed_max, &o->seed))) return r;
     if ((which & LM_CLI_QUIET) && (r = lm_cli_flag(c, "--quiet", &o->quiet))) return r;
+    if (which & LM_CLI_PRECISION) {
+        static const char *const names[] = {"fp32", "bf16", NULL};
+        int k = 0;
+        if ((r = lm_cli_choice(c, "--precision", names, &k)) != 0) {
+            if (r > 0) o->precision = k ? LM_PRECISION_BF16 : LM_PRECISION_FP32;
+            return r;
+        }
+    }
     return 0;
 }
 

@@ -43,8 +43,14 @@ typedef struct lm_cli_common {
                          * else cpu; lm_backend_open checks the name) */
     long long seed;     /* --seed S: 0..seed_max; the caller's default when not given */
     int quiet;          /* --quiet: no progress output */
+    int precision;      /* --precision fp32|bf16: LM_PRECISION_* (tensor.h); fp32 when not given */
 } lm_cli_common;
-enum { LM_CLI_THREADS = 1u, LM_CLI_DEVICE = 2u, LM_CLI_SEED = 4u, LM_CLI_QUIET = 8u };
+enum { LM_CLI_THREADS = 1u, LM_CLI_DEVICE = 2u, LM_CLI_SEED = 4u, LM_CLI_QUIET = 8u,
+       LM_CLI_PRECISION = 16u };
+/* The help line of --precision, the same for every command that takes it. */
+#define LM_CLI_PRECISION_HELP                                                                  \
+    "  --precision P    fp32 (default) | bf16: operands of the 3x3 convolutions' products\n" \
+    "                   rounded to bf16, sums in fp32 (AVX-512-BF16 where the CPU has it)\n"
 /* Match one of the common options in `which` (LM_CLI_* flags), --seed in [0, seed_max]:
  * returns as the matchers above (1, 0 or -1 with the error printed). */
 int lm_cli_common_opt(lm_cli *c, unsigned which, long long seed_max, lm_cli_common *o);

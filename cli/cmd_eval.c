@@ -28,6 +28,7 @@
 #include "data/dataset.h"
 #include "data/util.h"
 #include "infer/eval.h"
+#include "tensor/isa.h"
 
 static void help(void)
 {
@@ -35,7 +36,7 @@ static void help(void)
            "                     [--noise 0,5,10,15,20] [--output DIR] [--seed S]\n"
            "                     [--threads T] [--rainbow SIZE] [--batch N] [--system FILE]\n"
            "                     [--motion 0,60,120,240] [--motion-noise 0,10]\n"
-           "                     [--align confident|plain]\n"
+           "                     [--align confident|plain] [--precision fp32|bf16]\n"
            "                     [--device cpu|opencl] [--mat-key NAME]\n\n"
            "Score a trained model (system.md §10): each scene is cropped to the mosaic tile,\n"
            "divided by its own maximum, simulated at each noise level and reconstructed\n"
@@ -89,6 +90,7 @@ static void help(void)
            "                   scale (0 = off)\n"
            "  --noise-oracle   models that read the noise level (lmmse, residuals on it) get\n"
            "                   the simulated level instead of estimating it from the frame\n"
+           LM_CLI_PRECISION_HELP
            "  --help           this text\n", LM_EVAL_MAX_NOISE, LM_EVAL_MAX_MOTION,
            LM_EVAL_MAX_MOTION_NOISE);
 }
@@ -149,7 +151,7 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_value(c, "--output", &o->output)) ||
         (r = lm_cli_value(c, "--system", &o->system)) ||
         (r = lm_cli_value(c, "--mat-key", &o->mat_key)) ||
-        (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE | LM_CLI_SEED,
+        (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE | LM_CLI_SEED | LM_CLI_PRECISION,
                                (long long)1 << 62, &o->com)) ||
         (r = lm_cli_choice(c, "--split", split_names, &o->split)) ||
         (r = lm_cli_choice(c, "--align", align_names, &o->align_plain)) ||
@@ -427,6 +429,7 @@ static void write_json(FILE *f, const eval_run *r)
             split_names[o->split], o->com.seed);
     for (int n = 0; n < o->nnoise; n++) fprintf(f, "%s%g", n ? ", " : "", 100.0 * o->k[n]);
     fprintf(f, "],\n  \"photons\": %.10g,\n  \"read_noise\": %.10g", o->photons, o->read_noise);
+    fprintf(f, ",\n  \"precision\": \"%s\"", o->com.precision == LM_PRECISION_BF16 ? "bf16" : "fp32");
     fprintf(f, ",\n  \"scenes\": [\n");
     for (int i = 0; i < r->nsc; i++) {
         fprintf(f, "    {\"name\": ");
@@ -535,6 +538,9 @@ static int run(eval_run *r)
     if (lm_ctx_init(&r->ctx, (int)r->o->com.threads) != 0)
         return lm_cli_error(r->c, "out of memory (compute context)"), 1;
     r->have_ctx = 1;
+    r->ctx.precision = r->o->com.precision;
+    if (r->o->com.precision != LM_PRECISION_FP32)
+        fprintf(stderr, "precision: %s\n", lm_precision_describe(r->o->com.precision));
     if (lm_tile_device_open(&r->dev, r->o->com.device, r->im.model, &r->ctx, &e)) return fail(r->c, &e);
     if (r->dev.backend->device != LM_DEVICE_CPU && !lm_model_has(r->im.model, LM_CAP_OPENCL))
         return lm_cli_error(r->c, "--device %s: MST++ models (%s) run on the CPU only",

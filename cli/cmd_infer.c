@@ -44,13 +44,14 @@
 #include "infer/model_io.h"
 #include "infer/recon.h"
 #include "infer/tile.h"
+#include "tensor/isa.h"
 
 static void help(void)
 {
     printf("usage: lumosaic infer --model RUN --input FRAMES --output DIR [--batch N]\n"
            "                      [--threads T] [--system FILE] [--no-align] [--tiles]\n"
            "                      [--device cpu|opencl] [--auto FILE --auto-tol DB]\n"
-           "                      [--bucket0 FRAMES]\n\n"
+           "                      [--bucket0 FRAMES] [--precision fp32|bf16]\n\n"
            "Reconstruct 31-band cubes (400-700 nm) from coded frames with a trained model,\n"
            "patch-wise: 66 x 64 windows, stride 30 x 32, on the tile grid, blended by a raised-\n"
            "cosine weight; models with a finite receptive field (linear, rt-8, rt-16) instead\n"
@@ -92,6 +93,7 @@ static void help(void)
            "  --noise-level K  for models that read the noise level (lmmse and residuals on\n"
            "                   it): Gaussian noise sd = K x the frame's maximum (0..1), as\n"
            "                   simulate --noise K. Default: estimated from each frame\n"
+           LM_CLI_PRECISION_HELP
            "  --help           this text\n");
 }
 
@@ -123,7 +125,7 @@ static int parse(lm_cli *c, infer_opts *o)
             (r = lm_cli_real(c, "--noise-level", 0.0, 1.0, &o->noise_level)) ||
             (r = lm_cli_flag(c, "--tiles", &o->tiles)) ||
             (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
-            (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE, 0, &o->com)) ||
+            (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE | LM_CLI_PRECISION, 0, &o->com)) ||
             (r = lm_cli_flag(c, "--no-align", &o->no_align))) {
             if (r < 0) return 2;
             continue;
@@ -648,6 +650,9 @@ int lm_cmd_infer(int argc, char **argv)
         rc = 1;
     } else if (!rc) {
         have_ctx = 1;
+        r.ctx.precision = o.com.precision;
+        if (o.com.precision != LM_PRECISION_FP32)
+            fprintf(stderr, "precision: %s\n", lm_precision_describe(o.com.precision));
         if (o.is_auto ? lm_tile_device_open_models(&r.dev, o.com.device, r.models,
                                                    r.cal.nmodels, &r.ctx, &e)
                       : lm_tile_device_open(&r.dev, o.com.device, r.im.model, &r.ctx, &e))

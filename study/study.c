@@ -250,6 +250,12 @@ static json_t *rainbow_json(const lm_eval_rainbow *rb)
 
 /* Evaluation, rainbow, and (unless light: the narrowband sweep's runs) conditions, timing and
  * costs of the trained run into rec. */
+/* The study's "train": {"precision": ...} holds for its evaluation and timing too. */
+static int study_precision(const lm_study_cfg *cfg)
+{
+    return strcmp(cfg->train.precision, "bf16") ? LM_PRECISION_FP32 : LM_PRECISION_BF16;
+}
+
 static lm_status measure(const lm_study_cfg *cfg, const char *rundir, const held *h, int threads,
                          int light, json_t *rec, FILE *log, lm_err *err)
 {
@@ -260,8 +266,10 @@ static lm_status measure(const lm_study_cfg *cfg, const char *rundir, const held
         lm_infer_model_free(&im);
         return lm_err_set(err, LM_ERR_NOMEM, "study: out of memory (compute context)");
     }
+    c.precision = study_precision(cfg);
     json_t *levels = json_array();
     json_object_set_new(rec, "threads", json_integer(lm_nthreads(&c)));
+    json_object_set_new(rec, "precision", json_string(cfg->train.precision));
     double t0 = omp_get_wtime();
     lm_study_cond_acc *ca = cfg->ncond > 0 && !light ? malloc(sizeof *ca) : NULL;
     if (ca) lm_study_cond_init(ca);
@@ -311,6 +319,7 @@ static lm_status dir_levels(const lm_study_cfg *cfg, const char *dir, const held
     lm_ctx c;
     lm_status st = lm_ctx_init(&c, threads) ? lm_err_set(err, LM_ERR_NOMEM, "study: no memory")
                                             : LM_OK;
+    c.precision = study_precision(cfg);
     *levels = json_array();
     if (!st) st = eval_held(&c, &im, cfg, h, *levels, NULL, err);
     json_t *doc = json_pack("{s:O}", "levels", *levels);

@@ -69,7 +69,8 @@ void lm_study_cfg_default(lm_study_cfg *cfg);
  *   earlier), e.g. "lmmse", "han-tiny+lmmse"; preset_train {"name": {training fields}};
  *   drop {"after_minutes": M, "behind_db": D};
  *   version 1; presets [names]; data [paths, relative to the config's folder]; system;
- *   iterations; seed; patch "HxW"; synth_fraction; train {any other lm_train_cfg field
+ *   iterations; seed; patch "HxW"; synth_fraction; train {any other lm_train_cfg field;
+ *   its "precision" also holds for the evaluation and timing
  *   except model, data, output}; noise [percent levels]; eval_scenes; eval_size "HxW";
  *   rainbow; frame "HxW"; timing_repeats; output;
  *   conditions [{"family": photons|saturation|led_gain|dead_pixels|motion, "levels": [...]

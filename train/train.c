@@ -6,6 +6,7 @@
  * What it is not: the config (config.c), checkpoint files (checkpoint.c), or the data
  * pipeline (data/dataset.h). */
 #include "train/train.h"
+#include "tensor/isa.h"
 #include "autograd/autograd.h"
 #include "data/noise_est.h"
 #include "data/util.h"
@@ -408,6 +409,9 @@ static lm_status setup(loop *L, lm_err *err)
     if (lm_ctx_init(&L->ctx, cfg->threads) != LM_OK)
         return lm_err_set(err, LM_ERR_NOMEM, "train: cannot create the compute context");
     L->ctx.precision = strcmp(cfg->precision, "bf16") ? LM_PRECISION_FP32 : LM_PRECISION_BF16;
+    if (L->ctx.precision != LM_PRECISION_FP32 && L->opts->progress)
+        fprintf(L->opts->progress_out ? L->opts->progress_out : stderr, "train: precision %s\n",
+                lm_precision_describe(L->ctx.precision));
     if (open_device(L, err)) return err->status;
     size_t bn = (size_t)cfg->batch * cfg->patch_h * cfg->patch_w;
     L->raw = malloc(bn * L->model->in_channels * sizeof(float));

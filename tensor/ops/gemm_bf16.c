@@ -9,6 +9,7 @@
  * micro-tile is MR = 6 rows x 32 columns (12 accumulators), as the fp32 panel kernel's. */
 #include "tensor/ops/gemm_bf16.h"
 #include "tensor/isa.h"
+#include "tensor/tensor.h"
 #include <string.h>
 
 #if defined(__x86_64__) && defined(__GNUC__)
@@ -187,6 +188,15 @@ int lm_gemm_bf16_native(void)
 #else
     return 0;
 #endif
+}
+
+const char *lm_precision_describe(int precision)
+{
+    if (precision != LM_PRECISION_BF16) return "fp32";
+    if (lm_gemm_bf16_native()) return "bf16 (AVX-512-BF16 products, fp32 sums)";
+    return lm_cpu_features_get()->avx512_bf16
+               ? "bf16 (operands rounded to bf16, products in fp32: LM_ISA is below avx512)"
+               : "bf16 (operands rounded to bf16, products in fp32: this CPU has no AVX-512-BF16)";
 }
 
 void lm_gemm_bf16_panel(int M, int n, int K, const lm_bf16 *Ap, const lm_bf16 *Bp,
