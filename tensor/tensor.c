@@ -2,6 +2,7 @@
  * Not here: the backward walk (autograd/tape.c) and the ops (tensor/ops/). */
 #include "tensor/tensor.h"
 #include "tensor/op_list.h"
+#include "tensor/ops/wcache.h"
 #include <omp.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -32,6 +33,7 @@ int lm_ctx_init(lm_ctx *c, int nthreads)
 void lm_ctx_free(lm_ctx *c)
 {
     if (c->backend && c->backend->release) c->backend->release(c->backend, c);
+    lm_wcache_free(c);
     lm_arena_free(&c->arena);
     memset(c, 0, sizeof *c);
 }

@@ -128,6 +128,9 @@ struct lm_ctx {
      * or LM_PRECISION_BF16 (operands rounded to bf16, sums in fp32: the Winograd products of
      * 3x3 convolutions, forward and input gradient; the weight gradient stays fp32). */
     int precision;
+    /* Data derived from weights (transformed, packed), kept across lm_ctx_reset while the
+     * weights are unchanged (tensor/ops/wcache.h); freed by lm_ctx_free. */
+    struct lm_wcache *wcache;
 };
 enum { LM_PRECISION_FP32 = 0, LM_PRECISION_BF16 = 1 };
 

@@ -5,6 +5,7 @@
 #include "tests/check.h"
 #include "tensor/ops/gemm_internal.h"
 #include "tensor/isa.h"
+#include "tensor/ops/wcache.h"
 #include <stdlib.h>
 
 typedef struct cfg {
@@ -345,6 +346,80 @@ static void test_winograd_bf16(void)
            rms);
 }
 
+/* Output and input gradient of one Winograd conv in ctx c (grad on), copied to y / dx. */
+static void wino_run(lm_ctx *c, const cfg *k, made *m, lm_tensor *seed, float *y, float *dx)
+{
+    lm_tape_clear(c);
+    m->x->grad = NULL, m->w->grad = NULL; /* fresh gradients */
+    lm_tensor *t = lm_conv2d(c, m->x, m->w, m->b, &k->o);
+    CHECK(t && lm_backward(c, t, seed) == LM_OK);
+    CHECK_CTX_OK(c);
+    if (t && m->x->grad) {
+        memcpy(y, t->data, sizeof(float) * (size_t)lm_tensor_numel(t));
+        memcpy(dx, m->x->grad->data, sizeof(float) * (size_t)lm_tensor_numel(m->x));
+    }
+}
+
+/* The transformed weights kept across calls (tensor/ops/wcache.h): a repeated call gives the
+ * same bits as the first; after the weights change in place (same address, as an optimizer
+ * step does) the result is that of the new weights, bit for bit what a context without a
+ * store computes, in fp32 and in bf16; the store holds one entry per direction and
+ * precision, within its bound. */
+static void test_weight_cache(void)
+{
+    const cfg *k = &WINO[0];
+    lm_ctx c, fresh;
+    lm_ctx_init(&c, 2);
+    lm_rng r;
+    lm_rng_seed(&r, 77);
+    made m = make_inputs(&c, k, &r, 1);
+    lm_ctx_set_grad(&c, 0);
+    lm_tensor *y0 = lm_conv2d(&c, m.x, m.w, m.b, &k->o);
+    lm_ctx_set_grad(&c, 1);
+    lm_tensor *seed = y0 ? lm_tensor_uniform(&c, y0->ndim, y0->shape, &r, -1, 1) : NULL;
+    CHECK(seed != NULL);
+    if (!seed) {
+        lm_ctx_free(&c);
+        return;
+    }
+    long ny = lm_tensor_numel(y0), nx = lm_tensor_numel(m.x);
+    size_t by = sizeof(float) * (size_t)ny, bx = sizeof(float) * (size_t)nx;
+    float *ya = malloc(by), *yb = malloc(by), *yf = malloc(by);
+    float *da = malloc(bx), *db = malloc(bx), *df = malloc(bx);
+    int entries;
+    size_t held;
+    for (int prec = 0; prec < 2 && ya && yb && yf && da && db && df; prec++) {
+        c.precision = prec ? LM_PRECISION_BF16 : LM_PRECISION_FP32;
+        wino_run(&c, k, &m, seed, ya, da);
+        wino_run(&c, k, &m, seed, yb, db); /* from the store */
+        CHECK_MSG(!memcmp(ya, yb, by) && !memcmp(da, db, bx), "precision %d: a repeated call "
+                  "differs", prec);
+        lm_wcache_stats(&c, &entries, &held);
+        CHECK_MSG(entries == 2 * (prec + 1) && held > 0 && held <= LM_WCACHE_BYTES,
+                  "precision %d: %d entries, %zu bytes", prec, entries, held);
+        for (long i = 0; i < lm_tensor_numel(m.w); i += 7) m.w->data[i] += 0.25f; /* in place */
+        wino_run(&c, k, &m, seed, yb, db);
+        CHECK_MSG(memcmp(ya, yb, by) != 0, "precision %d: the old weights' result", prec);
+        /* the same tensors in a context with an empty store */
+        lm_ctx_init(&fresh, 2);
+        fresh.precision = c.precision;
+        lm_tape_clear(&fresh);
+        m.x->grad = NULL, m.w->grad = NULL;
+        lm_tensor *t = lm_conv2d(&fresh, m.x, m.w, m.b, &k->o);
+        CHECK(t && lm_backward(&fresh, t, seed) == LM_OK);
+        CHECK_CTX_OK(&fresh);
+        if (t && m.x->grad) {
+            memcpy(yf, t->data, by);
+            memcpy(df, m.x->grad->data, bx);
+            CHECK_MSG(!memcmp(yf, yb, by) && !memcmp(df, db, bx), "precision %d: changed "
+                      "weights: the stored result differs from a fresh context's", prec);
+        }
+        lm_ctx_free(&fresh);
+    }
+    free(ya), free(yb), free(yf), free(da), free(db), free(df);
+    lm_ctx_free(&c);
+}
+
 /* 1x1 convs on the pointwise path (a plain sum, held to 1e-6 like the tiled path): pixel
  * counts with 16-column blocks, one 8-column block and a scalar tail, output channels that
  * are not a multiple of the 6-row panel. */
@@ -620,6 +695,7 @@ int main(void)
     RUN(test_forward_backward_vs_direct);
     RUN(test_winograd_vs_direct);
     RUN(test_winograd_bf16);
+    RUN(test_weight_cache);
     RUN(test_pointwise_vs_direct);
     RUN(test_gradcheck);
     RUN(test_fast_matches_simple);

@@ -23,6 +23,8 @@
 #include "tensor/ops/gemm_internal.h"
 #include "tensor/ops/simd.h"
 #include "tensor/ops/gemm_bf16.h"
+#include "tensor/ops/wcache.h"
+#include "tensor/isa.h"
 #if defined(__AVX__) || defined(__AVX512F__)
 #include <immintrin.h>
 #endif
@@ -495,22 +497,39 @@ static int forward_like(lm_ctx *c, const lm_conv_geom *g, const float *in, const
                         int flip, const float *bias, float *out)
 {
     lm_arena_mark mk = lm_arena_get_mark(&c->arena);
-    long pu, puh = 0;
-    float *U = packed_weights(c, g, w, flip, &pu);
-    if (!U) return c->status;
-    lm_bf16 *Uh = NULL;
-    if (c->precision == LM_PRECISION_BF16) { /* the same U, rounded and paired per product */
-        int rows = flip ? g->Cin : g->Cout, K = flip ? g->Cout : g->Cin;
-        puh = (long)lm_bf16_pack_a_size(rows, K);
-        Uh = lm_ctx_alloc(c, sizeof(lm_bf16) * 36 * (size_t)puh);
-        float *row = lm_ctx_alloc(c, sizeof(float) * (size_t)rows * K);
-        if (!Uh || !row) return c->status;
-        for (int xi = 0; xi < 36; xi++) {
-            for (int m = 0; m < rows; m++)
-                for (int k = 0; k < K; k++)
-                    row[(long)m * K + k] = U[xi * pu + lm_panel_at(K, m, k)];
-            lm_bf16_pack_a(rows, K, row, K, Uh + xi * puh);
+    const int bf = c->precision == LM_PRECISION_BF16;
+    const int rows = flip ? g->Cin : g->Cout, K = flip ? g->Cout : g->Cin;
+    long pu = lm_panel_size(rows, K), puh = bf ? (long)lm_bf16_pack_a_size(rows, K) : 0;
+    /* the packed operand depends on the weights, the direction, the precision and (through
+     * the panel layout) the instruction-set level; kept while the weights are unchanged */
+    const long nw = (long)g->Cout * g->Cin * 9;
+    const unsigned long tag = ((unsigned long)lm_isa_active() << 2) | ((unsigned long)bf << 1) |
+                              (unsigned long)flip;
+    size_t have = 0;
+    const void *hit = lm_wcache_find(c, w, nw, tag, &have);
+    const float *U = NULL;
+    const lm_bf16 *Uh = NULL;
+    const size_t bytes = bf ? sizeof(lm_bf16) * 36 * (size_t)puh : sizeof(float) * 36 * (size_t)pu;
+    if (hit && have == bytes) {
+        if (bf) Uh = hit;
+        else U = hit;
+    } else {
+        float *Uf = packed_weights(c, g, w, flip, &pu);
+        if (!Uf) return c->status;
+        U = Uf;
+        if (bf) { /* the same U, rounded and paired per product */
+            lm_bf16 *Ub = lm_ctx_alloc(c, bytes);
+            float *row = lm_ctx_alloc(c, sizeof(float) * (size_t)rows * K);
+            if (!Ub || !row) return c->status;
+            for (int xi = 0; xi < 36; xi++) {
+                for (int m = 0; m < rows; m++)
+                    for (int k = 0; k < K; k++)
+                        row[(long)m * K + k] = U[xi * pu + lm_panel_at(K, m, k)];
+                lm_bf16_pack_a(rows, K, row, K, Ub + xi * puh);
+            }
+            Uh = Ub;
         }
+        lm_wcache_put(c, w, nw, tag, bf ? (const void *)Uh : (const void *)U, bytes);
     }
     wgrid gi = flip ? make_grid(g->Cout, g->Ho, g->Wo, g->H, g->W, 2 - g->ph, 2 - g->pw, g->B)
                     : make_grid(g->Cin, g->H, g->W, g->Ho, g->Wo, g->ph, g->pw, g->B);
