@@ -591,17 +591,21 @@ int lm_conv2d_winograd_bwd_w(lm_ctx *c, const lm_conv_geom *g, const float *dy, 
                                 dU + (long)xi * nw, Cin);
             }
         }
-        /* (the implicit barrier of the loop) partials added in group order, then dw += G^T dU
-         * G; weights split over threads */
+        /* (the implicit barrier of the loop) partials added in group order into the first
+         * one, contiguous runs of weights at a time (((g0 + g1) + g2) ..., the same sums as
+         * from zero), then dw += G^T dU G; weights split over threads */
         int me = omp_get_thread_num(), nthr = omp_get_num_threads();
         long k0 = nw * me / nthr, k1 = nw * (me + 1) / nthr;
+        for (int xi = 0; xi < 36; xi++) {
+            float *d0 = dUs + (size_t)xi * nw;
+            for (long gr = 1; gr < ng; gr++) {
+                const float *dg = dUs + 36 * (size_t)nw * (size_t)gr + (size_t)xi * nw;
+                for (long k = k0; k < k1; k++) d0[k] += dg[k];
+            }
+        }
         for (long k = k0; k < k1; k++) {
             float u[36];
-            for (int xi = 0; xi < 36; xi++) {
-                float s = 0.0f;
-                for (long gr = 0; gr < ng; gr++) s += dUs[36 * (size_t)nw * (size_t)gr + (size_t)xi * nw + k];
-                u[xi] = s;
-            }
+            for (int xi = 0; xi < 36; xi++) u[xi] = dUs[(size_t)xi * nw + k];
             weight_transform_adjoint(u, dw + k * 9, 3, 1);
         }
     }
