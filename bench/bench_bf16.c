@@ -4,6 +4,11 @@
  * 512 x 512 x 512. Interleaved: every repetition runs each kernel once, in turn; min and
  * median per kernel. GFLOP/s count 2 M n K. "pack B" is the time to round and interleave B
  * (an activation: once per call) and is not in the bf16 product's time.
+ * The peak the products are measured against is measured too, on this core: a register-only
+ * loop of independent vdpbf16ps (12 accumulators, 64 FLOP each) and of independent fp32 FMAs
+ * (12 zmm accumulators, 32 FLOP each) -- the issue rate times the clock as the core runs it,
+ * turbo and all. Each product's "% peak" is its GFLOP/s over that figure. AMX tile peaks are
+ * printed only on a CPU with AMX (none here: the bf16 product has no tile kernel).
  * Usage: build/bench_bf16 [repeats]   (LM_ISA=avx2 shows the fp32 twin of the bf16 path) */
 #include "tensor/isa.h"
 #include "tensor/ops/gemm_bf16.h"
@@ -25,6 +30,46 @@ static int cmp(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#define PEAK_ITERS 400000L /* ~5 ms a round: short enough to fall between interruptions */
+/* 12 independent accumulators in registers, OP(acc) per round, an empty asm keeping them
+ * live (and the compiler from folding the rounds). */
+#define PEAK_BODY(INIT, OP, FLOPS)                                                              \
+    __m512 c0 = INIT, c1 = INIT, c2 = INIT, c3 = INIT, c4 = INIT, c5 = INIT, c6 = INIT,        \
+           c7 = INIT, c8 = INIT, c9 = INIT, c10 = INIT, c11 = INIT;                             \
+    double t0 = now();                                                                         \
+    for (long it = 0; it < PEAK_ITERS; it++) {                                                 \
+        c0 = OP(c0), c1 = OP(c1), c2 = OP(c2), c3 = OP(c3), c4 = OP(c4), c5 = OP(c5);          \
+        c6 = OP(c6), c7 = OP(c7), c8 = OP(c8), c9 = OP(c9), c10 = OP(c10), c11 = OP(c11);      \
+        __asm__ volatile("" : "+v"(c0), "+v"(c1), "+v"(c2), "+v"(c3), "+v"(c4), "+v"(c5),     \
+                         "+v"(c6), "+v"(c7), "+v"(c8), "+v"(c9), "+v"(c10), "+v"(c11));        \
+    }                                                                                          \
+    double t = now() - t0;                                                                     \
+    c0 = _mm512_add_ps(_mm512_add_ps(_mm512_add_ps(c0, c1), _mm512_add_ps(c2, c3)),           \
+                       _mm512_add_ps(_mm512_add_ps(c4, c5), _mm512_add_ps(c6, c7)));          \
+    c0 = _mm512_add_ps(c0, _mm512_add_ps(_mm512_add_ps(c8, c9), _mm512_add_ps(c10, c11)));    \
+    if (_mm512_reduce_add_ps(c0) == 12345.0f) printf(" ");                                    \
+    return 12.0 * (FLOPS) * PEAK_ITERS / t * 1e-9;
+
+/* GFLOP/s of independent vdpbf16ps (64 FLOP each: 32 pair products, 32 adds). */
+__attribute__((target("avx512f,avx512bf16"))) static double peak_bf16(void)
+{
+    const __m512bh a = (__m512bh)_mm512_set1_epi16(0x3f80), b = (__m512bh)_mm512_set1_epi16(0x3c00);
+#define DP(c) _mm512_dpbf16_ps(c, a, b)
+    PEAK_BODY(_mm512_setzero_ps(), DP, 64.0)
+#undef DP
+}
+/* The same with fp32 FMAs (vfmadd231ps zmm: 32 FLOP each). */
+__attribute__((target("avx512f"))) static double peak_fma(void)
+{
+    const __m512 a = _mm512_set1_ps(1.0f), b = _mm512_set1_ps(0.5f);
+#define FMA(c) _mm512_fmadd_ps(a, b, c)
+    PEAK_BODY(_mm512_setzero_ps(), FMA, 32.0)
+#undef FMA
+}
+#endif
+
 int main(int argc, char **argv)
 {
     const int reps = argc > 1 ? atoi(argv[1]) : 9;
@@ -32,6 +77,25 @@ int main(int argc, char **argv)
     lm_isa_describe(isa, sizeof isa);
     printf("isa %s; bf16 product: %s\n", isa,
            lm_gemm_bf16_native() ? "AVX-512-BF16 (vdpbf16ps)" : "fp32 twin");
+    double pk_bf = 0, pk_fp = 0; /* measured single-core peaks (0: not measurable here) */
+#if defined(__x86_64__) && defined(__GNUC__)
+    const lm_cpu_features *cf = lm_cpu_features_get();
+    if (lm_isa_active() >= LM_ISA_AVX512) {
+        for (int r = 0; r < 40; r++) { /* best of 40 short rounds: a busy core only lowers it */
+            double f = peak_fma();
+            if (f > pk_fp) pk_fp = f;
+            if (cf->avx512_bf16) {
+                double b = peak_bf16();
+                if (b > pk_bf) pk_bf = b;
+            }
+        }
+    }
+    printf("measured peak, one core: fp32 FMA %.1f GFLOP/s; ", pk_fp);
+    if (pk_bf > 0) printf("vdpbf16ps %.1f GFLOP/s; ", pk_bf);
+    else printf("vdpbf16ps n/a (no AVX-512-BF16 at this level); ");
+    printf("AMX tiles %s\n", cf->amx_bf16 ? "present (no tile kernel in this build)"
+                                         : "absent on this CPU");
+#endif
     static const int shapes[][3] = {{16, 2048, 16}, {32, 2048, 32}, {64, 2048, 64},
                                     {128, 1024, 128}, {64, 4096, 144}, {512, 512, 512}};
     printf("%-16s %10s %10s %10s %10s %10s %10s %8s %8s\n", "M x n x K", "fp32 panel",
@@ -71,9 +135,13 @@ int main(int argc, char **argv)
         char name[32];
         snprintf(name, sizeof name, "%dx%dx%d", M, n, K);
         printf("%-16s %10.3f %10.1f %10.3f %10.1f %10.3f %10.3f %8.2f %8.1f   (ms min; "
-               "medians %.3f %.3f %.3f %.3f)\n", name, mn[0], gf / mn[0] * 1e3, mn[1],
+               "medians %.3f %.3f %.3f %.3f)", name, mn[0], gf / mn[0] * 1e3, mn[1],
                gf / mn[1] * 1e3, mn[2], mn[3], mn[0] / mn[1], gf / mn[3] * 1e3, md[0], md[1],
                md[2], md[3]);
+        if (pk_fp > 0) printf(" fp32 panel %.0f %% of FMA peak", 100 * gf / mn[0] * 1e3 / pk_fp);
+        if (pk_bf > 0 && lm_gemm_bf16_native())
+            printf(", bf16 %.0f %% of vdpbf16ps peak", 100 * gf / mn[1] * 1e3 / pk_bf);
+        printf("\n");
         for (int k = 0; k < 4; k++) free(t[k]);
         free(A), free(B), free(C), free(Ap), free(Ah), free(Bh);
     }
