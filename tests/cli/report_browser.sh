@@ -5,8 +5,8 @@
 # dumps the DOM. Opened as report.html#click=X,Y the page dispatches a click on the
 # reconstruction's preview at that pixel: the spectrum plot then names the pixel, and its
 # reconstruction and truth polylines have 31 points whose values are the embedded cube's at
-# that pixel (the known cubes: the values cli_make_cube wrote); without #click no spectrum is
-# drawn. The PSNR-per-noise plot holds eval.json's means, the PSNR-per-band plot 31 points,
+# that pixel (the known cubes: the values cli_make_cube wrote; a 280 x 200 cube embedded in
+# 5 x 5 blocks: the clicked pixel's block mean); without #click no spectrum is drawn. The PSNR-per-noise plot holds eval.json's means, the PSNR-per-band plot 31 points,
 # the rainbow plots one point per row. A screenshot is taken (a PNG of the window's size, not
 # a blank page). Without Chromium the test is skipped (exit 77), except under CI=true, where
 # it fails.
@@ -46,12 +46,17 @@ mkdir "$T/known"
 "$MK" "$T/known/cube_0000.exr" good 40 60
 "$LM" report "$T/known" > /dev/null 2> "$T/err"
 check "report of known cubes: $(cat "$T/err")" [ -s "$T/known/report.html" ]
+mkdir "$T/big" # 280 x 200 shown 300 px wide (not a whole number of screen pixels per pixel),
+"$MK" "$T/big/cube_0000.exr" good 200 280 # embedded as 56 x 40 blocks of 5 x 5
+"$LM" report "$T/big" --max-side 64 > /dev/null 2> "$T/err"
+check "report --max-side 64: $(cat "$T/err")" [ -s "$T/big/report.html" ]
 
 chrome "file://$O/report.html#click=40,30" "$T/eval.dom"
 check "chromium --dump-dom (eval page): $(tail -3 "$T/chrome.err")" [ -s "$T/eval.dom" ]
 chrome "file://$O/report.html" "$T/noclick.dom"
 chrome "file://$T/known/report.html#click=13,7" "$T/known.dom"
 check "chromium --dump-dom (known cubes): $(tail -3 "$T/chrome.err")" [ -s "$T/known.dom" ]
+chrome "file://$T/big/report.html#click=201,133" "$T/big.dom"
 chrome "file://$O/report.html#click=40,30" "$T/shot.png"
 check "chromium --screenshot: $(tail -3 "$T/chrome.err")" [ -s "$T/shot.png" ]
 
@@ -131,6 +136,17 @@ value = lambda b, i: 0.05 + 0.9 * ((b * 7 + i * 13) % 101) / 100.0
 close(line(p, "spectrum-recon", 31), [value(b, 7 * 60 + 13) for b in range(31)],
       d["cube"]["scale"] / 65535)
 assert "spectrum-truth" not in p.by_id and "hidden" in p.by_id["fig-tru"]
+
+# the 280 x 200 cube in 5 x 5 blocks: pixel (201, 133) is block (40, 26), its spectrum the
+# block's mean
+d = rd.load(T + "/big/report.html")
+p = parse(T + "/big.dom")
+assert p.by_id["spectrum"].get("data-pixel") == "201,133", p.by_id["spectrum"]
+assert p.by_id["spectrum"].get("data-cube-pixel") == "40,26", p.by_id["spectrum"]
+mean = [sum(value(b, y * 280 + x) for y in range(130, 135) for x in range(200, 205)) / 25
+        for b in range(31)]
+close(line(p, "spectrum-recon", 31), mean, d["cube"]["scale"] / 65535)
+assert "mean of its 5 × 5 block" in p.text.get("cap-spec", ""), p.text.get("cap-spec")
 
 # the screenshot: a PNG of the window, far from a blank page
 png = open(T + "/shot.png", "rb").read()
