@@ -40,7 +40,7 @@ static void help(void)
            "                     [--motion 0,60,120,240] [--motion-noise 0,10]\n"
            "                     [--align confident|plain] [--precision fp32|bf16]\n"
            "                     [--device cpu|opencl] [--mat-key NAME]\n"
-           "                     [--report [--report-noise PCT]]\n\n"
+           "                     [--report [--report-noise K]]\n\n"
            "Score a trained model (system.md §10): each scene is cropped to the mosaic tile,\n"
            "divided by its own maximum, simulated at each noise level and reconstructed\n"
            "patch-wise; PSNR (peak 1), SSIM, MAE and SAM (degrees) on the 31 bands 400-700 nm.\n"
@@ -99,7 +99,7 @@ static void help(void)
            "                   one noise level (sample_recon.exr, sample_truth.exr, negatives\n"
            "                   clamped to 0; sample.json) and rainbow.csv (peak per row);\n"
            "                   needs --output; reconstructs that scene once more\n"
-           "  --report-noise PCT  the level of that sample, one of --noise (default: the\n"
+           "  --report-noise K the sample's noise level in %%, one of --noise (default: the\n"
            "                   level nearest 10)\n"
            "  --help           this text\n", LM_EVAL_MAX_NOISE, LM_EVAL_MAX_MOTION,
            LM_EVAL_MAX_MOTION_NOISE);
@@ -196,7 +196,7 @@ static int report_level(const eval_opts *o)
     int best = -1;
     for (int n = 0; n < o->nnoise; n++) {
         double d = fabs(100.0 * o->k[n] - (o->report_noise >= 0 ? o->report_noise : 10.0));
-        if (o->report_noise >= 0 ? d < 1e-6 : best < 0 || d < fabs(100.0 * o->k[best] - 10.0))
+        if (o->report_noise >= 0 ? d < 1e-4 : best < 0 || d < fabs(100.0 * o->k[best] - 10.0))
             best = n;
     }
     return best;

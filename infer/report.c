@@ -191,10 +191,9 @@ static lm_status check_eval_json(const char *path, json_t *j, lm_err *err)
         json_array_size(noise) == 0 || json_array_size(mean) != json_array_size(noise))
         return lm_err_set(err, LM_ERR_FORMAT, "%s: not an eval result (needs noise_percent, "
                           "mean and scenes, one mean per level)", path);
-    size_t i;
-    json_t *v;
-    json_array_foreach(mean, i, v) if (!json_is_number(json_object_get(v, "psnr")))
-        return lm_err_set(err, LM_ERR_FORMAT, "%s: mean row %zu has no psnr", path, i);
+    for (size_t i = 0; i < json_array_size(mean); i++)
+        if (!json_is_number(json_object_get(json_array_get(mean, i), "psnr")))
+            return lm_err_set(err, LM_ERR_FORMAT, "%s: mean row %zu has no psnr", path, i);
     return LM_OK;
 }
 
@@ -419,6 +418,11 @@ lm_status lm_report_write(const char *dir, const char *out, const lm_report_opts
     json_t *root = json_object();
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "report: out of memory");
     int ev = exists(dir, "eval.json", p, sizeof p);
+    if (ev && o->frame >= 0) {
+        json_decref(root);
+        return lm_err_set(err, LM_ERR_ARG, "%s: an eval folder (--frame is for infer folders)",
+                          dir);
+    }
     json_object_set_new(root, "kind", json_string(ev ? "eval" : "infer"));
     json_object_set_new(root, "version", json_string(LM_VERSION));
     lm_status st = ev ? load_eval(dir, root, o, info, err) : load_infer(dir, root, o, info, err);

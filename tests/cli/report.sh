@@ -7,12 +7,14 @@
 # mean error is eval.json's; the page loads nothing from a network and embeds the eval results,
 # both previews (PNGs of the scene's size), the cubes (PSNR of the embedded cubes = the one
 # the per-band PSNRs give) and the rainbow rows; `lumosaic report DIR` writes the same bytes
-# (deterministic); --max-side 32 box-averages the cube to 25 x 25; an infer folder (simulate +
+# (deterministic); --max-side 32 box-averages the cube to 25 x 25; --report-noise 0 shows the
+# 0 % row's reconstruction and --rainbow 0 leaves out rainbow.csv; an infer folder (simulate +
 # infer) and a folder of known cubes (cli_make_cube: the embedded values are the cube's,
 # --frame picks the file); bad input: no DIR, missing folder, neither kind of folder, corrupt
 # eval.json, a sample file missing, a corrupt rainbow.csv, --max-side out of range, --frame
-# missing, a non-.html output, an output folder that does not exist; eval --report without
-# --output, --report-noise not a level — one line on stderr, the exit status, nothing left.
+# missing or given for an eval folder, a non-.html output, an output folder that does not
+# exist; eval --report without --output, --report-noise not a level — one line on stderr, the
+# exit status, nothing left.
 # usage: report.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 PYLIB=$(cd "$(dirname "$0")" && pwd)
@@ -108,6 +110,23 @@ check "--max-side: a smaller page" [ "$(stat -c %s "$T/small.html")" -lt "$(stat
 check "report of a plain eval folder: $(cat "$T/err")" grep -q "eval scores$" "$T/out"
 check "no sample files without --report" [ ! -e "$T/plain/sample.json" ] && [ ! -e "$T/plain/rainbow.csv" ]
 
+# --report-noise 0 and --rainbow 0: the sample at 0 %, no rainbow.csv
+"$LM" eval --model "$R" "$CAVE" --split all --noise 0,5 --rainbow 0 --output "$T/ev0" --report \
+  --report-noise 0 > /dev/null 2> "$T/err"
+check "eval --report --report-noise 0: $(cat "$T/err")" [ -s "$T/ev0/report.html" ]
+check "--rainbow 0: no rainbow.csv" [ ! -e "$T/ev0/rainbow.csv" ]
+python3 - "$T/ev0" "$PYLIB" <<'PY'
+import json, sys
+sys.path.insert(0, sys.argv[2])
+import report_data as rd
+ev = json.load(open(sys.argv[1] + "/eval.json"))
+smp = json.load(open(sys.argv[1] + "/sample.json"))
+assert smp["noise_percent"] == 0 and abs(smp["metrics"]["psnr"] - ev["mean"][0]["psnr"]) < 1e-5, smp
+d = rd.load(sys.argv[1] + "/report.html")
+assert "rainbow_rows" not in d and "rainbow" not in d["eval"], d.keys()
+PY
+check "--report-noise 0: the sample is the 0 % row" [ $? -eq 0 ]
+
 # ---- an infer folder, and a folder of known cubes ---------------------------------------------
 "$LM" simulate --input "$CAVE" --output "$T/sim" --crop > /dev/null 2>&1
 "$LM" infer --model "$R" --input "$T/sim/frames/frame_0000.png" --output "$T/inf" > /dev/null 2>&1
@@ -162,6 +181,7 @@ expect_error "sample file missing" 2 "sample_truth.exr is missing" "$T/nosample/
 expect_error "corrupt rainbow.csv" 2 "rainbow.csv: line 2" "$T/badrb/report.html" -- "$LM" report "$T/badrb"
 expect_error "--max-side 8" 2 "--max-side" "$T/x.html" -- "$LM" report "$O" --max-side 8 --output "$T/x.html"
 expect_error "--frame missing" 2 "no cube_0005.exr (--frame 5)" "$T/x.html" -- "$LM" report "$T/known" --frame 5 --output "$T/x.html"
+expect_error "--frame on an eval folder" 2 "an eval folder (--frame is for infer folders)" "$T/x.html" -- "$LM" report "$O" --frame 0 --output "$T/x.html"
 expect_error "not .html" 2 "written as .html" "$T/x.txt" -- "$LM" report "$O" --output "$T/x.txt"
 expect_error "output folder missing" 1 "$T/nodir/x.html: cannot write" "$T/nodir" -- "$LM" report "$O" --output "$T/nodir/x.html"
 expect_error "unknown option" 2 "--bogus" "$T/x.html" -- "$LM" report "$O" --bogus --output "$T/x.html"
