@@ -173,8 +173,8 @@ lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err)
     return LM_OK;
 }
 
-/* Simulate the frame of truth with noise k from rng, reconstruct, score. */
-/* keep: NULL, or where the reconstruction goes (else it is freed). */
+/* Simulate the frame of truth with noise k from rng, reconstruct, score; keep: NULL, or where
+ * the reconstruction goes (else it is freed). */
 static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth, float k,
                           const lm_tile_opts *to, lm_rng *rng, float *frame, lm_metrics *out,
                           lm_cube *keep, lm_err *err)
