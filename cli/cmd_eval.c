@@ -18,6 +18,7 @@
  * MST++ models run on the CPU only).
  * What it is not: training-time validation (train/), or a benchmark of speed. */
 #include <errno.h>
+#include <math.h>
 #include <omp.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -28,6 +29,7 @@
 #include "data/dataset.h"
 #include "data/util.h"
 #include "infer/eval.h"
+#include "infer/report.h"
 #include "tensor/isa.h"
 
 static void help(void)
@@ -37,7 +39,8 @@ static void help(void)
            "                     [--threads T] [--rainbow SIZE] [--batch N] [--system FILE]\n"
            "                     [--motion 0,60,120,240] [--motion-noise 0,10]\n"
            "                     [--align confident|plain] [--precision fp32|bf16]\n"
-           "                     [--device cpu|opencl] [--mat-key NAME]\n\n"
+           "                     [--device cpu|opencl] [--mat-key NAME]\n"
+           "                     [--report [--report-noise K]]\n\n"
            "Score a trained model (system.md §10): each scene is cropped to the mosaic tile,\n"
            "divided by its own maximum, simulated at each noise level and reconstructed\n"
            "patch-wise; PSNR (peak 1), SSIM, MAE and SAM (degrees) on the 31 bands 400-700 nm.\n"
@@ -91,6 +94,13 @@ static void help(void)
            "  --noise-oracle   models that read the noise level (lmmse, residuals on it) get\n"
            "                   the simulated level instead of estimating it from the frame\n"
            LM_CLI_PRECISION_HELP
+           "  --report         also write DIR/report.html (see 'lumosaic report --help') and\n"
+           "                   what it shows: the first scene's reconstruction and truth at\n"
+           "                   one noise level (sample_recon.exr, sample_truth.exr, negatives\n"
+           "                   clamped to 0; sample.json) and rainbow.csv (peak per row);\n"
+           "                   needs --output; reconstructs that scene once more\n"
+           "  --report-noise K the sample's noise level in %%, one of --noise (default: the\n"
+           "                   level nearest 10)\n"
            "  --help           this text\n", LM_EVAL_MAX_NOISE, LM_EVAL_MAX_MOTION,
            LM_EVAL_MAX_MOTION_NOISE);
 }
@@ -107,7 +117,8 @@ typedef struct eval_opts {
     float mk[LM_EVAL_MAX_MOTION_NOISE]; /* --motion-noise levels (fractions) */
     int nmk;
     long long rainbow, batch;
-    int noise_oracle, clip, align_plain;
+    int noise_oracle, clip, align_plain, report;
+    double report_noise; /* --report-noise in %, -1 = the level nearest 10 % */
     long long bits;
     double photons, read_noise;
 } eval_opts;
@@ -161,6 +172,8 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_value(c, "--motion", &motion)) ||
         (r = lm_cli_value(c, "--motion-noise", &mnoise)) ||
         (r = lm_cli_flag(c, "--noise-oracle", &o->noise_oracle)) ||
+        (r = lm_cli_flag(c, "--report", &o->report)) ||
+        (r = lm_cli_real(c, "--report-noise", 0, 100, &o->report_noise)) ||
         (r = lm_cli_flag(c, "--clip", &o->clip)) ||
         (r = lm_cli_int(c, "--bits", 0, 24, &o->bits)) ||
         (r = lm_cli_real(c, "--photons", 0, 1e12, &o->photons)) ||
@@ -176,11 +189,24 @@ static int parse_opt(lm_cli *c, eval_opts *o)
     return 0;
 }
 
+/* The --noise level of the report's sample: --report-noise's, else the one nearest 10 %
+ * (-1: --report-noise is not a level). */
+static int report_level(const eval_opts *o)
+{
+    int best = -1;
+    for (int n = 0; n < o->nnoise; n++) {
+        double d = fabs(100.0 * o->k[n] - (o->report_noise >= 0 ? o->report_noise : 10.0));
+        if (o->report_noise >= 0 ? d < 1e-4 : best < 0 || d < fabs(100.0 * o->k[best] - 10.0))
+            best = n;
+    }
+    return best;
+}
+
 /* 1: run, 0: help printed, 2: bad usage (printed). */
 static int parse(lm_cli *c, eval_opts *o)
 {
     *o = (eval_opts){.com.seed = 1, .rainbow = 256, .batch = 8, .nnoise = 5,
-                     .k = {0.0f, 0.05f, 0.10f, 0.15f, 0.20f}, .nmk = 1};
+                     .k = {0.0f, 0.05f, 0.10f, 0.15f, 0.20f}, .nmk = 1, .report_noise = -1};
     o->data = calloc((size_t)c->argc + 1, sizeof *o->data);
     if (!o->data) return lm_cli_error(c, "out of memory");
     while (!lm_cli_done(c)) {
@@ -197,6 +223,13 @@ static int parse(lm_cli *c, eval_opts *o)
     if (!o->ndata)
         return lm_cli_error(c, "no DATA given: name scenes or folders of scenes "
                                "(see 'lumosaic eval --help')");
+    if (o->report && !o->output)
+        return lm_cli_error(c, "--report needs --output (the report goes into DIR)");
+    if (o->report_noise >= 0 && !o->report)
+        return lm_cli_error(c, "--report-noise needs --report");
+    if (o->report_noise >= 0 && report_level(o) < 0)
+        return lm_cli_error(c, "--report-noise %g is not one of the --noise levels",
+                            o->report_noise);
     if (o->rainbow > 0 && o->rainbow < 66)
         return lm_cli_error(c, "--rainbow %lld: need 0 (skip) or at least 66 (the window)",
                             o->rainbow);
@@ -496,8 +529,26 @@ static void write_motion_csv(FILE *f, const eval_run *r)
     }
 }
 
+/* --report: the sample files and report.html into the staging folder. */
+static int write_report(eval_run *r, const lm_tile_opts *to)
+{
+    lm_err e;
+    lm_err_clear(&e);
+    char page[1200];
+    snprintf(page, sizeof page, "%s/report.html", r->tmp);
+    const scene_res *s = &r->sc[0];
+    if (lm_report_eval_files(&r->ctx, &r->im, s->path, s->name, r->o->mat_key, r->o->com.seed,
+                             r->o->k[report_level(r->o)], to, r->o->rainbow > 0 ? &r->rb : NULL,
+                             r->tmp, &e) ||
+        lm_report_write(r->tmp, page, NULL, NULL, &e)) {
+        lm_cli_error(r->c, "report: %s", e.msg);
+        return lm_cli_exit_status(e.status);
+    }
+    return 0;
+}
+
 /* Into the staging folder, then renamed onto --output. */
-static int write_outputs(eval_run *r)
+static int write_outputs(eval_run *r, const lm_tile_opts *to)
 {
     char path[1200];
     const char *tmp = r->tmp;
@@ -514,6 +565,10 @@ static int write_outputs(eval_run *r)
             lm_cli_error(r->c, "%s: cannot write: %s", path, strerror(errno));
             return LM_EXIT_FAILED;
         }
+    }
+    if (r->o->report) {
+        int rc = write_report(r, to);
+        if (rc) return rc;
     }
     int rc = lm_cli_commit_dir(r->c, tmp, r->o->output) ? 1 : 0;
     r->tmp[0] = '\0'; /* renamed, or removed by lm_cli_commit_dir on failure */
@@ -557,7 +612,7 @@ static int run(eval_run *r)
         return lm_cli_exit_status(e.status);
     }
     print_table(r);
-    return r->o->output ? write_outputs(r) : 0;
+    return r->o->output ? write_outputs(r, &to) : 0;
 }
 
 int lm_cmd_eval(int argc, char **argv)

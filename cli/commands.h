@@ -22,6 +22,7 @@ int lm_cmd_fit_auto(int argc, char **argv);
 int lm_cmd_infer(int argc, char **argv);
 int lm_cmd_info(int argc, char **argv);
 int lm_cmd_render(int argc, char **argv);
+int lm_cmd_report(int argc, char **argv);
 int lm_cmd_simulate(int argc, char **argv);
 int lm_cmd_study(int argc, char **argv);
 int lm_cmd_train(int argc, char **argv);

@@ -17,6 +17,7 @@ static const lm_command commands[] = {
     {"infer", lm_cmd_infer, "reconstruct 31-band cubes from coded frames with a trained model"},
     {"info", lm_cmd_info, "layer table of a model (shapes, parameters, MACs), presets, system"},
     {"render", lm_cmd_render, "render a spectral cube as an sRGB PNG (D65, CIE 1931)"},
+    {"report", lm_cmd_report, "one offline HTML page of an infer or eval output: previews, plots"},
     {"simulate", lm_cmd_simulate, "simulate coded frames (static or video) from a spectral cube"},
     {"study", lm_cmd_study, "speed against accuracy: train, score and time presets; charts"},
     {"train", lm_cmd_train, "train a network (config/flags, checkpoints, --resume)"},

@@ -173,10 +173,11 @@ lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err)
     return LM_OK;
 }
 
-/* Simulate the frame of truth with noise k from rng, reconstruct, score. */
+/* Simulate the frame of truth with noise k from rng, reconstruct, score; keep: NULL, or where
+ * the reconstruction goes (else it is freed). */
 static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth, float k,
                           const lm_tile_opts *to, lm_rng *rng, float *frame, lm_metrics *out,
-                          lm_err *err)
+                          lm_cube *keep, lm_err *err)
 {
     lm_noise_opts no;
     memset(&no, 0, sizeof no);
@@ -203,7 +204,8 @@ static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *tr
     if (st) return st;
     st = lm_metrics_compute(pred.data, truth->data, 31, truth->height, truth->width, 0, 31, out,
                             err);
-    lm_cube_free(&pred);
+    if (!st && keep) *keep = pred;
+    else lm_cube_free(&pred);
     return st;
 }
 
@@ -224,8 +226,24 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
     for (int i = 0; i < nnoise && !st; i++) {
         /* keyed on the level, not its position: 10 % draws the same noise in any list */
         lm_rng r = lm_rng_split(rng, (uint64_t)llround((double)k[i] * 1e6));
-        st = eval_one(c, im, truth, k[i], to, &r, frame, &out[i], err);
+        st = eval_one(c, im, truth, k[i], to, &r, frame, &out[i], NULL, err);
     }
+    free(frame);
+    return st;
+}
+
+lm_status lm_eval_scene_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth, float k,
+                            const lm_tile_opts *to, const lm_rng *rng, lm_metrics *out,
+                            lm_cube *pred, lm_err *err)
+{
+    memset(pred, 0, sizeof *pred);
+    if (!(k >= 0.0f) || !isfinite(k))
+        return lm_err_set(err, LM_ERR_ARG, "eval: noise level %g is not >= 0", (double)k);
+    float *frame = malloc(sizeof(float) * planes_of(im) * (size_t)truth->height *
+                          truth->width);
+    if (!frame) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+    lm_rng r = lm_rng_split(rng, (uint64_t)llround((double)k * 1e6));
+    lm_status st = eval_one(c, im, truth, k, to, &r, frame, out, pred, err);
     free(frame);
     return st;
 }
@@ -525,7 +543,12 @@ static void rainbow_errors(const lm_cube *pred, int size, lm_eval_rainbow *out)
             for (int x = 0; x < W; x++) s += row[x];
             spec[b] = (float)(s / W);
         }
-        double e = fabs(lm_eval_peak_nm(spec, 31, 400.0, 10.0) - lm_synth_rainbow_peak(y, size));
+        double peak = lm_eval_peak_nm(spec, 31, 400.0, 10.0), want = lm_synth_rainbow_peak(y, size);
+        double e = fabs(peak - want);
+        if (y < LM_EVAL_RAINBOW_MAX_ROWS) {
+            out->row_true_nm[y] = (float)want;
+            out->row_peak_nm[y] = (float)peak;
+        }
         sum += e;
         if (e > out->max_err_nm) {
             out->max_err_nm = e;

@@ -73,6 +73,13 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
                         const float *k, int nnoise, const lm_tile_opts *to, const lm_rng *rng,
                         lm_metrics *out, lm_err *err);
 
+/* One level k of lm_eval_scene, the same noise (lm_rng_split(rng, round(k * 1e6))) and
+ * metrics (*out), keeping the reconstruction: *pred is allocated here (lm_cube_free), as the
+ * network returned it (not clamped). Errors: as lm_eval_scene. */
+lm_status lm_eval_scene_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth, float k,
+                            const lm_tile_opts *to, const lm_rng *rng, lm_metrics *out,
+                            lm_cube *pred, lm_err *err);
+
 /* Peak wavelength of a spectrum sampled at wl0 + i * step (i < n): the largest sample m (first
  * one on ties), refined by the vertex of the parabola through m - 1, m, m + 1 when both
  * neighbours exist and the parabola is concave; else wl0 + m * step. */
@@ -140,6 +147,8 @@ lm_status lm_eval_motion_run_noise(lm_ctx *c, const lm_infer_model *im, const lm
                                    const lm_tile_opts *to, const lm_flow_opts *fo,
                                    const lm_align_opts *ao, lm_eval_motion *out, lm_err *err);
 
+#define LM_EVAL_RAINBOW_MAX_ROWS 4096
+
 typedef struct lm_eval_rainbow {
     int size;                 /* the scene simulated: size x size */
     int height, width;        /* after cropping to the tile */
@@ -147,6 +156,8 @@ typedef struct lm_eval_rainbow {
     double max_err_nm;
     int worst_row;
     lm_metrics m;             /* metrics of the reconstruction against the rainbow */
+    /* per row y < min(height, LM_EVAL_RAINBOW_MAX_ROWS): the true and the recovered peak */
+    float row_true_nm[LM_EVAL_RAINBOW_MAX_ROWS], row_peak_nm[LM_EVAL_RAINBOW_MAX_ROWS];
 } lm_eval_rainbow;
 
 /* The rainbow test without noise: lm_synth_rainbow(size, size) cropped to the tile (rows kept

@@ -4,14 +4,15 @@
 # libpng, matio, HDF5 (headers: the .mat reader's v7.3 checks), OpenEXR, the OpenCL ICD loader + headers
 # and PoCL (CPU OpenCL driver), gnuplot (the charts of `lumosaic study`), Open MPI (data-parallel
 # training: `mpirun -np N lumosaic train`), FFTW
-# (single precision: the DOE optics and PSF convolution of the QDO baseline).
+# (single precision: the DOE optics and PSF convolution of the QDO baseline), Chromium (the
+# headless browser that loads the page of `lumosaic report` in its test, label "browser").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 pkgs=(build-essential cmake pkg-config libopenblas-dev libjansson-dev libopenimageio-dev
       libpng-dev libmatio-dev libhdf5-dev libopenexr-dev zlib1g-dev ocl-icd-opencl-dev
       opencl-headers pocl-opencl-icd clinfo python3 gnuplot-nox libopenmpi-dev openmpi-bin
-      libfftw3-dev)
+      libfftw3-dev chromium)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

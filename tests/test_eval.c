@@ -5,7 +5,8 @@
  * divide by the maximum, shape / numeric errors with "eval:" messages) and lm_eval_scene on a
  * small smooth cube with a linear model fitted to it by least squares: noise 0 beats 20 %,
  * the noise-0 PSNR equals a plain-loop PSNR of lm_tile_infer's reconstruction of the clean
- * frame, a level draws the same noise wherever it sits in the list, and bad level lists fail;
+ * frame, a level draws the same noise wherever it sits in the list (and in lm_eval_scene_one,
+ * whose kept reconstruction scores its metrics), and bad level lists fail;
  * lm_eval_motion_region (the in-view margin from the frame period) and lm_eval_motion_run on
  * the same model: a still scene scores the same aligned or not and equals the static
  * reference, at 60 px/s alignment is not worse than none, at 400 px/s the unaligned frame loses
@@ -319,6 +320,20 @@ static void test_scene_linear_model(void)
     CHECK_MSG(lm_eval_scene(&c, &im, &truth, k2, 2, &to, &rng, m2, &e) == LM_OK, "%s", e.msg);
     CHECK(m2[0].psnr == m[1].psnr && m2[0].sam == m[1].sam);
     CHECK(m2[1].psnr != m[1].psnr);
+    /* one level with its reconstruction kept: the same noise and metrics as in the list, and
+     * the kept cube scores them */
+    lm_metrics one;
+    lm_cube kept;
+    CHECK_MSG(lm_eval_scene_one(&c, &im, &truth, 0.2f, &to, &rng, &one, &kept, &e) == LM_OK,
+              "%s", e.msg);
+    CHECK(one.psnr == m[1].psnr && one.ssim == m[1].ssim && one.sam == m[1].sam);
+    CHECK(kept.bands == 31 && kept.height == truth.height && kept.width == truth.width);
+    if (kept.data)
+        CHECK_CLOSE(one.psnr, plain_psnr(kept.data, truth.data, 31 * (size_t)truth.height *
+                                                                     truth.width), 1e-6, 1e-6);
+    lm_cube_free(&kept);
+    CHECK(lm_eval_scene_one(&c, &im, &truth, -0.1f, &to, &rng, &one, &kept, &e) == LM_ERR_ARG);
+    CHECK(kept.data == NULL);
     /* noise 0 against a plain-loop PSNR of the clean frame's reconstruction */
     size_t plane = (size_t)truth.height * truth.width;
     float *frame = malloc(sizeof(float) * plane);
