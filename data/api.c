@@ -1,7 +1,7 @@
 /* api.c — the public C API (include/lumosaic.h): status text, version, system descriptions,
- * cubes, simulation and metrics, each a thin layer over the library's own functions
- * (data/system.h, data/cube_io.h, data/forward.h, data/metrics.h) that checks the arguments
- * and turns the library's errors into the API's.
+ * cubes and their sRGB previews, simulation and metrics, each a thin layer over the library's
+ * own functions (data/system.h, data/cube_io.h, data/srgb.h, data/forward.h, data/metrics.h)
+ * that checks the arguments and turns the library's errors into the API's.
  * What it is not: models and reconstruction (infer/api.c). */
 #include <stdarg.h>
 #include <stdio.h>
@@ -13,6 +13,7 @@
 #include "data/metrics.h"
 #include "data/limits.h"
 #include "data/spectra.h"
+#include "data/srgb.h"
 #include "tensor/rng.h"
 
 _Static_assert(LM_API_OK == (int)LM_OK && LM_API_ERR_SHAPE == (int)LM_ERR_SHAPE &&
@@ -204,6 +205,22 @@ float *lm_api_cube_data(lm_api_cube *cube)
 const float *lm_api_cube_wavelengths(const lm_api_cube *cube)
 {
     return cube ? cube->cube.wavelength : NULL;
+}
+
+lm_api_status lm_api_cube_srgb(const lm_api_cube *cube, float exposure, float *rgb, size_t n,
+                               lm_api_error *err)
+{
+    if (!cube || !rgb)
+        return lm_api_fail(err, LM_API_ERR_ARG, "lm_api_cube_srgb: %s is NULL",
+                           !cube ? "cube" : "rgb");
+    const lm_cube *c = &cube->cube;
+    if (n < (size_t)3 * c->height * c->width)
+        return lm_api_fail(err, LM_API_ERR_SHAPE, "lm_api_cube_srgb: a buffer of %zu values "
+                           "for a %d x %d x 3 image", n, c->height, c->width);
+    lm_err e;
+    lm_err_clear(&e);
+    if (lm_srgb_render_cube(c, exposure, NULL, rgb, &e)) return lm_api_from_err(&e, err);
+    return lm_api_ok(err);
 }
 
 /* ---- simulation ------------------------------------------------------------------------- */

@@ -116,6 +116,14 @@ LM_API lm_api_status lm_api_cube_shape(const lm_api_cube *cube, int *bands, int 
 LM_API float *lm_api_cube_data(lm_api_cube *cube);
 LM_API const float *lm_api_cube_wavelengths(const lm_api_cube *cube);
 
+/* The sRGB preview of a reflectance cube, as `lumosaic infer` writes it (srgb_NNNN.png): each
+ * pixel's spectrum times `exposure` (1 = as is) under D65 with the CIE 1931 2-degree observer,
+ * to sRGB clipped to [0, 1] and gamma-encoded. rgb receives height x width x 3 floats
+ * (interleaved R, G, B; n: its element count, checked). The cube's wavelengths must lie within
+ * 360-830 nm. */
+LM_API lm_api_status lm_api_cube_srgb(const lm_api_cube *cube, float exposure, float *rgb,
+                                      size_t n, lm_api_error *err);
+
 /* ---- simulation ----------------------------------------------------------------------- */
 /* Sensor noise of a simulated frame, applied in this order (a zero field is off):
  * shot noise (photons: photo-electrons at full scale), full-well clipping (clip), read noise
@@ -168,6 +176,17 @@ LM_API lm_api_status lm_api_model_set_noise_level(lm_api_model *model, double le
 /* 1: reconstruct in overlapping 66 x 64 windows even when the model could run on the whole
  * frame at once (0, the default: whole frame where the model allows, as `lumosaic infer`). */
 LM_API lm_api_status lm_api_model_set_patchwise(lm_api_model *model, int patchwise,
+                                                lm_api_error *err);
+
+/* Operand precision of the reconstruction's convolution products. */
+typedef enum lm_api_precision {
+    LM_API_PRECISION_FP32 = 0, /* the default */
+    LM_API_PRECISION_BF16 = 1  /* operands rounded to bf16, sums in fp32 (AVX-512-BF16 products
+                                * where the CPU has them), as `lumosaic infer --precision bf16` */
+} lm_api_precision;
+
+/* The precision of the model's reconstructions (the weights stay fp32). */
+LM_API lm_api_status lm_api_model_set_precision(lm_api_model *model, lm_api_precision precision,
                                                 lm_api_error *err);
 
 /* 1 (the default): values below 0 in reconstructed cubes are set to 0, as `lumosaic infer`

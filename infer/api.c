@@ -102,6 +102,19 @@ lm_api_status lm_api_model_set_patchwise(lm_api_model *model, int patchwise,
     return lm_api_ok(err);
 }
 
+lm_api_status lm_api_model_set_precision(lm_api_model *model, lm_api_precision precision,
+                                         lm_api_error *err)
+{
+    if (!model)
+        return lm_api_fail(err, LM_API_ERR_ARG, "lm_api_model_set_precision: model is NULL");
+    if (precision != LM_API_PRECISION_FP32 && precision != LM_API_PRECISION_BF16)
+        return lm_api_fail(err, LM_API_ERR_ARG, "lm_api_model_set_precision: precision %d (one "
+                           "of LM_API_PRECISION_FP32, LM_API_PRECISION_BF16)", (int)precision);
+    model->ctx.precision = precision == LM_API_PRECISION_BF16 ? LM_PRECISION_BF16
+                                                             : LM_PRECISION_FP32;
+    return lm_api_ok(err);
+}
+
 lm_api_status lm_api_model_set_clamp(lm_api_model *model, int clamp, lm_api_error *err)
 {
     if (!model)

@@ -5,8 +5,9 @@
  * unclamped as eval scores it, and clamped at 0 bit for bit equal to eval's cube clamped), a
  * 16-bit frame equal bit for bit to what `lumosaic infer` computes from that frame written as
  * a PNG (lm_frame_write, lm_frame_read, lm_recon_frame, clamp), caller-owned and library-owned
- * cubes, threads, a cube round trip through EXR, and errors: missing and corrupt files, NULL
- * arguments, wrong buffers and frames (a status and a message, no crash). */
+ * cubes, threads, bf16 precision, the sRGB preview, a cube round trip through EXR, and errors:
+ * missing and corrupt files, NULL arguments, wrong buffers and frames (a status and a message,
+ * no crash). */
 #include <stdint.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -15,6 +16,7 @@
 #include "shared_dir.h"
 #include "data/cube_io.h"
 #include "data/frames.h"
+#include "data/srgb.h"
 #include "infer/eval.h"
 #include "infer/recon.h"
 
@@ -202,6 +204,18 @@ static void test_against_eval(void)
     CHECK(lm_api_model_set_threads(m, -1, &err) == LM_API_ERR_ARG);
     CHECK(lm_api_reconstruct(m, &f, buf, nc, NULL, &err) == LM_API_OK);
     CHECK(rc && !memcmp(buf, lm_api_cube_data(rc), sizeof(float) * nc));
+    /* bf16 products: a cube that differs a little, as good; fp32 again: the same cube */
+    CHECK(lm_api_model_set_precision(m, (lm_api_precision)5, &err) == LM_API_ERR_ARG);
+    CHECK(lm_api_model_set_precision(NULL, LM_API_PRECISION_BF16, &err) == LM_API_ERR_ARG);
+    CHECK(lm_api_model_set_precision(m, LM_API_PRECISION_BF16, &err) == LM_API_OK);
+    CHECK(lm_api_reconstruct(m, &f, buf, nc, NULL, &err) == LM_API_OK);
+    CHECK(rc && memcmp(buf, lm_api_cube_data(rc), sizeof(float) * nc) != 0);
+    CHECK(lm_api_metrics_compute(buf, truth.data, 31, H, W, &ma, &err) == LM_API_OK);
+    printf("bf16: %.4f dB\n", ma.psnr);
+    CHECK(ma.psnr > mc.psnr - 0.5);
+    CHECK(lm_api_model_set_precision(m, LM_API_PRECISION_FP32, &err) == LM_API_OK);
+    CHECK(lm_api_reconstruct(m, &f, buf, nc, NULL, &err) == LM_API_OK);
+    CHECK(rc && !memcmp(buf, lm_api_cube_data(rc), sizeof(float) * nc));
     /* the noise level given instead of estimated: another cube, as good */
     CHECK(lm_api_model_set_noise_level(m, 2.0, &err) == LM_API_ERR_ARG);
     CHECK(lm_api_model_set_noise_level(m, k, &err) == LM_API_OK);
@@ -220,6 +234,16 @@ static void test_against_eval(void)
     CHECK(back && lm_api_cube_wavelengths(back)[30] == 700.0f);
     CHECK(lm_api_cube_write("/nonexistent/dir/x.exr", rc, &err) != LM_API_OK && err.message[0]);
     lm_api_cube_free(back);
+    /* the sRGB preview: infer's (lm_srgb_render_cube at exposure 1); errors */
+    float *rgb = malloc(sizeof(float) * 3 * n), *want = malloc(sizeof(float) * 3 * n);
+    CHECK(rc && lm_api_cube_srgb(rc, 1.0f, rgb, 3 * n, &err) == LM_API_OK);
+    CHECK(lm_srgb_render_cube(&er, 1.0f, NULL, want, &e) == LM_OK); /* er: rc's values */
+    CHECK(!memcmp(rgb, want, sizeof(float) * 3 * n));
+    CHECK(lm_api_cube_srgb(rc, 1.0f, rgb, 3 * n - 1, &err) == LM_API_ERR_SHAPE);
+    CHECK(lm_api_cube_srgb(rc, -1.0f, rgb, 3 * n, &err) == LM_API_ERR_ARG && err.message[0]);
+    CHECK(lm_api_cube_srgb(NULL, 1.0f, rgb, 3 * n, &err) == LM_API_ERR_ARG);
+    free(rgb);
+    free(want);
     /* frames the model cannot take */
     lm_api_frame g = f;
     g.bucket0 = frame;
