@@ -1,16 +1,17 @@
 /* isolate.c — a library call in a child process (see isolate.h).
- * What it is: fork, then exec of the entry's helper beside the running program, or failing that
- * of /proc/self/exe, with the entry in the environment
- * (LM_ISOLATE_ENTRY, _FD, _MEM, _ARG in hex); between the two the child makes only system calls
- * (no allocation, no lock: any lock may be held by a thread that no longer exists). The new
- * image's constructor (lm_isolate_serve) sets the limits that need a look at its own address
- * space, default fault handlers (so a fault ends the child, whatever handlers a sanitizer or
- * fuzzer installed), and runs the entry. The parent bounds each read of the reply by the wall
- * clock (a child that never answers is killed) and turns the child's end into a status and a
- * message.
+ * What it is: fork, then exec of the entry's helper beside the running program or beside the
+ * shared library holding this code, or failing that of /proc/self/exe, with the entry in the
+ * environment (LM_ISOLATE_ENTRY, _FD, _MEM, _ARG in hex); between the two the child makes only
+ * system calls (no allocation, no lock: any lock may be held by a thread that no longer
+ * exists). The new image's constructor (lm_isolate_serve) sets the limits that need a look at
+ * its own address space, default fault handlers (so a fault ends the child, whatever handlers
+ * a sanitizer or fuzzer installed), and runs the entry. The parent bounds each read of the
+ * reply by the wall clock (a child that never answers is killed) and turns the child's end into
+ * a status and a message.
  * What it is not: a general process API (no stdin/stdout plumbing). */
 #define _GNU_SOURCE
 #include "data/isolate.h"
+#include <dlfcn.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <poll.h>
@@ -126,19 +127,33 @@ static char **child_env(const lm_isolate_entry *en, int fd, size_t mem, const vo
     return env;
 }
 
-/* dir(/proc/self/exe)/name if it is an executable file; "" otherwise. */
+/* dir(file)/name if it is an executable file; "" otherwise. */
+static void beside(const char *file, const char *name, char *out, size_t cap)
+{
+    out[0] = 0;
+    const char *slash = strrchr(file, '/');
+    if (!slash) return;
+    if ((size_t)snprintf(out, cap, "%.*s/%s", (int)(slash - file), file, name) >= cap ||
+        access(out, X_OK) != 0)
+        out[0] = 0;
+}
+
+/* The helper: beside the running program (/proc/self/exe), else beside the shared object
+ * holding this code (liblumosaic.so in a program that loads it, e.g. Python); "" if neither
+ * has it. */
 static void helper_path(const char *name, char *out, size_t cap)
 {
+    static const char here = 0;
     out[0] = 0;
     char self[4096];
     ssize_t k = readlink("/proc/self/exe", self, sizeof self - 1);
-    if (k <= 0) return;
-    self[k] = 0;
-    char *slash = strrchr(self, '/');
-    if (!slash) return;
-    *slash = 0;
-    if ((size_t)snprintf(out, cap, "%s/%s", self, name) >= cap || access(out, X_OK) != 0)
-        out[0] = 0;
+    if (k > 0) {
+        self[k] = 0;
+        beside(self, name, out, cap);
+    }
+    Dl_info info;
+    if (!out[0] && dladdr(&here, &info) && info.dli_fname && info.dli_fname[0])
+        beside(info.dli_fname, name, out, cap);
 }
 
 lm_status lm_isolate_start(lm_isolate *c, const lm_isolate_entry *entry, const void *arg,

@@ -5,13 +5,14 @@
  * becomes an error of the caller ("<what>: the reader crashed (signal 11)"), never the death of
  * the program. Used for libmatio/libhdf5 (io_mat.c), which fault on some corrupt files.
  * How: fork, then exec of the entry's helper program (a small executable beside the running
- * one, linked with only the libraries the entry needs) or, without one, of the running program
- * itself (/proc/self/exe), with the entry's name, the argument and the pipe in the environment;
- * a constructor of the entry's file (LM_ISOLATE_ENTRY) finds them before main and runs the entry
- * alone. The helper saves the start of a program with every image library (~0.2 s). A fresh image matters:
- * a child made by fork alone keeps every lock another thread of the parent held at that
- * instant (an allocator's, a library's), and waits on it for ever. Only if exec fails (no /proc)
- * does the forked child run the entry itself.
+ * one or beside the shared library liblumosaic.so, linked with only the libraries the entry
+ * needs) or, without one, of the running program itself (/proc/self/exe), with the entry's
+ * name, the argument and the pipe in the environment; a constructor of the entry's file
+ * (LM_ISOLATE_ENTRY) finds them before main and runs the entry alone. The helper saves the
+ * start of a program with every image library (~0.2 s). A fresh image matters: a child made by
+ * fork alone keeps every lock another thread of the parent held at that instant (an
+ * allocator's, a library's), and waits on it for ever. Only if exec fails (no /proc) does the
+ * forked child run the entry itself.
  * What it is not: a security sandbox (the child keeps the parent's privileges and files), or a
  * thread pool. The child runs only the entry: no main, no OpenMP, no atexit handlers. */
 #ifndef LM_ISOLATE_H
