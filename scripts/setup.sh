@@ -5,14 +5,16 @@
 # and PoCL (CPU OpenCL driver), gnuplot (the charts of `lumosaic study`), Open MPI (data-parallel
 # training: `mpirun -np N lumosaic train`), FFTW
 # (single precision: the DOE optics and PSF convolution of the QDO baseline), Chromium (the
-# headless browser that loads the page of `lumosaic report` in its test, label "browser").
+# headless browser that loads the page of `lumosaic report` in its test, label "browser"),
+# python3-venv and Ninja (`pip install ./python`: a virtual environment, the library's parallel
+# build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 pkgs=(build-essential cmake pkg-config libopenblas-dev libjansson-dev libopenimageio-dev
       libpng-dev libmatio-dev libhdf5-dev libopenexr-dev zlib1g-dev ocl-icd-opencl-dev
-      opencl-headers pocl-opencl-icd clinfo python3 gnuplot-nox libopenmpi-dev openmpi-bin
-      libfftw3-dev chromium)
+      opencl-headers pocl-opencl-icd clinfo python3 python3-venv ninja-build gnuplot-nox
+      libopenmpi-dev openmpi-bin libfftw3-dev chromium)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # test.sh — the whole test suite: set-up and build (scripts/setup.sh), every CTest test in the
 # Release build (portable, warnings as errors; the numerical tests also at each lower
-# instruction-set level, label "isa"), then the same suite built with AddressSanitizer +
-# UndefinedBehaviorSanitizer, then the core library compiled (not run) for other CPU targets
-# and with clang, warnings as errors (scripts/check_targets.sh).
+# instruction-set level, label "isa"), the Python package installed with pip in a virtual
+# environment and its pytest tests (scripts/test_python.sh), then the same suite built with
+# AddressSanitizer + UndefinedBehaviorSanitizer, then the core library compiled (not run) for
+# other CPU targets and with clang, warnings as errors (scripts/check_targets.sh).
 # Exits non-zero on any failure. A skipped OpenCL test fails the run when CI=true (CI installs
 # PoCL, so a skip there means the set-up is broken).
 set -euo pipefail
@@ -13,6 +14,9 @@ LM_WERROR=ON scripts/setup.sh
 jobs=$(nproc)
 echo "== tests (Release) =="
 ctest --test-dir build --output-on-failure -j"$jobs" | tee build/ctest.log
+
+echo "== Python package (pip install ./python in build/venv, pytest) =="
+scripts/test_python.sh
 
 echo "== tests (AddressSanitizer + UndefinedBehaviorSanitizer) =="
 cmake -S . -B build-asan -DLM_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLM_WERROR=ON > /dev/null
