@@ -3,6 +3,7 @@
  * own functions (data/system.h, data/cube_io.h, data/srgb.h, data/forward.h, data/metrics.h)
  * that checks the arguments and turns the library's errors into the API's.
  * What it is not: models and reconstruction (infer/api.c). */
+#include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -269,6 +270,16 @@ lm_api_status lm_api_metrics_compute(const float *pred, const float *truth, int 
     if (bands < 1 || height < 1 || width < 1)
         return lm_api_fail(err, LM_API_ERR_SHAPE, "lm_api_metrics_compute: size %d x %d x %d",
                            bands, height, width);
+    const size_t n = (size_t)bands * height * width;
+    for (int k = 0; k < 2; k++) {
+        const float *a = k ? truth : pred;
+        for (size_t i = 0; i < n; i++)
+            if (!isfinite(a[i]))
+                return lm_api_fail(err, LM_API_ERR_NUMERIC, "lm_api_metrics_compute: %s holds "
+                                   "%g at band %zu, row %zu, column %zu", k ? "truth" : "pred",
+                                   (double)a[i], i / ((size_t)height * width),
+                                   i / width % height, i % width);
+    }
     lm_metrics m;
     lm_err e;
     lm_err_clear(&e);

@@ -210,7 +210,8 @@ typedef struct lm_api_frame {
 
 /* Reconstruct one frame into a caller-owned buffer: cube receives 31 x height x width floats
  * (n: its element count, checked), the bands 400, 410, ..., 700 nm; wavelengths (NULL or 31
- * floats) receives them. Values below 0 are set to 0 unless lm_api_model_set_clamp(0). */
+ * floats) receives them. Values below 0 are set to 0 unless lm_api_model_set_clamp(0). A float
+ * frame holding NaN or infinity is refused (LM_API_ERR_NUMERIC). */
 LM_API lm_api_status lm_api_reconstruct(lm_api_model *model, const lm_api_frame *frame,
                                         float *cube, size_t n, float *wavelengths,
                                         lm_api_error *err);
@@ -227,7 +228,7 @@ typedef struct lm_api_metrics {
 } lm_api_metrics;
 
 /* The metrics of a reconstruction against the truth: two bands x height x width arrays
- * (height and width at least 11). */
+ * (height and width at least 11) of finite values (else LM_API_ERR_NUMERIC). */
 LM_API lm_api_status lm_api_metrics_compute(const float *pred, const float *truth, int bands,
                                             int height, int width, lm_api_metrics *out,
                                             lm_api_error *err);

@@ -4,6 +4,7 @@
  * takes, clamped at 0 as infer writes it (or not, as eval scores it).
  * What it is not: systems, cubes, simulation or metrics (data/api.c); alignment of sequences
  * or the per-window model choice (`lumosaic infer` only). */
+#include <math.h>
 #include <omp.h>
 #include <stdlib.h>
 #include <string.h>
@@ -151,6 +152,15 @@ static lm_api_status check_frame(const lm_api_model *model, const lm_api_frame *
     lm_err e;
     lm_err_clear(&e);
     if (lm_recon_check(m, f->height, f->width, &e)) return lm_api_from_err(&e, err);
+    if (f->type == LM_API_PIXEL_F32)
+        for (int k = 0; k < 1 + two; k++) {
+            const float *p = k ? f->bucket0 : f->bucket1;
+            for (size_t i = 0; i < (size_t)f->height * f->width; i++)
+                if (!isfinite(p[i]))
+                    return lm_api_fail(err, LM_API_ERR_NUMERIC, "lm_api_reconstruct: frame->%s "
+                                       "holds %g at row %zu, column %zu", k ? "bucket0" :
+                                       "bucket1", (double)p[i], i / f->width, i % f->width);
+        }
     return LM_API_OK;
 }
 

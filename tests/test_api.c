@@ -8,6 +8,7 @@
  * cubes, threads, bf16 precision, the sRGB preview, a cube round trip through EXR, and errors:
  * missing and corrupt files, NULL arguments, wrong buffers and frames (a status and a message,
  * no crash). */
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -258,6 +259,15 @@ static void test_against_eval(void)
     g = f;
     g.bucket1 = NULL;
     CHECK(lm_api_reconstruct(m, &g, buf, nc, NULL, &err) == LM_API_ERR_ARG);
+    /* NaN in a frame, in a cube to score: refused with the place */
+    const float keep = frame[W + 2];
+    frame[W + 2] = NAN;
+    CHECK(lm_api_reconstruct(m, &f, buf, nc, NULL, &err) == LM_API_ERR_NUMERIC);
+    CHECK(strstr(err.message, "row 1, column 2") != NULL);
+    frame[W + 2] = keep;
+    buf[5] = INFINITY;
+    CHECK(lm_api_metrics_compute(buf, truth.data, 31, H, W, &ma, &err) == LM_API_ERR_NUMERIC);
+    CHECK(strstr(err.message, "pred") != NULL);
     /* still working after the errors */
     CHECK(lm_api_reconstruct(m, &f, buf, nc, NULL, &err) == LM_API_OK && err.status == LM_API_OK);
     CHECK(rc && !memcmp(buf, lm_api_cube_data(rc), sizeof(float) * nc));

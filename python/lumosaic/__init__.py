@@ -293,8 +293,8 @@ def _frame_array(a, what: str) -> np.ndarray:
     x = np.asarray(a)
     if x.ndim != 2:
         raise Error(Status.SHAPE, f"{what}: shape {x.shape}: a (height, width) frame")
-    if x.dtype == np.uint16 or x.dtype == np.float32:
-        return np.ascontiguousarray(x)
+    if x.dtype.kind == "u" and x.dtype.itemsize == 2:
+        return np.ascontiguousarray(x, dtype=np.uint16)  # (native byte order)
     if np.issubdtype(x.dtype, np.floating):
         return np.ascontiguousarray(x, dtype=np.float32)
     raise Error(Status.ARG, f"{what}: dtype {x.dtype}: uint16 (65535 = full scale) or float "

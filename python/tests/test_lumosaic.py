@@ -237,6 +237,17 @@ def test_errors_are_exceptions_with_one_line(tmp_path, model):
         lumosaic.write_cube("/nonexistent/dir/x.exr", np.ones((4, 4, 31), np.float32))
     with pytest.raises(lumosaic.Error):
         lumosaic.metrics(np.zeros((16, 16, 31)), np.zeros((16, 17, 31)))
+    nan = np.full((66, 64), 0.5, np.float32)
+    nan[1, 2] = np.nan
+    with pytest.raises(lumosaic.Error) as e:
+        model.reconstruct(nan)
+    assert e.value.status == lumosaic.Status.NUMERIC and "row 1, column 2" in str(e.value)
+    with pytest.raises(lumosaic.Error) as e:
+        lumosaic.metrics(np.full((16, 16, 31), np.nan), np.ones((16, 16, 31)))
+    assert e.value.status == lumosaic.Status.NUMERIC
+    with pytest.raises(lumosaic.Error) as e:
+        lumosaic.simulate(np.full((12, 12, 31), np.inf, np.float32))
+    assert e.value.status == lumosaic.Status.NUMERIC
     with pytest.raises(lumosaic.Error):
         lumosaic.simulate(np.ones((12, 12, 31), np.float32), system=tmp_path / "no.json")
     # the model still works after its errors
