@@ -121,8 +121,8 @@ class _View:
                                     "data": (_capi.lib.lm_api_cube_data(handle), False)}
 
 
-def read_cube(path: PathLike, mat_key: Optional[str] = None, *,
-              return_wavelengths: bool = False):
+def read_cube(path: PathLike, mat_key: Optional[str] = None, *, return_wavelengths: bool = False
+              ) -> Union[np.ndarray, Tuple[np.ndarray, np.ndarray]]:
     """Read a spectral cube: a CAVE folder (31 band PNGs), a MATLAB ``.mat`` file (v5 or v7.3:
     ARAD, KAUST, ICVL, Harvard and other keys) or a spectral OpenEXR (channels ``T.<nm>nm``).
 
@@ -244,7 +244,8 @@ class Noise:
 
 def simulate(cube: np.ndarray, system: Union[System, PathLike, None] = None,
              noise: Union[float, Noise] = 0.0, seed: int = 1, bucket0: bool = False,
-             threads: Optional[int] = None, wavelengths: Optional[Sequence[float]] = None):
+             threads: Optional[int] = None, wavelengths: Optional[Sequence[float]] = None
+             ) -> Union[np.ndarray, Tuple[np.ndarray, np.ndarray]]:
     """The coded frame a cube gives through the system's forward model, as
     ``lumosaic simulate --seed SEED --format exr`` makes it.
 
