@@ -302,12 +302,12 @@ def test_gil_released_during_reconstruction():
     t1 = time.perf_counter()
     stop.set()
     t.join()
-    inside = [x for x in ticks if t0 <= x <= t1]
-    assert t1 - t0 > 0.05, "the reconstruction is too short to tell"
-    # the thread kept running: at least half the ticks a free thread gets in that time
-    # (held, the GIL would leave it none between the call's start and end)
-    gaps = np.diff([t0] + inside + [t1])
-    assert gaps.max() < 0.5 * (t1 - t0), (len(inside), t1 - t0, gaps.max())
+    d = t1 - t0
+    assert d > 0.05, "the reconstruction is too short to tell"
+    # the thread kept running in the middle half of the call (with the GIL held it would not
+    # run at all between the call's start and its end)
+    middle = [x for x in ticks if t0 + d / 4 <= x <= t1 - d / 4]
+    assert len(middle) >= 3, (len(middle), len(ticks), d)
 
 
 def test_threads_share_a_model_safely():
