@@ -17,6 +17,9 @@ Arrays:
 Errors of the library, and arguments it cannot take, raise :class:`Error` with the library's
 one-line message and a :class:`Status`.
 
+What it is not: training, evaluation over datasets or sequences with alignment (the
+``lumosaic`` program's ``train``, ``eval`` and ``infer`` on files).
+
 Example::
 
     import lumosaic

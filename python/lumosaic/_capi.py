@@ -2,6 +2,7 @@
 
 The library is loaded with ``ctypes.CDLL``, which releases the GIL for the duration of every
 call: a reconstruction or a simulation runs while other Python threads go on.
+What it is not: the package's interface (``lumosaic/__init__.py``: arrays, checks, ownership).
 """
 from __future__ import annotations
 
