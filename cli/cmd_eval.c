@@ -59,7 +59,12 @@ static void help(void)
            "  --threads T      OpenMP threads (1..1024; default: all cores)\n"
            "  --rainbow SIZE   rainbow scene size (0 = skip, else 66..4096; default 256)\n"
            "  --batch N        windows per network call (1..4096; default 8)\n"
-           "  --system FILE    system description (default: the one recorded in the model)\n"
+           "  --system FILE    system description (default: the one recorded in the model).\n"
+           "                   One that differs from the model's only in LED gains (a\n"
+           "                   calibrated system) is simulated as the camera and its frames\n"
+           "                   rescaled per tile phase to the model's gains (one line says so)\n"
+           "  --no-gain-remap  with such a --system: give its frames to the model as they are\n"
+           "                   (what the rescaling gains, measured)\n"
            "  --motion LIST    also score moving scenes: speeds in px/s (0..10000, at most %d),\n"
            "                   each a 3-frame noise-free coded video of the scene translating\n"
            "                   along (0.8, 0.6); the middle frame is reconstructed with and\n"
@@ -107,7 +112,7 @@ typedef struct eval_opts {
     float mk[LM_EVAL_MAX_MOTION_NOISE]; /* --motion-noise levels (fractions) */
     int nmk;
     long long rainbow, batch;
-    int noise_oracle, clip, align_plain;
+    int noise_oracle, clip, align_plain, no_remap;
     long long bits;
     double photons, read_noise;
 } eval_opts;
@@ -161,6 +166,7 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_value(c, "--motion", &motion)) ||
         (r = lm_cli_value(c, "--motion-noise", &mnoise)) ||
         (r = lm_cli_flag(c, "--noise-oracle", &o->noise_oracle)) ||
+        (r = lm_cli_flag(c, "--no-gain-remap", &o->no_remap)) ||
         (r = lm_cli_flag(c, "--clip", &o->clip)) ||
         (r = lm_cli_int(c, "--bits", 0, 24, &o->bits)) ||
         (r = lm_cli_real(c, "--photons", 0, 1e12, &o->photons)) ||
@@ -525,6 +531,13 @@ static int run(eval_run *r)
     lm_err e;
     lm_err_clear(&e);
     if (lm_infer_model_load(r->o->model, r->o->system, &r->im, &e)) return fail(r->c, &e);
+    if (r->im.remap.active) {
+        char line[3000];
+        lm_gain_remap_describe(&r->im.remap, r->im.system_path, r->im.model_system, line,
+                               sizeof line);
+        fprintf(stderr, "%s%s\n", line, r->o->no_remap ? "; not applied (--no-gain-remap)" : "");
+        if (r->o->no_remap) r->im.remap.active = 0;
+    }
     r->im.noise_oracle = r->o->noise_oracle;
     r->im.sensor_clip = r->o->clip;
     r->im.sensor_bits = (int)r->o->bits;

@@ -77,8 +77,12 @@ static void help(void)
            "  --output DIR     output folder (must not exist, or be empty); written atomically\n"
            "  --batch N        windows per network call (1..4096; default 8)\n"
            "  --threads T      OpenMP threads (1..1024; default: all cores)\n"
-           "  --system FILE    system description (default: the one recorded in the model; it\n"
-           "                   must be the same file content)\n"
+           "  --system FILE    system description of the camera (default: the one recorded in\n"
+           "                   the model). One that differs from the model's only in LED gains\n"
+           "                   or allocations (a 'lumosaic calibrate' output) is accepted: each\n"
+           "                   tile phase of every frame is rescaled to the model's gains (and\n"
+           "                   the noise level with it; one line says so). Another tile map,\n"
+           "                   other LEDs or another sensor are refused\n"
            "  --no-align       do not align a sequence in time. By default, for 2 or more\n"
            "                   frames, each LED sub-image is moved to the frame's lime-LED\n"
            "                   time by optical flow to the neighbouring frames (needs\n"
@@ -407,7 +411,8 @@ static lm_status with_bucket0(infer_run *r, int i, const float **in, int H, int 
 }
 
 /* One frame to a 31-band cube by the run's path: auto, or the fixed model's (infer/recon.h:
- * whole frame or windows). */
+ * whole frame or windows). A camera of other gains than the model's: the frame rescaled per
+ * tile phase first (infer/raw.h), with the given noise level. */
 static lm_status reconstruct(infer_run *r, const float *in, int H, int W, lm_cube *cube,
                              lm_err *e)
 {
@@ -418,7 +423,7 @@ static lm_status reconstruct(infer_run *r, const float *in, int H, int W, lm_cub
         return auto_frame(r, in, H, W, &to, cube, e);
     }
     lm_recon_opts ro = {.batch = (int)r->o->batch, .tiles = r->o->tiles};
-    return lm_recon_frame(&r->ctx, r->im.model, in, H, W, &ro, cube, e);
+    return lm_recon_camera_frame(&r->ctx, &r->im, in, H, W, &ro, cube, e);
 }
 
 /* The share of windows per model over the run and the calibration's expected PSNR. */
@@ -495,6 +500,11 @@ static int open_auto(infer_run *r, lm_err *e)
         if (lm_infer_model_load(a->models[m].path, r->o->system, im, e))
             return lm_cli_error(r->c, "%s: model %d: %s", r->o->auto_file, m, e->msg);
         r->models[m] = im->model;
+        if (im->remap.active)
+            return lm_cli_error(r->c, "--model auto: %s has other LED gains than model '%s' "
+                                "was trained with: give that model with --model (its frames "
+                                "are rescaled to its gains)", im->system_path,
+                                a->models[m].path);
         if (lm_model_buckets(im->model) == 2)
             return lm_cli_error(r->c, "%s: model '%s' reads both buckets: --model auto takes "
                                 "one-bucket models only", r->o->auto_file, a->models[m].path);
@@ -524,6 +534,12 @@ static int open_inputs(infer_run *r, lm_err *e)
         r->im.model->noise_given = (float)r->o->noise_level;
     }
     if (lm_frame_seq_open(r->o->input, &r->seq, e)) return fail(r->c, e, 0);
+    if (!r->o->is_auto && r->im.remap.active) {
+        char line[3000];
+        lm_gain_remap_describe(&r->im.remap, r->im.system_path, r->im.model_system, line,
+                               sizeof line);
+        fprintf(stderr, "%s\n", line);
+    }
     int rc = open_bucket0(r, e);
     if (rc) return rc;
     if (lm_recon_check(r->im.model, r->seq.height, r->seq.width, e))

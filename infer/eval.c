@@ -142,8 +142,21 @@ lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *
     if (m->in_channels != lm_model_coded_planes(m))
         return lm_err_set(err, LM_ERR_ARG, "eval: model %s takes %d input channels and is not "
                           "MST++", m->preset, m->in_channels);
-    if (whole && lm_whole_halo(m) > 0) return lm_whole_infer(c, m, frame, height, width, out, err);
-    return lm_tile_infer(c, m, frame, height, width, to, out, err);
+    float *mapped = NULL, given = m->noise_given;
+    if (im->remap.active) { /* frames of the camera's gains, rescaled to the model's */
+        const int planes = lm_model_coded_planes(m);
+        mapped = malloc(sizeof(float) * planes * (size_t)height * width);
+        if (!mapped) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+        m->noise_given = lm_gain_remap_frame(&im->remap, frame, planes, height, width, given,
+                                             mapped);
+        frame = mapped;
+    }
+    lm_status st = whole && lm_whole_halo(m) > 0
+                       ? lm_whole_infer(c, m, frame, height, width, out, err)
+                       : lm_tile_infer(c, m, frame, height, width, to, out, err);
+    m->noise_given = given;
+    free(mapped);
+    return st;
 }
 
 lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err)

@@ -57,7 +57,9 @@ lm_status lm_eval_simulate(const lm_infer_model *im, const lm_cube *truth,
  * `whole` is non-zero and the model declares a receptive field (lm_whole_halo > 0); models
  * with LM_CAP_WHOLE_FRAME (MST++: the RGB "mst", "mst-tiny", and the coded "mst-coded", whose
  * global attention has no windows) through lm_mst_reconstruct on the whole frame with lm_nthreads(c)
- * threads (in its own ctx; `to` and `whole` unused). c must hold no tensors. Errors: those of
+ * threads (in its own ctx; `to` and `whole` unused). A coded frame of a system whose gains
+ * differ from the model's (im->remap active, infer/raw.h) is rescaled per tile phase first,
+ * the model's given noise level converted with it. c must hold no tensors. Errors: those of
  * the inference paths; LM_ERR_ARG for a model that is neither coded nor MST++. */
 lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *frame,
                               int height, int width, const lm_tile_opts *to, int whole,
