@@ -42,6 +42,7 @@
 #include "data/align.h"
 #include "infer/auto.h"
 #include "infer/model_io.h"
+#include "infer/raw.h"
 #include "infer/recon.h"
 #include "infer/tile.h"
 #include "tensor/isa.h"
@@ -51,7 +52,9 @@ static void help(void)
     printf("usage: lumosaic infer --model RUN --input FRAMES --output DIR [--batch N]\n"
            "                      [--threads T] [--system FILE] [--no-align] [--tiles]\n"
            "                      [--device cpu|opencl] [--auto FILE --auto-tol DB]\n"
-           "                      [--bucket0 FRAMES] [--precision fp32|bf16]\n\n"
+           "                      [--bucket0 FRAMES] [--precision fp32|bf16]\n"
+           "                      [--bits B [--msb]] [--black-level V | --dark FRAMES]\n"
+           "                      [--flat FRAMES] [--saturation-mask]\n\n"
            "Reconstruct 31-band cubes (400-700 nm) from coded frames with a trained model,\n"
            "patch-wise: 66 x 64 windows, stride 30 x 32, on the tile grid, blended by a raised-\n"
            "cosine weight; models with a finite receptive field (linear, rt-8, rt-16) instead\n"
@@ -98,12 +101,30 @@ static void help(void)
            "                   it): Gaussian noise sd = K x the frame's maximum (0..1), as\n"
            "                   simulate --noise K. Default: estimated from each frame\n"
            LM_CLI_PRECISION_HELP
+           "Raw frames from a camera (one-bucket models; defaults: none of these). A frame's\n"
+           "value 1.0 is full scale, the largest code: the system's white (info --system).\n"
+           "  --bits B         integer files hold B-bit data (1..16), e.g. 12-bit in a 16-bit\n"
+           "                   PNG/TIFF: LSB-aligned (codes 0..2^B-1) unless --msb; code\n"
+           "                   2^B-1 is full scale. A code outside that layout is an error\n"
+           "  --msb            the B bits are the file's high bits (codes x 2^(16-B))\n"
+           "  --black-level V  subtract V (in B-bit codes; float files: in their units):\n"
+           "                   (code - V) / (full scale - V)\n"
+           "  --dark FRAMES    dark frames (file, pattern or folder; averaged), subtracted per\n"
+           "                   pixel: (x - dark) / (1 - mean dark); not with --black-level\n"
+           "  --flat FRAMES    frames of a white target (averaged, dark-subtracted): each\n"
+           "                   pixel divided by its gain, the flat over its tile phase's mean\n"
+           "                   (each LED keeps its level); pixels under 5 %% of it are left\n"
+           "  --saturation-mask  also write DIR/saturated_NNNN.png (65535 where a pixel is at\n"
+           "                   full scale, else 0). Every frame's progress line gives the\n"
+           "                   share of saturated pixels\n"
            "  --help           this text\n");
 }
 
 typedef struct infer_opts {
     const char *model, *input, *output, *system, *auto_file, *bucket0;
     lm_cli_common com; /* --threads, --device */
+    lm_raw_opts raw;   /* --bits, --msb, --black-level, --dark, --flat */
+    int sat_mask;
     long long batch;
     double auto_tol, noise_level;
     int no_align, tiles, is_auto;
@@ -113,6 +134,7 @@ typedef struct infer_opts {
 static int parse(lm_cli *c, infer_opts *o)
 {
     *o = (infer_opts){.batch = 8, .auto_tol = 0.5, .noise_level = -1.0};
+    long long bits = 0;
     while (!lm_cli_done(c)) {
         int r;
         if (lm_cli_is_help(c)) {
@@ -128,6 +150,12 @@ static int parse(lm_cli *c, infer_opts *o)
             (r = lm_cli_real(c, "--auto-tol", 0.0, 1e6, &o->auto_tol)) ||
             (r = lm_cli_real(c, "--noise-level", 0.0, 1.0, &o->noise_level)) ||
             (r = lm_cli_flag(c, "--tiles", &o->tiles)) ||
+            (r = lm_cli_int(c, "--bits", 1, 16, &bits)) ||
+            (r = lm_cli_flag(c, "--msb", &o->raw.msb)) ||
+            (r = lm_cli_real(c, "--black-level", 0.0, 65535.0, &o->raw.black)) ||
+            (r = lm_cli_value(c, "--dark", &o->raw.dark)) ||
+            (r = lm_cli_value(c, "--flat", &o->raw.flat)) ||
+            (r = lm_cli_flag(c, "--saturation-mask", &o->sat_mask)) ||
             (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
             (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE | LM_CLI_PRECISION, 0, &o->com)) ||
             (r = lm_cli_flag(c, "--no-align", &o->no_align))) {
@@ -136,6 +164,8 @@ static int parse(lm_cli *c, infer_opts *o)
         }
         return lm_cli_unknown(c);
     }
+    o->raw.bits = (int)bits;
+    if (o->raw.msb && !bits) return lm_cli_error(c, "--msb needs --bits B");
     if (!o->model) return lm_cli_error(c, "--model is required (see 'lumosaic infer --help')");
     if (!o->input) return lm_cli_error(c, "--input is required (see 'lumosaic infer --help')");
     if (!o->output) return lm_cli_error(c, "--output is required (see 'lumosaic infer --help')");
@@ -181,6 +211,8 @@ typedef struct infer_run {
     lm_frame_seq seq0;   /* two-bucket models: bucket 0 of the frames (count 0 otherwise) */
     float *in2;          /* two-bucket models: bucket 1 then bucket 0, 2 x H x W */
     lm_srgb srgb;
+    lm_raw raw;          /* --bits, --black-level, --dark, --flat */
+    double *sat;         /* per frame: the share of saturated pixels (-1: not read here) */
     lm_ctx ctx;
     lm_tile_device dev;
     float *rgb;
@@ -188,6 +220,40 @@ typedef struct infer_run {
     char tmp[1100];
     int first, end;  /* the frames this process reconstructs: [first, end) */
 } infer_run;
+
+/* Frame i's saturated pixels (1.0, else 0) as DIR/saturated_NNNN.png (the frame read again). */
+static int write_mask(infer_run *r, int i, int number, lm_err *e)
+{
+    lm_frame f;
+    if (lm_frame_seq_read(&r->seq, i, &f, e)) return fail(r->c, e, 0);
+    const size_t n = (size_t)f.height * f.width;
+    uint8_t *m = malloc(n);
+    if (!m) {
+        lm_frame_free(&f);
+        return lm_cli_error(r->c, "out of memory (saturation mask)"), 1;
+    }
+    lm_raw_saturated(&r->o->raw, &f, m);
+    for (size_t k = 0; k < n; k++) f.data[k] = m[k];
+    free(m);
+    char path[1200];
+    snprintf(path, sizeof path, "%s/saturated_%04d.png", r->tmp, number);
+    lm_status st = lm_frame_write(path, f.height, f.width, f.data, e);
+    lm_frame_free(&f);
+    return st ? fail(r->c, e, 1) : 0;
+}
+
+/* Read frame i of the sequence converted to the system's scale (--bits, --black-level, --dark,
+ * --flat; infer/raw.h), its share of saturated pixels noted in r->sat[i]. */
+static lm_status read_frame(infer_run *r, int i, lm_frame *f, lm_err *e)
+{
+    if (lm_frame_seq_read(&r->seq, i, f, e)) return e->status;
+    r->sat[i] = lm_raw_saturated(&r->o->raw, f, NULL);
+    if (lm_raw_apply(&r->raw, f, r->seq.paths[i], e)) {
+        lm_frame_free(f);
+        return e->status;
+    }
+    return LM_OK;
+}
 
 /* Write one reconstructed cube (clamped to >= 0) and its sRGB preview into the staging dir. */
 static int write_frame(infer_run *r, lm_cube *cube, int number, lm_err *e)
@@ -200,7 +266,7 @@ static int write_frame(infer_run *r, lm_cube *cube, int number, lm_err *e)
     if (lm_srgb_render(&r->srgb, cube, 1.0f, NULL, r->rgb, e) ||
         lm_image_write_rgb8(path, cube->width, cube->height, r->rgb, e))
         return fail(r->c, e, 1);
-    return 0;
+    return r->o->sat_mask ? write_mask(r, number - r->seq.first_index, number, e) : 0;
 }
 
 static void align_free(infer_align *a)
@@ -250,7 +316,7 @@ static lm_status mf_step(infer_run *r, int i, lm_err *e)
         int j = i - 1 + k;
         if (j < 0 || j >= r->seq.count) continue;
         lm_frame f;
-        if (lm_frame_seq_read(&r->seq, j, &f, e)) return e->status;
+        if (read_frame(r, j, &f, e)) return e->status;
         memcpy(a->fr[k], f.data, sizeof(float) * (size_t)f.height * f.width);
         lm_frame_free(&f);
         fr[k] = a->fr[k];
@@ -301,7 +367,7 @@ static int align_init(infer_run *r, lm_err *e)
 static lm_status load_planes(infer_run *r, int i, float *dst, lm_err *e)
 {
     lm_frame f;
-    if (lm_frame_seq_read(&r->seq, i, &f, e)) return e->status;
+    if (read_frame(r, i, &f, e)) return e->status;
     lm_status st = lm_align_unshuffle(f.data, f.height, f.width, r->al.ty, r->al.tx, dst, e);
     lm_frame_free(&f);
     return st;
@@ -347,7 +413,7 @@ static lm_status frame_input(infer_run *r, int i, lm_frame *f, const float **dat
         *data = r->al.raw;
         return LM_OK;
     }
-    if (lm_frame_seq_read(&r->seq, i, f, e)) return e->status;
+    if (read_frame(r, i, f, e)) return e->status;
     *data = f->data;
     return LM_OK;
 }
@@ -482,8 +548,9 @@ static int run_frames(infer_run *r)
         char al[48] = "alignment off";
         if (r->al.on || (r->al.mf && !r->o->no_align))
             snprintf(al, sizeof al, "alignment %.2f s", ta - t0);
-        fprintf(stderr, "frame %d/%d %s: %.2f s (%s, reconstruction %.2f s, writing %.2f s)\n",
-                i + 1, r->seq.count, r->seq.paths[i], t2 - t0, al, t1 - ta, t2 - t1);
+        fprintf(stderr, "frame %d/%d %s: %.2f s (%s, reconstruction %.2f s, writing %.2f s); "
+                "saturated %.3f %%\n", i + 1, r->seq.count, r->seq.paths[i], t2 - t0, al,
+                t1 - ta, t2 - t1, 100.0 * r->sat[i]);
     }
     if (r->o->is_auto) auto_summary(r);
     return 0;
@@ -534,6 +601,20 @@ static int open_inputs(infer_run *r, lm_err *e)
         r->im.model->noise_given = (float)r->o->noise_level;
     }
     if (lm_frame_seq_open(r->o->input, &r->seq, e)) return fail(r->c, e, 0);
+    r->sat = malloc(sizeof(double) * r->seq.count);
+    if (!r->sat) return lm_cli_error(r->c, "out of memory"), 1;
+    for (int i = 0; i < r->seq.count; i++) r->sat[i] = -1.0;
+    if (lm_raw_opts_any(&r->o->raw)) {
+        if (!r->o->is_auto && lm_model_buckets(r->im.model) == 2)
+            return lm_cli_error(r->c, "--bits, --black-level, --dark and --flat are for one-bucket "
+                                "frames (model %s reads both buckets)", r->im.model->preset);
+        if (lm_raw_init(&r->raw, &r->o->raw, r->seq.height, r->seq.width, r->im.sys.tile_rows,
+                        r->im.sys.tile_cols, e))
+            return fail(r->c, e, 0);
+        if (r->raw.flat_skipped)
+            fprintf(stderr, "lumosaic infer: warning: %ld pixels of the flat are under 5 %% of "
+                    "their tile phase's mean: left uncorrected\n", r->raw.flat_skipped);
+    }
     if (!r->o->is_auto && r->im.remap.active) {
         char line[3000];
         lm_gain_remap_describe(&r->im.remap, r->im.system_path, r->im.model_system, line,
@@ -693,6 +774,8 @@ int lm_cmd_infer(int argc, char **argv)
     lm_frame_seq_free(&r.seq);
     lm_frame_seq_free(&r.seq0);
     free(r.in2);
+    free(r.sat);
+    lm_raw_free(&r.raw);
     lm_infer_model_free(&r.im);
     for (int m = 1; m < LM_AUTO_MAX_MODELS; m++) lm_infer_model_free(&r.more[m]);
     return rc;

@@ -1,7 +1,10 @@
-/* test_raw.c — infer/raw.h: the gain remap. A frame simulated with the bundled system's gains
+/* test_raw.c — infer/raw.h. The gain remap: a frame simulated with the bundled system's gains
  * perturbed by up to +-30 % (or with another sub-frame allocation), rescaled per tile phase,
  * equals the frame of the bundled system; the given noise level is converted with the noise
- * factor; another tile map, another emission and a dark LED are refused by name. */
+ * factor; another tile map, another emission and a dark LED are refused by name. The raw-frame
+ * conventions on synthetic 16-bit PNG files: 12-bit data LSB- and MSB-aligned (and the wrong
+ * alignment refused), a black level, averaged dark frames, a flat with per-pixel gains (a dead
+ * pixel left), saturated pixels counted and masked. */
 #include "tests/check.h"
 #include "data/forward.h"
 #include "data/spectra.h"
@@ -10,6 +13,8 @@
 #include "infer/raw.h"
 #include "tensor/rng.h"
 #include <stdlib.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 static char *default_text(void)
 {
@@ -185,10 +190,162 @@ static void test_refusals(void)
     lm_system_free(&def);
 }
 
+/* ---- raw-frame conventions ------------------------------------------------------------ */
+enum { RH = 24, RW = 32 };
+static char tmpdir[64];
+
+/* A 16-bit PNG holding the codes c[i] (0..65535) at tmpdir/name; its path in path. */
+static void write_codes(const char *name, const double *c, char *path, size_t n)
+{
+    float v[RH * RW];
+    for (int i = 0; i < RH * RW; i++) v[i] = (float)(c[i] / 65535.0);
+    snprintf(path, n, "%s/%s", tmpdir, name);
+    lm_err e = {0};
+    CHECK_MSG(lm_frame_write(path, RH, RW, v, &e) == LM_OK, "%s", e.msg);
+}
+
+/* The scene: values in [0.05, 0.95], varied per pixel. */
+static double scene(int i) { return 0.05 + 0.9 * ((i * 37) % 101) / 100.0; }
+
+/* Read path and convert it with o; out gets the frame (RH x RW). */
+static lm_status convert(const lm_raw_opts *o, const char *path, float *out, lm_err *e)
+{
+    lm_raw r;
+    lm_frame f;
+    lm_err_clear(e);
+    lm_status st = lm_raw_init(&r, o, RH, RW, 3, 4, e);
+    if (st) return st;
+    st = lm_frame_read(path, &f, e);
+    if (!st) st = lm_raw_apply(&r, &f, path, e);
+    if (!st) memcpy(out, f.data, sizeof(float) * RH * RW);
+    if (!st) lm_frame_free(&f);
+    lm_raw_free(&r);
+    return st;
+}
+
+static void test_bits_alignment_and_saturation(void)
+{
+    double lsb[RH * RW], msb[RH * RW];
+    float want[RH * RW], got[RH * RW];
+    for (int i = 0; i < RH * RW; i++) {
+        lsb[i] = floor(scene(i) * 4095 + 0.5);
+        if (i % 97 == 5) lsb[i] = 4095; /* saturated */
+        msb[i] = lsb[i] * 16;
+        want[i] = (float)(lsb[i] / 4095);
+    }
+    char pl[256], pm[256];
+    write_codes("lsb.png", lsb, pl, sizeof pl);
+    write_codes("msb.png", msb, pm, sizeof pm);
+    lm_err e;
+    lm_raw_opts o = {.bits = 12};
+    CHECK_MSG(convert(&o, pl, got, &e) == LM_OK, "%s", e.msg);
+    CHECK_ARRAY_CLOSE(got, want, RH * RW, 1e-6, 0);
+    CHECK(convert(&o, pm, got, &e) == LM_ERR_FORMAT && strstr(e.msg, "add --msb"));
+    o.msb = 1;
+    CHECK_MSG(convert(&o, pm, got, &e) == LM_OK, "%s", e.msg);
+    CHECK_ARRAY_CLOSE(got, want, RH * RW, 1e-6, 0);
+    CHECK(convert(&o, pl, got, &e) == LM_ERR_FORMAT && strstr(e.msg, "drop --msb"));
+    lm_frame f;
+    lm_err_clear(&e);
+    if (lm_frame_read(pm, &f, &e) == LM_OK) {
+        uint8_t mask[RH * RW];
+        int k = 0, ok = 1;
+        for (int i = 0; i < RH * RW; i++) k += i % 97 == 5;
+        CHECK_CLOSE(lm_raw_saturated(&o, &f, mask), (double)k / (RH * RW), 1e-12, 0);
+        for (int i = 0; i < RH * RW; i++) ok &= mask[i] == (i % 97 == 5);
+        CHECK(ok);
+        lm_raw_opts plain = {0}; /* as 16-bit data nothing reaches 65535 */
+        CHECK(lm_raw_saturated(&plain, &f, NULL) == 0.0);
+        lm_frame_free(&f);
+    }
+    lm_raw r;
+    lm_raw_opts bad = {.bits = 12, .black = 4095};
+    CHECK(lm_raw_init(&r, &bad, RH, RW, 3, 4, &e) == LM_ERR_ARG);
+}
+
+static void test_black_dark_flat(void)
+{
+    double c[RH * RW], d1[RH * RW], d2[RH * RW], fl[RH * RW];
+    float want[RH * RW], got[RH * RW];
+    double dmean = 0.0;
+    for (int i = 0; i < RH * RW; i++) {
+        int y = i / RW, x = i % RW;
+        double d = 2000.0 + 50.0 * (x % 5) + 30.0 * (y % 7); /* codes of 16 bits */
+        d1[i] = d - 100, d2[i] = d + 100;
+        dmean += d / 65535.0;
+        want[i] = (float)scene(i);
+    }
+    dmean /= RH * RW;
+    char p[256], pd1[256], pd2[256], pf[256], pat[300];
+    lm_err e;
+    /* black level 256 in 12-bit codes */
+    for (int i = 0; i < RH * RW; i++) c[i] = floor(256 + scene(i) * (4095 - 256) + 0.5);
+    write_codes("black.png", c, p, sizeof p);
+    lm_raw_opts o = {.bits = 12, .black = 256};
+    CHECK_MSG(convert(&o, p, got, &e) == LM_OK, "%s", e.msg);
+    CHECK_ARRAY_CLOSE(got, want, RH * RW, 0.6 / (4095 - 256), 0);
+    /* dark frames: two, averaged */
+    for (int i = 0; i < RH * RW; i++)
+        c[i] = floor(65535.0 * (0.5 * (d1[i] + d2[i]) / 65535.0 + scene(i) * (1 - dmean)) + 0.5);
+    write_codes("dark_frame.png", c, p, sizeof p);
+    mkdir(strcat(strcpy(pat, tmpdir), "/dark"), 0700);
+    write_codes("dark/d_0001.png", d1, pd1, sizeof pd1);
+    write_codes("dark/d_0002.png", d2, pd2, sizeof pd2);
+    lm_raw_opts od = {.dark = pat};
+    CHECK_MSG(convert(&od, p, got, &e) == LM_OK, "%s", e.msg);
+    CHECK_ARRAY_CLOSE(got, want, RH * RW, 1.0 / 65535, 0);
+    /* a flat: per-pixel gains 1 +- 0.2 (mean 1 over each tile phase), a white target at 0.8 */
+    for (int i = 0; i < RH * RW; i++) {
+        int y = i / RW, x = i % RW;
+        double g = (x + y) % 2 ? 1.2 : 0.8;
+        fl[i] = floor(65535.0 * 0.8 * g + 0.5);
+        c[i] = floor(65535.0 * 0.8 * scene(i) * g + 0.5); /* below full scale */
+    }
+    fl[7 * RW + 9] = 0; /* a dead pixel: left as it is */
+    c[7 * RW + 9] = floor(65535.0 * 0.8 * scene(7 * RW + 9) + 0.5);
+    write_codes("flat.png", fl, pf, sizeof pf);
+    write_codes("flat_frame.png", c, p, sizeof p);
+    lm_raw_opts of = {.flat = pf};
+    lm_raw r;
+    lm_err_clear(&e);
+    CHECK_MSG(lm_raw_init(&r, &of, RH, RW, 3, 4, &e) == LM_OK, "%s", e.msg);
+    CHECK(r.flat_skipped == 1);
+    lm_raw_free(&r);
+    CHECK_MSG(convert(&of, p, got, &e) == LM_OK, "%s", e.msg);
+    /* the dead pixel (gain 0.8) is missing from its phase's mean, 64 pixels of mean gain 1:
+     * that phase's pixels read (1 - 0.8 / 64) of the scene */
+    for (int i = 0; i < RH * RW; i++) want[i] = (float)(0.8 * scene(i));
+    int bad = 0;
+    for (int i = 0; i < RH * RW; i++) {
+        int y = i / RW, x = i % RW;
+        double k = (y % 3 == 7 % 3 && x % 4 == 9 % 4) ? 1.0 - 0.8 / 64 : 1.0;
+        if (i == 7 * RW + 9) k = 1.0;
+        if (fabs(got[i] - want[i] * k) > 2e-4 && bad++ < 3)
+            fprintf(stderr, "(%d, %d): %g, want %g\n", y, x, got[i], want[i] * k);
+    }
+    CHECK_MSG(bad == 0, "%d pixels off", bad);
+    /* refused: both black and dark; a dark frame of another size; an unlit flat */
+    lm_raw_opts both = {.black = 10, .dark = pat};
+    CHECK(lm_raw_init(&r, &both, RH, RW, 3, 4, &e) == LM_ERR_ARG);
+    CHECK(lm_raw_init(&r, &od, RH, RW + 4, 3, 4, &e) == LM_ERR_SHAPE && strstr(e.msg, "dark"));
+    for (int i = 0; i < RH * RW; i++) fl[i] = (i % RW) % 4 == 1 ? 0 : 30000;
+    write_codes("unlit.png", fl, pf, sizeof pf);
+    lm_raw_opts ou = {.flat = pf};
+    lm_err_clear(&e);
+    CHECK(lm_raw_init(&r, &ou, RH, RW, 3, 4, &e) == LM_ERR_ARG && strstr(e.msg, "no signal"));
+}
+
 int main(void)
 {
+    snprintf(tmpdir, sizeof tmpdir, "/tmp/lm_test_raw_XXXXXX");
+    if (!mkdtemp(tmpdir)) return 1;
     RUN(test_perturbed_gains_map_back);
     RUN(test_other_allocation_maps_back);
     RUN(test_refusals);
+    RUN(test_bits_alignment_and_saturation);
+    RUN(test_black_dark_flat);
+    char cmd[128];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
+    if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmpdir);
     return check_summary();
 }
