@@ -75,6 +75,17 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
                         const float *k, int nnoise, const lm_tile_opts *to, const lm_rng *rng,
                         lm_metrics *out, lm_err *err);
 
+/* lm_eval_scene that also returns, per noise level, the seconds the reconstruction of the
+ * frame took (seconds[i], NULL-able; simulation and scoring not counted). */
+lm_status lm_eval_scene_timed(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
+                              const float *k, int nnoise, const lm_tile_opts *to,
+                              const lm_rng *rng, lm_metrics *out, double *seconds, lm_err *err);
+
+/* Was the scene at path (a file or a CAVE folder) among the model's training scenes, by
+ * content (lm_scene_content_hash in im->train_scenes)? 1 yes, 0 no, -1 unknown (the model
+ * records no training scenes). */
+int lm_eval_trained_on(const lm_infer_model *im, const char *path);
+
 /* Peak wavelength of a spectrum sampled at wl0 + i * step (i < n): the largest sample m (first
  * one on ties), refined by the vertex of the parabola through m - 1, m, m + 1 when both
  * neighbours exist and the parabola is concave; else wl0 + m * step. */

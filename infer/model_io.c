@@ -151,6 +151,7 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
         lm_infer_model_free(im);
         return st;
     }
+    im->train_scenes = lm_safetensors_meta(im->weights, "train_scenes", &e3);
     char *bk = lm_safetensors_meta(im->weights, "buckets", &e3); /* older files: none */
     if (bk && bk[0] && atoi(bk) != lm_model_buckets(im->model))
         st = lm_err_set(err, LM_ERR_FORMAT, "%s: records %s bucket(s), its preset %s reads %d",
@@ -224,5 +225,6 @@ void lm_infer_model_free(lm_infer_model *im)
     lm_system_free(&im->sys);
     if (im->qdo) lm_qdocam_free(im->qdo);
     free(im->qdo);
+    free(im->train_scenes);
     memset(im, 0, sizeof *im);
 }

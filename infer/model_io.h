@@ -21,6 +21,8 @@ typedef struct lm_infer_model {
     char system_path[1024];
     lm_gain_remap remap;  /* frames of sys's gains to the model's (remap.active 0: none) */
     char model_system[1024]; /* with a remap: the system file the model was trained with */
+    char *train_scenes;   /* content hashes of its training scenes ("train_scenes" metadata,
+                           * data/dataset.h); NULL when the file records none */
     int noise_oracle;     /* eval only: give noise-reading models the simulated level */
     int sensor_clip, sensor_bits; /* eval only: simulated frames clipped to [0, 1] / quantised
                                    * after the noise, as a 16-bit PNG holds them */
