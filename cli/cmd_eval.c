@@ -501,8 +501,11 @@ static void json_path(FILE *f, const char *p)
 static void write_json(FILE *f, const eval_run *r)
 {
     const eval_opts *o = r->o;
+    char name[160];
     fprintf(f, "{\n  \"model\": ");
     json_path(f, r->im.weights);
+    fprintf(f, ",\n  \"preset\": ");
+    json_str(f, lm_model_name(r->im.model, name, sizeof name));
     fprintf(f, ",\n  \"split\": \"%s\",\n  \"seed\": %lld,\n  \"noise_percent\": [",
             o->scenes ? "chosen" : split_names[o->split], o->com.seed);
     for (int n = 0; n < o->nnoise; n++) fprintf(f, "%s%g", n ? ", " : "", 100.0 * o->k[n]);
