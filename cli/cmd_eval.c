@@ -16,6 +16,11 @@
  * eval_motion.csv with --motion) into --output atomically (a staging folder renamed into place).
  * --device opencl runs the network on an OpenCL device (weights uploaded once, lm_tile_device;
  * MST++ models run on the CPU only).
+ * --scenes names the scored scenes instead of a split; each scored scene whose content the
+ * checkpoint lists among its training scenes gets a warning line (after the scores, so that an
+ * error stays the only line); the reconstruction's seconds per frame are reported per level.
+ * A --system of other LED gains than the model's is simulated as the camera and its frames
+ * rescaled to the model's gains (infer/eval.h), unless --no-gain-remap.
  * What it is not: training-time validation (train/), or a benchmark of speed. */
 #include <errno.h>
 #include <omp.h>

@@ -25,6 +25,10 @@
  * aligned in that plane instead (as align.h's edge rule). With --no-align, or sub-images below
  * the flow's minimum, the frames are stacked as recorded (the same duplicates at the ends).
  * They need a sequence of at least two frames (a single frame is refused, exit 2).
+ * A camera's own frames (infer/raw.h): --bits / --msb / --black-level / --dark / --flat convert
+ * each frame of bucket 1 as it is read, the share of saturated pixels of each is on its progress
+ * line (--saturation-mask writes them); a --system of other LED gains than the model's has each
+ * frame rescaled per tile phase to the model's gains (lm_recon_camera_frame).
  * What it is not: the flow or the alignment scheme themselves (data/flow.c, data/align.c). */
 #include <omp.h>
 #include <sys/stat.h>
