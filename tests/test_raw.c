@@ -216,9 +216,11 @@ static lm_status convert(const lm_raw_opts *o, const char *path, float *out, lm_
     lm_status st = lm_raw_init(&r, o, RH, RW, 3, 4, e);
     if (st) return st;
     st = lm_frame_read(path, &f, e);
-    if (!st) st = lm_raw_apply(&r, &f, path, e);
-    if (!st) memcpy(out, f.data, sizeof(float) * RH * RW);
-    if (!st) lm_frame_free(&f);
+    if (!st) {
+        st = lm_raw_apply(&r, &f, path, e);
+        if (!st) memcpy(out, f.data, sizeof(float) * RH * RW);
+        lm_frame_free(&f);
+    }
     lm_raw_free(&r);
     return st;
 }
