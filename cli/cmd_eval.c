@@ -16,6 +16,11 @@
  * eval_motion.csv with --motion) into --output atomically (a staging folder renamed into place).
  * --device opencl runs the network on an OpenCL device (weights uploaded once, lm_tile_device;
  * MST++ models run on the CPU only).
+ * --scenes names the scored scenes instead of a split; each scored scene whose content the
+ * checkpoint lists among its training scenes gets a warning line (after the scores, so that an
+ * error stays the only line); the reconstruction's seconds per frame are reported per level.
+ * A --system of other LED gains than the model's is simulated as the camera and its frames
+ * rescaled to the model's gains (infer/eval.h), unless --no-gain-remap.
  * What it is not: training-time validation (train/), or a benchmark of speed. */
 #include <errno.h>
 #include <math.h>
@@ -39,7 +44,7 @@ static void help(void)
            "                     [--threads T] [--rainbow SIZE] [--batch N] [--system FILE]\n"
            "                     [--motion 0,60,120,240] [--motion-noise 0,10]\n"
            "                     [--align confident|plain] [--precision fp32|bf16]\n"
-           "                     [--device cpu|opencl] [--mat-key NAME]\n"
+           "                     [--device cpu|opencl] [--mat-key NAME] [--scenes NAMES]\n"
            "                     [--report [--report-noise K]]\n\n"
            "Score a trained model (system.md §10): each scene is cropped to the mosaic tile,\n"
            "divided by its own maximum, simulated at each noise level and reconstructed\n"
@@ -47,13 +52,18 @@ static void help(void)
            "RGB models (the MST++ baseline) see the scene through an RGB camera (Nikon D5100,\n"
            "D65, white balanced) instead and reconstruct the whole frame at once.\n"
            "Then the rainbow scene: per row, the recovered peak wavelength (parabolic fit\n"
-           "around the largest band of the row's mean spectrum) against the true one.\n\n"
+           "around the largest band of the row's mean spectrum) against the true one.\n"
+           "s/frame: the reconstruction's seconds per frame (simulation and scoring not\n"
+           "counted). A scored scene that the model was trained on (its content hash is among\n"
+           "those the checkpoint records) gets a warning line: its score is not held out.\n\n"
            "  --model RUN      a training run folder or a .safetensors written by 'lumosaic train'\n"
            "  DATA...          scenes (CAVE folders, .mat, spectral .exr) or folders of scenes;\n"
            "                   bands other than 31 at 400-700 nm are resampled (see README)\n"
            "  --mat-key NAME   the .mat variable holding each cube (default: automatic)\n"
            "  --split S        test (default), val, train (the dataset's split, as in training:\n"
            "                   scene groups ranked by hash, 10%% test, 10%% val) or all\n"
+           "  --scenes NAMES   score these scenes (comma-separated names, as the table prints\n"
+           "                   them) among DATA's, whatever their split (not with --split)\n"
            "  --noise LIST     Gaussian noise levels in %% of the largest clean value\n"
            "                   (default 0,5,10,15,20; at most %d levels, each 0..100)\n"
            "  --output DIR     write DIR/eval.json and DIR/eval.csv (DIR must not exist, or be\n"
@@ -62,7 +72,12 @@ static void help(void)
            "  --threads T      OpenMP threads (1..1024; default: all cores)\n"
            "  --rainbow SIZE   rainbow scene size (0 = skip, else 66..4096; default 256)\n"
            "  --batch N        windows per network call (1..4096; default 8)\n"
-           "  --system FILE    system description (default: the one recorded in the model)\n"
+           "  --system FILE    system description (default: the one recorded in the model).\n"
+           "                   One that differs from the model's only in LED gains (a\n"
+           "                   calibrated system) is simulated as the camera and its frames\n"
+           "                   rescaled per tile phase to the model's gains (one line says so)\n"
+           "  --no-gain-remap  with such a --system: give its frames to the model as they are\n"
+           "                   (what the rescaling gains, measured)\n"
            "  --motion LIST    also score moving scenes: speeds in px/s (0..10000, at most %d),\n"
            "                   each a 3-frame noise-free coded video of the scene translating\n"
            "                   along (0.8, 0.6); the middle frame is reconstructed with and\n"
@@ -106,10 +121,11 @@ static void help(void)
 }
 
 typedef struct eval_opts {
-    const char *model, *output, *system, *mat_key;
+    const char *model, *output, *system, *mat_key, *scenes;
     lm_cli_common com; /* --threads, --device, --seed */
     const char **data;
     int ndata, split; /* split: 0 test, 1 val, 2 train, 3 all */
+    int split_given;
     float k[LM_EVAL_MAX_NOISE];
     int nnoise;
     double speed[LM_EVAL_MAX_MOTION];
@@ -117,7 +133,7 @@ typedef struct eval_opts {
     float mk[LM_EVAL_MAX_MOTION_NOISE]; /* --motion-noise levels (fractions) */
     int nmk;
     long long rainbow, batch;
-    int noise_oracle, clip, align_plain, report;
+    int noise_oracle, clip, align_plain, report, no_remap;
     double report_noise; /* --report-noise in %, -1 = the level nearest 10 % */
     long long bits;
     double photons, read_noise;
@@ -162,9 +178,10 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_value(c, "--output", &o->output)) ||
         (r = lm_cli_value(c, "--system", &o->system)) ||
         (r = lm_cli_value(c, "--mat-key", &o->mat_key)) ||
+        (r = lm_cli_value(c, "--scenes", &o->scenes)) ||
         (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE | LM_CLI_SEED | LM_CLI_PRECISION,
                                (long long)1 << 62, &o->com)) ||
-        (r = lm_cli_choice(c, "--split", split_names, &o->split)) ||
+        ((r = lm_cli_choice(c, "--split", split_names, &o->split)) && (o->split_given = 1)) ||
         (r = lm_cli_choice(c, "--align", align_names, &o->align_plain)) ||
         (r = lm_cli_int(c, "--rainbow", 0, 4096, &o->rainbow)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
@@ -174,6 +191,7 @@ static int parse_opt(lm_cli *c, eval_opts *o)
         (r = lm_cli_flag(c, "--noise-oracle", &o->noise_oracle)) ||
         (r = lm_cli_flag(c, "--report", &o->report)) ||
         (r = lm_cli_real(c, "--report-noise", 0, 100, &o->report_noise)) ||
+        (r = lm_cli_flag(c, "--no-gain-remap", &o->no_remap)) ||
         (r = lm_cli_flag(c, "--clip", &o->clip)) ||
         (r = lm_cli_int(c, "--bits", 0, 24, &o->bits)) ||
         (r = lm_cli_real(c, "--photons", 0, 1e12, &o->photons)) ||
@@ -230,6 +248,9 @@ static int parse(lm_cli *c, eval_opts *o)
     if (o->report_noise >= 0 && report_level(o) < 0)
         return lm_cli_error(c, "--report-noise %g is not one of the --noise levels",
                             o->report_noise);
+    if (o->scenes && o->split_given)
+        return lm_cli_error(c, "--scenes names the scenes to score: give it or --split, not both");
+    if (o->scenes && !o->scenes[0]) return lm_cli_error(c, "--scenes: no names given");
     if (o->rainbow > 0 && o->rainbow < 66)
         return lm_cli_error(c, "--rainbow %lld: need 0 (skip) or at least 66 (the window)",
                             o->rainbow);
@@ -241,6 +262,7 @@ typedef struct scene_res {
     lm_data_split split; /* the dataset's split of the scene (never a borrowed one) */
     int height, width;
     lm_metrics m[LM_EVAL_MAX_NOISE];
+    double sec[LM_EVAL_MAX_NOISE]; /* reconstruction seconds of the frame at each level */
     lm_eval_motion mo[LM_EVAL_MAX_MOTION * LM_EVAL_MAX_MOTION_NOISE]; /* noise-major */
 } scene_res;
 
@@ -254,6 +276,7 @@ typedef struct eval_run {
     scene_res *sc;
     int nsc;
     lm_metrics mean[LM_EVAL_MAX_NOISE];
+    double mean_sec[LM_EVAL_MAX_NOISE];
     lm_eval_motion mo_mean[LM_EVAL_MAX_MOTION * LM_EVAL_MAX_MOTION_NOISE];
     lm_eval_rainbow rb;
     char tmp[1100]; /* staging folder of --output ("" until created) */
@@ -263,6 +286,57 @@ static int fail(const lm_cli *c, const lm_err *e)
 {
     lm_cli_error(c, "%s", e->msg);
     return lm_cli_exit_status(e->status);
+}
+
+/* --scenes: keep the named scenes, in the order named; a name not among DATA's is an error
+ * (printed; its status returned). */
+static int pick_scenes(eval_run *r)
+{
+    char *names = strdup(r->o->scenes), *save = NULL;
+    scene_res *kept = calloc((size_t)r->nsc + 1, sizeof *kept);
+    int nk = 0, rc = 0;
+    if (!names || !kept) rc = (lm_cli_error(r->c, "out of memory"), 1);
+    for (char *t = rc ? NULL : strtok_r(names, ",", &save); t && !rc; t = strtok_r(NULL, ",", &save)) {
+        int hit = -1;
+        for (int i = 0; i < r->nsc && hit < 0; i++)
+            if (!strcmp(r->sc[i].name, t)) hit = i;
+        for (int j = 0; j < nk && hit >= 0; j++)
+            if (!strcmp(kept[j].name, t)) hit = -2; /* named twice: once is enough */
+        if (hit == -1) {
+            char list[512] = "";
+            for (int i = 0; i < r->nsc; i++)
+                snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", i ? ", " : "",
+                         r->sc[i].name);
+            rc = lm_cli_error(r->c, "--scenes: no scene '%s' among the %d given (%s)", t, r->nsc,
+                              list);
+        } else if (hit >= 0) {
+            kept[nk++] = r->sc[hit];
+        }
+    }
+    if (!rc) {
+        memcpy(r->sc, kept, sizeof *kept * (size_t)nk);
+        r->nsc = nk;
+    }
+    free(kept);
+    free(names);
+    return rc;
+}
+
+/* A warning line for each scored scene the model was trained on (by content); one note when
+ * the model records no training scenes. */
+static void warn_overlap(const eval_run *r)
+{
+    for (int i = 0; i < r->nsc; i++) {
+        int t = lm_eval_trained_on(&r->im, r->sc[i].path);
+        if (t < 0) {
+            fprintf(stderr, "lumosaic eval: note: %s records no training scenes: overlap with "
+                    "the scored scenes is not checked\n", r->im.weights);
+            return;
+        }
+        if (t > 0)
+            fprintf(stderr, "lumosaic eval: warning: scene %s (%s) was in the model's training "
+                    "set: its score is not a held-out score\n", r->sc[i].name, r->sc[i].path);
+    }
 }
 
 /* The scenes of the chosen split among those the DATA paths name: the dataset's list of that
@@ -289,6 +363,7 @@ static int list_scenes(eval_run *r, lm_err *e)
     free(ls);
     static const lm_data_split want[3] = {LM_SPLIT_TEST, LM_SPLIT_VAL, LM_SPLIT_TRAIN};
     int given = r->nsc;
+    if (r->o->scenes) return pick_scenes(r);
     if (r->o->split < 3) {
         r->nsc = 0;
         for (int i = 0; i < given; i++)
@@ -363,8 +438,8 @@ static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
         if (lm_cube_read_with(s->path, &ro, &cube, e)) return fail(r->c, e);
         lm_status st = lm_eval_prepare(&cube, r->im.model->mosaic.ty, r->im.model->mosaic.tx, e);
         lm_rng rs = lm_rng_split(&base, lm_fnv1a_str(LM_FNV1A_BASIS_SHORT, s->name));
-        if (!st) st = lm_eval_scene(&r->ctx, &r->im, &cube, r->o->k, r->o->nnoise, to, &rs,
-                                    s->m, e);
+        if (!st) st = lm_eval_scene_timed(&r->ctx, &r->im, &cube, r->o->k, r->o->nnoise, to,
+                                          &rs, s->m, s->sec, e);
         if (!st) st = scene_motion(r, s, &cube, to, &rs, e);
         s->height = cube.height;
         s->width = cube.width;
@@ -377,18 +452,25 @@ static int eval_scenes(eval_run *r, const lm_tile_opts *to, lm_err *e)
         fprintf(stderr, "scene %d/%d %s (%d x %d): %.2f s\n", i + 1, r->nsc, s->name, s->width,
                 s->height, omp_get_wtime() - t0);
     }
-    for (int n = 0; n < r->o->nnoise; n++) r->mean[n] = lm_metrics_acc_mean(&acc[n]);
+    for (int n = 0; n < r->o->nnoise; n++) {
+        r->mean[n] = lm_metrics_acc_mean(&acc[n]);
+        double t = 0.0;
+        for (int i = 0; i < r->nsc; i++) t += r->sc[i].sec[n];
+        r->mean_sec[n] = r->nsc ? t / r->nsc : 0.0;
+    }
     motion_means(r);
     return 0;
 }
 
 static void print_table(const eval_run *r)
 {
-    printf("%d scene(s), split %s\n", r->nsc, split_names[r->o->split]);
-    printf("%9s %10s %8s %9s %9s\n", "noise %", "PSNR dB", "SSIM", "MAE", "SAM deg");
+    if (r->o->scenes) printf("%d scene(s), chosen by --scenes\n", r->nsc);
+    else printf("%d scene(s), split %s\n", r->nsc, split_names[r->o->split]);
+    printf("%9s %10s %8s %9s %9s %9s\n", "noise %", "PSNR dB", "SSIM", "MAE", "SAM deg",
+           "s/frame");
     for (int n = 0; n < r->o->nnoise; n++)
-        printf("%9g %10.3f %8.4f %9.5f %9.3f\n", 100.0 * r->o->k[n], r->mean[n].psnr,
-               r->mean[n].ssim, r->mean[n].mae, r->mean[n].sam);
+        printf("%9g %10.3f %8.4f %9.5f %9.3f %9.3f\n", 100.0 * r->o->k[n], r->mean[n].psnr,
+               r->mean[n].ssim, r->mean[n].mae, r->mean[n].sam, r->mean_sec[n]);
     if (r->o->nmotion) {
         printf("motion (3-frame video, middle frame, in-view region; means over scenes; "
                "alignment %s)\n", align_names[r->o->align_plain]);
@@ -421,12 +503,13 @@ static void json_str(FILE *f, const char *s)
     fputc('"', f);
 }
 
-static void json_metrics(FILE *f, const eval_opts *o, const lm_metrics *m, const char *ind)
+static void json_metrics(FILE *f, const eval_opts *o, const lm_metrics *m, const double *sec,
+                         const char *ind)
 {
     for (int n = 0; n < o->nnoise; n++)
         fprintf(f, "%s{\"noise_percent\": %g, \"psnr\": %.6f, \"ssim\": %.6f, \"mae\": %.8f, "
-                   "\"sam\": %.6f}%s\n", ind, 100.0 * o->k[n], m[n].psnr, m[n].ssim, m[n].mae,
-                m[n].sam, n + 1 < o->nnoise ? "," : "");
+                   "\"sam\": %.6f, \"seconds_per_frame\": %.6f}%s\n", ind, 100.0 * o->k[n],
+                m[n].psnr, m[n].ssim, m[n].mae, m[n].sam, sec[n], n + 1 < o->nnoise ? "," : "");
 }
 
 static void json_motion(FILE *f, const eval_opts *o, const lm_eval_motion *m, const char *ind)
@@ -456,10 +539,13 @@ static void json_path(FILE *f, const char *p)
 static void write_json(FILE *f, const eval_run *r)
 {
     const eval_opts *o = r->o;
+    char name[160];
     fprintf(f, "{\n  \"model\": ");
     json_path(f, r->im.weights);
+    fprintf(f, ",\n  \"preset\": ");
+    json_str(f, lm_model_name(r->im.model, name, sizeof name));
     fprintf(f, ",\n  \"split\": \"%s\",\n  \"seed\": %lld,\n  \"noise_percent\": [",
-            split_names[o->split], o->com.seed);
+            o->scenes ? "chosen" : split_names[o->split], o->com.seed);
     for (int n = 0; n < o->nnoise; n++) fprintf(f, "%s%g", n ? ", " : "", 100.0 * o->k[n]);
     fprintf(f, "],\n  \"photons\": %.10g,\n  \"read_noise\": %.10g", o->photons, o->read_noise);
     fprintf(f, ",\n  \"precision\": \"%s\"", o->com.precision == LM_PRECISION_BF16 ? "bf16" : "fp32");
@@ -471,7 +557,7 @@ static void write_json(FILE *f, const eval_run *r)
         json_path(f, r->sc[i].path);
         fprintf(f, ", \"height\": %d, \"width\": %d, \"results\": [\n", r->sc[i].height,
                 r->sc[i].width);
-        json_metrics(f, o, r->sc[i].m, "      ");
+        json_metrics(f, o, r->sc[i].m, r->sc[i].sec, "      ");
         fprintf(f, "    ]");
         if (o->nmotion) {
             fprintf(f, ", \"motion\": [\n");
@@ -481,7 +567,7 @@ static void write_json(FILE *f, const eval_run *r)
         fprintf(f, "}%s\n", i + 1 < r->nsc ? "," : "");
     }
     fprintf(f, "  ],\n  \"mean\": [\n");
-    json_metrics(f, o, r->mean, "    ");
+    json_metrics(f, o, r->mean, r->mean_sec, "    ");
     fprintf(f, "  ]");
     if (o->nmotion) {
         fprintf(f, ",\n  \"motion_speeds_px_s\": [");
@@ -580,6 +666,13 @@ static int run(eval_run *r)
     lm_err e;
     lm_err_clear(&e);
     if (lm_infer_model_load(r->o->model, r->o->system, &r->im, &e)) return fail(r->c, &e);
+    if (r->im.remap.active) {
+        char line[3000];
+        lm_gain_remap_describe(&r->im.remap, r->im.system_path, r->im.model_system, line,
+                               sizeof line);
+        fprintf(stderr, "%s%s\n", line, r->o->no_remap ? "; not applied (--no-gain-remap)" : "");
+        if (r->o->no_remap) r->im.remap.active = 0;
+    }
     r->im.noise_oracle = r->o->noise_oracle;
     r->im.sensor_clip = r->o->clip;
     r->im.sensor_bits = (int)r->o->bits;
@@ -611,6 +704,7 @@ static int run(eval_run *r)
         lm_cli_error(r->c, "rainbow: %s", e.msg);
         return lm_cli_exit_status(e.status);
     }
+    warn_overlap(r); /* after the scores: an error stays the only line */
     print_table(r);
     return r->o->output ? write_outputs(r, &to) : 0;
 }

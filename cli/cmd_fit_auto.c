@@ -191,7 +191,7 @@ static int load_models(cal_run *r, lm_err *e)
         char *abs = realpath(im->weights, NULL); /* infer may run from another folder */
         snprintf(x->path, sizeof x->path, "%s", abs ? abs : im->weights);
         free(abs);
-        snprintf(x->preset, sizeof x->preset, "%s", im->model->preset);
+        lm_model_name(im->model, x->preset, sizeof x->preset); /* NET+BASE for residuals */
         r->models[a->nmodels++] = im->model;
         if (im->model->mosaic.ty != r->models[0]->mosaic.ty ||
             im->model->mosaic.tx != r->models[0]->mosaic.tx ||

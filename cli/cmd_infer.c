@@ -25,6 +25,10 @@
  * aligned in that plane instead (as align.h's edge rule). With --no-align, or sub-images below
  * the flow's minimum, the frames are stacked as recorded (the same duplicates at the ends).
  * They need a sequence of at least two frames (a single frame is refused, exit 2).
+ * A camera's own frames (infer/raw.h): --bits / --msb / --black-level / --dark / --flat convert
+ * each frame of bucket 1 as it is read, the share of saturated pixels of each is on its progress
+ * line (--saturation-mask writes them); a --system of other LED gains than the model's has each
+ * frame rescaled per tile phase to the model's gains (lm_recon_camera_frame).
  * What it is not: the flow or the alignment scheme themselves (data/flow.c, data/align.c). */
 #include <omp.h>
 #include <sys/stat.h>
@@ -42,6 +46,7 @@
 #include "data/align.h"
 #include "infer/auto.h"
 #include "infer/model_io.h"
+#include "infer/raw.h"
 #include "infer/recon.h"
 #include "infer/tile.h"
 #include "tensor/isa.h"
@@ -51,7 +56,9 @@ static void help(void)
     printf("usage: lumosaic infer --model RUN --input FRAMES --output DIR [--batch N]\n"
            "                      [--threads T] [--system FILE] [--no-align] [--tiles]\n"
            "                      [--device cpu|opencl] [--auto FILE --auto-tol DB]\n"
-           "                      [--bucket0 FRAMES] [--precision fp32|bf16]\n\n"
+           "                      [--bucket0 FRAMES] [--precision fp32|bf16]\n"
+           "                      [--bits B [--msb]] [--black-level V | --dark FRAMES]\n"
+           "                      [--flat FRAMES] [--saturation-mask]\n\n"
            "Reconstruct 31-band cubes (400-700 nm) from coded frames with a trained model,\n"
            "patch-wise: 66 x 64 windows, stride 30 x 32, on the tile grid, blended by a raised-\n"
            "cosine weight; models with a finite receptive field (linear, rt-8, rt-16) instead\n"
@@ -77,8 +84,12 @@ static void help(void)
            "  --output DIR     output folder (must not exist, or be empty); written atomically\n"
            "  --batch N        windows per network call (1..4096; default 8)\n"
            "  --threads T      OpenMP threads (1..1024; default: all cores)\n"
-           "  --system FILE    system description (default: the one recorded in the model; it\n"
-           "                   must be the same file content)\n"
+           "  --system FILE    system description of the camera (default: the one recorded in\n"
+           "                   the model). One that differs from the model's only in LED gains\n"
+           "                   or allocations (a 'lumosaic calibrate' output) is accepted: each\n"
+           "                   tile phase of every frame is rescaled to the model's gains (and\n"
+           "                   the noise level with it; one line says so). Another tile map,\n"
+           "                   other LEDs or another sensor are refused\n"
            "  --no-align       do not align a sequence in time. By default, for 2 or more\n"
            "                   frames, each LED sub-image is moved to the frame's lime-LED\n"
            "                   time by optical flow to the neighbouring frames (needs\n"
@@ -94,12 +105,30 @@ static void help(void)
            "                   it): Gaussian noise sd = K x the frame's maximum (0..1), as\n"
            "                   simulate --noise K. Default: estimated from each frame\n"
            LM_CLI_PRECISION_HELP
+           "Raw frames from a camera (one-bucket models; defaults: none of these). A frame's\n"
+           "value 1.0 is full scale, the largest code: the system's white (info --system).\n"
+           "  --bits B         integer files hold B-bit data (1..16), e.g. 12-bit in a 16-bit\n"
+           "                   PNG/TIFF: LSB-aligned (codes 0..2^B-1) unless --msb; code\n"
+           "                   2^B-1 is full scale. A code outside that layout is an error\n"
+           "  --msb            the B bits are the file's high bits (codes x 2^(16-B))\n"
+           "  --black-level V  subtract V (in B-bit codes; float files: in their units):\n"
+           "                   (code - V) / (full scale - V)\n"
+           "  --dark FRAMES    dark frames (file, pattern or folder; averaged), subtracted per\n"
+           "                   pixel: (x - dark) / (1 - mean dark); not with --black-level\n"
+           "  --flat FRAMES    frames of a white target (averaged, dark-subtracted): each\n"
+           "                   pixel divided by its gain, the flat over its tile phase's mean\n"
+           "                   (each LED keeps its level); pixels under 5 %% of it are left\n"
+           "  --saturation-mask  also write DIR/saturated_NNNN.png (65535 where a pixel is at\n"
+           "                   full scale, else 0). Every frame's progress line gives the\n"
+           "                   share of saturated pixels\n"
            "  --help           this text\n");
 }
 
 typedef struct infer_opts {
     const char *model, *input, *output, *system, *auto_file, *bucket0;
     lm_cli_common com; /* --threads, --device */
+    lm_raw_opts raw;   /* --bits, --msb, --black-level, --dark, --flat */
+    int sat_mask;
     long long batch;
     double auto_tol, noise_level;
     int no_align, tiles, is_auto;
@@ -109,6 +138,7 @@ typedef struct infer_opts {
 static int parse(lm_cli *c, infer_opts *o)
 {
     *o = (infer_opts){.batch = 8, .auto_tol = 0.5, .noise_level = -1.0};
+    long long bits = 0;
     while (!lm_cli_done(c)) {
         int r;
         if (lm_cli_is_help(c)) {
@@ -124,6 +154,12 @@ static int parse(lm_cli *c, infer_opts *o)
             (r = lm_cli_real(c, "--auto-tol", 0.0, 1e6, &o->auto_tol)) ||
             (r = lm_cli_real(c, "--noise-level", 0.0, 1.0, &o->noise_level)) ||
             (r = lm_cli_flag(c, "--tiles", &o->tiles)) ||
+            (r = lm_cli_int(c, "--bits", 1, 16, &bits)) ||
+            (r = lm_cli_flag(c, "--msb", &o->raw.msb)) ||
+            (r = lm_cli_real(c, "--black-level", 0.0, 65535.0, &o->raw.black)) ||
+            (r = lm_cli_value(c, "--dark", &o->raw.dark)) ||
+            (r = lm_cli_value(c, "--flat", &o->raw.flat)) ||
+            (r = lm_cli_flag(c, "--saturation-mask", &o->sat_mask)) ||
             (r = lm_cli_int(c, "--batch", 1, 4096, &o->batch)) ||
             (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_DEVICE | LM_CLI_PRECISION, 0, &o->com)) ||
             (r = lm_cli_flag(c, "--no-align", &o->no_align))) {
@@ -132,6 +168,8 @@ static int parse(lm_cli *c, infer_opts *o)
         }
         return lm_cli_unknown(c);
     }
+    o->raw.bits = (int)bits;
+    if (o->raw.msb && !bits) return lm_cli_error(c, "--msb needs --bits B");
     if (!o->model) return lm_cli_error(c, "--model is required (see 'lumosaic infer --help')");
     if (!o->input) return lm_cli_error(c, "--input is required (see 'lumosaic infer --help')");
     if (!o->output) return lm_cli_error(c, "--output is required (see 'lumosaic infer --help')");
@@ -177,6 +215,8 @@ typedef struct infer_run {
     lm_frame_seq seq0;   /* two-bucket models: bucket 0 of the frames (count 0 otherwise) */
     float *in2;          /* two-bucket models: bucket 1 then bucket 0, 2 x H x W */
     lm_srgb srgb;
+    lm_raw raw;          /* --bits, --black-level, --dark, --flat */
+    double *sat;         /* per frame: the share of saturated pixels (-1: not read here) */
     lm_ctx ctx;
     lm_tile_device dev;
     float *rgb;
@@ -184,6 +224,40 @@ typedef struct infer_run {
     char tmp[1100];
     int first, end;  /* the frames this process reconstructs: [first, end) */
 } infer_run;
+
+/* Frame i's saturated pixels (1.0, else 0) as DIR/saturated_NNNN.png (the frame read again). */
+static int write_mask(infer_run *r, int i, int number, lm_err *e)
+{
+    lm_frame f;
+    if (lm_frame_seq_read(&r->seq, i, &f, e)) return fail(r->c, e, 0);
+    const size_t n = (size_t)f.height * f.width;
+    uint8_t *m = malloc(n);
+    if (!m) {
+        lm_frame_free(&f);
+        return lm_cli_error(r->c, "out of memory (saturation mask)"), 1;
+    }
+    lm_raw_saturated(&r->o->raw, &f, m);
+    for (size_t k = 0; k < n; k++) f.data[k] = m[k];
+    free(m);
+    char path[1200];
+    snprintf(path, sizeof path, "%s/saturated_%04d.png", r->tmp, number);
+    lm_status st = lm_frame_write(path, f.height, f.width, f.data, e);
+    lm_frame_free(&f);
+    return st ? fail(r->c, e, 1) : 0;
+}
+
+/* Read frame i of the sequence converted to the system's scale (--bits, --black-level, --dark,
+ * --flat; infer/raw.h), its share of saturated pixels noted in r->sat[i]. */
+static lm_status read_frame(infer_run *r, int i, lm_frame *f, lm_err *e)
+{
+    if (lm_frame_seq_read(&r->seq, i, f, e)) return e->status;
+    r->sat[i] = lm_raw_saturated(&r->o->raw, f, NULL);
+    if (lm_raw_apply(&r->raw, f, r->seq.paths[i], e)) {
+        lm_frame_free(f);
+        return e->status;
+    }
+    return LM_OK;
+}
 
 /* Write one reconstructed cube (clamped to >= 0) and its sRGB preview into the staging dir. */
 static int write_frame(infer_run *r, lm_cube *cube, int number, lm_err *e)
@@ -196,7 +270,7 @@ static int write_frame(infer_run *r, lm_cube *cube, int number, lm_err *e)
     if (lm_srgb_render(&r->srgb, cube, 1.0f, NULL, r->rgb, e) ||
         lm_image_write_rgb8(path, cube->width, cube->height, r->rgb, e))
         return fail(r->c, e, 1);
-    return 0;
+    return r->o->sat_mask ? write_mask(r, number - r->seq.first_index, number, e) : 0;
 }
 
 static void align_free(infer_align *a)
@@ -246,7 +320,7 @@ static lm_status mf_step(infer_run *r, int i, lm_err *e)
         int j = i - 1 + k;
         if (j < 0 || j >= r->seq.count) continue;
         lm_frame f;
-        if (lm_frame_seq_read(&r->seq, j, &f, e)) return e->status;
+        if (read_frame(r, j, &f, e)) return e->status;
         memcpy(a->fr[k], f.data, sizeof(float) * (size_t)f.height * f.width);
         lm_frame_free(&f);
         fr[k] = a->fr[k];
@@ -297,7 +371,7 @@ static int align_init(infer_run *r, lm_err *e)
 static lm_status load_planes(infer_run *r, int i, float *dst, lm_err *e)
 {
     lm_frame f;
-    if (lm_frame_seq_read(&r->seq, i, &f, e)) return e->status;
+    if (read_frame(r, i, &f, e)) return e->status;
     lm_status st = lm_align_unshuffle(f.data, f.height, f.width, r->al.ty, r->al.tx, dst, e);
     lm_frame_free(&f);
     return st;
@@ -343,7 +417,7 @@ static lm_status frame_input(infer_run *r, int i, lm_frame *f, const float **dat
         *data = r->al.raw;
         return LM_OK;
     }
-    if (lm_frame_seq_read(&r->seq, i, f, e)) return e->status;
+    if (read_frame(r, i, f, e)) return e->status;
     *data = f->data;
     return LM_OK;
 }
@@ -407,7 +481,8 @@ static lm_status with_bucket0(infer_run *r, int i, const float **in, int H, int 
 }
 
 /* One frame to a 31-band cube by the run's path: auto, or the fixed model's (infer/recon.h:
- * whole frame or windows). */
+ * whole frame or windows). A camera of other gains than the model's: the frame rescaled per
+ * tile phase first (infer/raw.h), with the given noise level. */
 static lm_status reconstruct(infer_run *r, const float *in, int H, int W, lm_cube *cube,
                              lm_err *e)
 {
@@ -418,7 +493,7 @@ static lm_status reconstruct(infer_run *r, const float *in, int H, int W, lm_cub
         return auto_frame(r, in, H, W, &to, cube, e);
     }
     lm_recon_opts ro = {.batch = (int)r->o->batch, .tiles = r->o->tiles};
-    return lm_recon_frame(&r->ctx, r->im.model, in, H, W, &ro, cube, e);
+    return lm_recon_camera_frame(&r->ctx, &r->im, in, H, W, &ro, cube, e);
 }
 
 /* The share of windows per model over the run and the calibration's expected PSNR. */
@@ -477,8 +552,9 @@ static int run_frames(infer_run *r)
         char al[48] = "alignment off";
         if (r->al.on || (r->al.mf && !r->o->no_align))
             snprintf(al, sizeof al, "alignment %.2f s", ta - t0);
-        fprintf(stderr, "frame %d/%d %s: %.2f s (%s, reconstruction %.2f s, writing %.2f s)\n",
-                i + 1, r->seq.count, r->seq.paths[i], t2 - t0, al, t1 - ta, t2 - t1);
+        fprintf(stderr, "frame %d/%d %s: %.2f s (%s, reconstruction %.2f s, writing %.2f s); "
+                "saturated %.3f %%\n", i + 1, r->seq.count, r->seq.paths[i], t2 - t0, al,
+                t1 - ta, t2 - t1, 100.0 * r->sat[i]);
     }
     if (r->o->is_auto) auto_summary(r);
     return 0;
@@ -495,6 +571,11 @@ static int open_auto(infer_run *r, lm_err *e)
         if (lm_infer_model_load(a->models[m].path, r->o->system, im, e))
             return lm_cli_error(r->c, "%s: model %d: %s", r->o->auto_file, m, e->msg);
         r->models[m] = im->model;
+        if (im->remap.active)
+            return lm_cli_error(r->c, "--model auto: %s has other LED gains than model '%s' "
+                                "was trained with: give that model with --model (its frames "
+                                "are rescaled to its gains)", im->system_path,
+                                a->models[m].path);
         if (lm_model_buckets(im->model) == 2)
             return lm_cli_error(r->c, "%s: model '%s' reads both buckets: --model auto takes "
                                 "one-bucket models only", r->o->auto_file, a->models[m].path);
@@ -524,6 +605,26 @@ static int open_inputs(infer_run *r, lm_err *e)
         r->im.model->noise_given = (float)r->o->noise_level;
     }
     if (lm_frame_seq_open(r->o->input, &r->seq, e)) return fail(r->c, e, 0);
+    r->sat = malloc(sizeof(double) * r->seq.count);
+    if (!r->sat) return lm_cli_error(r->c, "out of memory"), 1;
+    for (int i = 0; i < r->seq.count; i++) r->sat[i] = -1.0;
+    if (lm_raw_opts_any(&r->o->raw)) {
+        if (!r->o->is_auto && lm_model_buckets(r->im.model) == 2)
+            return lm_cli_error(r->c, "--bits, --black-level, --dark and --flat are for one-bucket "
+                                "frames (model %s reads both buckets)", r->im.model->preset);
+        if (lm_raw_init(&r->raw, &r->o->raw, r->seq.height, r->seq.width, r->im.sys.tile_rows,
+                        r->im.sys.tile_cols, e))
+            return fail(r->c, e, 0);
+        if (r->raw.flat_skipped)
+            fprintf(stderr, "lumosaic infer: warning: %ld pixels of the flat are under 5 %% of "
+                    "their tile phase's mean: left uncorrected\n", r->raw.flat_skipped);
+    }
+    if (!r->o->is_auto && r->im.remap.active) {
+        char line[3000];
+        lm_gain_remap_describe(&r->im.remap, r->im.system_path, r->im.model_system, line,
+                               sizeof line);
+        fprintf(stderr, "%s\n", line);
+    }
     int rc = open_bucket0(r, e);
     if (rc) return rc;
     if (lm_recon_check(r->im.model, r->seq.height, r->seq.width, e))
@@ -677,6 +778,8 @@ int lm_cmd_infer(int argc, char **argv)
     lm_frame_seq_free(&r.seq);
     lm_frame_seq_free(&r.seq0);
     free(r.in2);
+    free(r.sat);
+    lm_raw_free(&r.raw);
     lm_infer_model_free(&r.im);
     for (int m = 1; m < LM_AUTO_MAX_MODELS; m++) lm_infer_model_free(&r.more[m]);
     return rc;

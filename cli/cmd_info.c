@@ -23,7 +23,7 @@ static void help(void)
            "totals. Nothing is computed: the forward runs on a dry-run backend.\n"
            "MACs count conv/linear layers only (attention matmuls, HAN's CSAM Conv3d and MCAN's\n"
            "fixed bilinear/mosaic convolutions are not counted), as in models.md.\n\n"
-           "  --model NAME   preset (see --list)\n"
+           "  --model NAME   preset (see --list), or NET+BASE: NET as a residual on BASE\n"
            "  --batch B      batch size (default 1)\n"
            "  --height H     input rows, a multiple of the tile rows (default 66)\n"
            "  --width W      input columns, a multiple of the tile columns (default 64)\n"
@@ -137,8 +137,9 @@ int lm_cmd_info(int argc, char **argv)
         for (const char *const *p = lm_model_presets(); *p; p++)
             printf("%-15s %s\n", *p, lm_model_preset_purpose(*p));
         printf("\nalso: lmmse-K (window K, odd 1..31), lmmse-K-b2, lmmse-K-rfD (D random "
-               "features);\nNET+BASE in results tables: NET trained as a residual on BASE "
-               "(train --model NET --base RUN)\n");
+               "features);\nNET+BASE (e.g. rt-16-nc+lmmse, the bundled demo model): NET trained "
+               "as a residual on BASE\n(train --model NET --base RUN; info --model NET+BASE "
+               "describes it)\n");
         if (!a.model) return 0;
     }
     lm_system sys;
@@ -152,7 +153,11 @@ int lm_cmd_info(int argc, char **argv)
     lm_mosaic mo;
     lm_model *m = NULL;
     lm_profile p = {0};
-    if (lm_mosaic_from_system(&sys, &mo, &e) == LM_OK) m = lm_model_create(a.model, &mo, 1, &e);
+    char net[64], base[64]; /* "NET+BASE": the residual as results tables name it */
+    int res = lm_model_name_split(a.model, net, base, sizeof net);
+    if (lm_mosaic_from_system(&sys, &mo, &e) == LM_OK)
+        m = res ? lm_model_create_residual(net, base, &mo, 1, 0, 0.0f, &e)
+                : lm_model_create(a.model, &mo, 1, &e);
     lm_system_free(&sys);
     if (m && lm_model_profile(m, (int)a.batch, (int)a.height, (int)a.width, &p, &e) == LM_OK)
         print_table(&p, a.model, &a);

@@ -12,7 +12,9 @@
 #include "data/spectra.h"
 #include "data/synth.h"
 #include "data/util.h"
+#include "data/system.h"
 #include <dirent.h>
+#include <inttypes.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -703,4 +705,42 @@ void lm_dataset_close(lm_dataset *d)
     pthread_cond_destroy(&d->done_cv);
     pthread_mutex_destroy(&d->mu);
     free(d);
+}
+
+static int visible(const struct dirent *e) { return e->d_name[0] != '.'; }
+
+uint64_t lm_scene_content_hash(const char *path)
+{
+    if (!lm_is_dir(path)) return lm_file_hash(path);
+    struct dirent **list;
+    int n = scandir(path, &list, visible, alphasort);
+    if (n < 0) return 0;
+    uint64_t h = LM_FNV1A_BASIS_SHORT;
+    int any = 0;
+    for (int i = 0; i < n; i++) {
+        char f[DS_PATH_MAX];
+        snprintf(f, sizeof f, "%s/%s", path, list[i]->d_name);
+        struct stat st;
+        if (stat(f, &st) == 0 && S_ISREG(st.st_mode)) {
+            uint64_t fh = lm_file_hash(f);
+            h = lm_fnv1a(h, &fh, sizeof fh);
+            any = 1;
+        }
+        free(list[i]);
+    }
+    free(list);
+    return any ? h : 0;
+}
+
+char *lm_dataset_split_hashes(const lm_dataset *d, lm_data_split split)
+{
+    int n = lm_dataset_num_scenes(d, split);
+    char *out = malloc((size_t)n * 17 + 1);
+    if (!out) return NULL;
+    char *p = out;
+    *p = 0;
+    for (int i = 0; i < n; i++)
+        p += sprintf(p, "%s%016" PRIx64, i ? "," : "",
+                     lm_scene_content_hash(lm_dataset_scene_path(d, split, i)));
+    return out;
 }

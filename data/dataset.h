@@ -155,6 +155,14 @@ lm_status lm_dataset_list_scenes(const char *const *paths, int npaths, const lm_
                                  const char *mat_key, int split, lm_dataset_scene **out, int *n,
                                  lm_err *err);
 
+/* The identity of a scene's content on disk: FNV-1a 64 over the bytes of its file, or, for a
+ * folder (a CAVE scene), of every regular file in it (hidden files skipped) in name order; 0 if
+ * nothing can be read. Names and paths do not enter it: a copied or renamed scene keeps it. */
+uint64_t lm_scene_content_hash(const char *path);
+/* The content hashes of the scenes of a split (lm_scene_content_hash, "%016x" each, comma
+ * separated; "" for none), malloc'ed (NULL: out of memory). */
+char *lm_dataset_split_hashes(const lm_dataset *d, lm_data_split split);
+
 typedef enum lm_sample_kind {
     LM_SAMPLE_SCENE = 0,       /* a patch of a real scene */
     LM_SAMPLE_NARROWBAND = 1,  /* synthetic: textureless Gaussian spectrum */

@@ -623,12 +623,25 @@ void lm_system_describe(const lm_system *s, FILE *f)
         fprintf(f, "  %-12s %8.1f %9d %10.1f %10.1f %9.4f %12.5g\n", l->name, l->peak_nm,
                 l->subframes, l->start_us, l->end_us, white, l->gain);
     }
-    fprintf(f, "  tile map (%d x %d), gains %s:\n", s->tile_rows, s->tile_cols,
-            s->equal_white ? "equal_white" : "from file");
-    for (int r = 0; r < s->tile_rows; r++) {
-        fprintf(f, "   ");
+    fprintf(f, "  gains %s; white: the 'white' column is what a perfect white reflector reads "
+            "under each LED, in units of full scale (1.0 = a frame's largest code: 65535 in a "
+            "16-bit file, 2^B - 1 with infer --bits B)\n", s->equal_white ? "equal_white" :
+            "from file");
+    fprintf(f, "  tile (%d x %d, repeated over the sensor): pixel (y, x) sees the LED at row "
+            "y mod %d, column x mod %d\n", s->tile_rows, s->tile_cols, s->tile_rows,
+            s->tile_cols);
+    fprintf(f, "           ");
+    for (int c = 0; c < s->tile_cols; c++)
+        fprintf(f, c + 1 < s->tile_cols ? "  column %-5d" : "  column %d", c);
+    fputc('\n', f);
+    for (int r = 0; r <= s->tile_rows; r++) {
+        fprintf(f, "          +");
+        for (int c = 0; c < s->tile_cols; c++) fprintf(f, "-------------+");
+        fputc('\n', f);
+        if (r == s->tile_rows) break;
+        fprintf(f, "    row %-2d|", r);
         for (int c = 0; c < s->tile_cols; c++)
-            fprintf(f, " %-12s", s->leds[s->tile_led[r * s->tile_cols + c]].name);
+            fprintf(f, " %-12.12s|", s->leds[s->tile_led[r * s->tile_cols + c]].name);
         fputc('\n', f);
     }
 }

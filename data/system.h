@@ -33,7 +33,10 @@
  * Response (system.md section 4): a_l = scale * alloc_us_l * gain_l * (qe .* E_l) on the grid,
  * alloc_us_l = subframes_l * subframe_us. "equal_white" gains make sum_b a_l[b] (the response to
  * a perfect white reflector) the same for every LED; `scale` makes the largest of these 1.0
- * (with equal-white gains every LED's white response is then 1.0). */
+ * (with equal-white gains every LED's white response is then 1.0). That is the frames' scale:
+ * 1.0 is a frame's full scale (its largest code), what the brightest LED gives a perfect white
+ * reflector. The tile map is the camera's mosaic: pixel (y, x) integrates the LED at
+ * tile_map[y mod rows][x mod cols] (`lumosaic info --system` draws it). */
 #ifndef LM_SYSTEM_H
 #define LM_SYSTEM_H
 #include <stdint.h>

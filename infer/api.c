@@ -210,8 +210,8 @@ static lm_api_status reconstruct(lm_api_model *model, const lm_api_frame *f, lm_
     lm_ctx_clear_error(&model->ctx);
     const int prev = omp_get_max_threads(); /* this thread's OpenMP default, restored below */
     omp_set_num_threads(model->ctx.nthreads);
-    lm_status ls = lm_recon_frame(&model->ctx, model->im.model, in, f->height, f->width,
-                                  &model->ro, cube, &e);
+    lm_status ls = lm_recon_camera_frame(&model->ctx, &model->im, in, f->height, f->width,
+                                         &model->ro, cube, &e);
     omp_set_num_threads(prev);
     lm_ctx_reset(&model->ctx);
     lm_ctx_clear_error(&model->ctx);

@@ -1,9 +1,13 @@
 /* eval.c — evaluation of a trained model on prepared cubes and on the rainbow scene (see
  * eval.h). What it is not: scene listing or output (cli/cmd_eval.c). */
 #include "infer/eval.h"
+#include <inttypes.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
+#include "data/dataset.h"
 #include "data/forward.h"
 #include "data/spectra.h"
 #include "data/synth.h"
@@ -11,6 +15,13 @@
 #include "data/video.h"
 #include "data/align.h"
 #include "infer/whole.h"
+
+static double now_s(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec + 1e-9 * t.tv_nsec;
+}
 
 static int is_rgb(const lm_infer_model *im) { return lm_model_has(im->model, LM_CAP_RGB_INPUT); }
 
@@ -142,8 +153,21 @@ lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *
     if (m->in_channels != lm_model_coded_planes(m))
         return lm_err_set(err, LM_ERR_ARG, "eval: model %s takes %d input channels and is not "
                           "MST++", m->preset, m->in_channels);
-    if (whole && lm_whole_halo(m) > 0) return lm_whole_infer(c, m, frame, height, width, out, err);
-    return lm_tile_infer(c, m, frame, height, width, to, out, err);
+    float *mapped = NULL, given = m->noise_given;
+    if (im->remap.active) { /* frames of the camera's gains, rescaled to the model's */
+        const int planes = lm_model_coded_planes(m);
+        mapped = malloc(sizeof(float) * planes * (size_t)height * width);
+        if (!mapped) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
+        m->noise_given = lm_gain_remap_frame(&im->remap, frame, planes, height, width, given,
+                                             mapped);
+        frame = mapped;
+    }
+    lm_status st = whole && lm_whole_halo(m) > 0
+                       ? lm_whole_infer(c, m, frame, height, width, out, err)
+                       : lm_tile_infer(c, m, frame, height, width, to, out, err);
+    m->noise_given = given;
+    free(mapped);
+    return st;
 }
 
 lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err)
@@ -177,7 +201,7 @@ lm_status lm_eval_prepare(lm_cube *cube, int ty, int tx, lm_err *err)
  * the reconstruction goes (else it is freed). */
 static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth, float k,
                           const lm_tile_opts *to, lm_rng *rng, float *frame, lm_metrics *out,
-                          lm_cube *keep, lm_err *err)
+                          lm_cube *keep, double *seconds, lm_err *err)
 {
     lm_noise_opts no;
     memset(&no, 0, sizeof no);
@@ -200,8 +224,10 @@ static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *tr
         im->model->noise_given = mx > 0.0f ? k * clean_max / mx : 0.0f;
     }
     lm_cube pred;
+    double t0 = now_s();
     st = lm_eval_reconstruct(c, im, frame, truth->height, truth->width, to, 0, &pred, err);
     if (st) return st;
+    if (seconds) *seconds = now_s() - t0;
     st = lm_metrics_compute(pred.data, truth->data, 31, truth->height, truth->width, 0, 31, out,
                             err);
     if (!st && keep) *keep = pred;
@@ -212,6 +238,23 @@ static lm_status eval_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *tr
 lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
                         const float *k, int nnoise, const lm_tile_opts *to, const lm_rng *rng,
                         lm_metrics *out, lm_err *err)
+{
+    return lm_eval_scene_timed(c, im, truth, k, nnoise, to, rng, out, NULL, err);
+}
+
+int lm_eval_trained_on(const lm_infer_model *im, const char *path)
+{
+    if (!im->train_scenes) return -1;
+    char h[24];
+    snprintf(h, sizeof h, "%016" PRIx64, lm_scene_content_hash(path));
+    for (const char *p = strstr(im->train_scenes, h); p; p = strstr(p + 1, h))
+        if ((p == im->train_scenes || p[-1] == ',') && (p[16] == ',' || p[16] == 0)) return 1;
+    return 0;
+}
+
+lm_status lm_eval_scene_timed(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
+                              const float *k, int nnoise, const lm_tile_opts *to,
+                              const lm_rng *rng, lm_metrics *out, double *seconds, lm_err *err)
 {
     if (nnoise < 1 || nnoise > LM_EVAL_MAX_NOISE)
         return lm_err_set(err, LM_ERR_ARG, "eval: %d noise levels (need 1..%d)", nnoise,
@@ -226,7 +269,8 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
     for (int i = 0; i < nnoise && !st; i++) {
         /* keyed on the level, not its position: 10 % draws the same noise in any list */
         lm_rng r = lm_rng_split(rng, (uint64_t)llround((double)k[i] * 1e6));
-        st = eval_one(c, im, truth, k[i], to, &r, frame, &out[i], NULL, err);
+        st = eval_one(c, im, truth, k[i], to, &r, frame, &out[i], NULL,
+                      seconds ? &seconds[i] : NULL, err);
     }
     free(frame);
     return st;
@@ -243,7 +287,7 @@ lm_status lm_eval_scene_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *
                           truth->width);
     if (!frame) return lm_err_set(err, LM_ERR_NOMEM, "eval: out of memory");
     lm_rng r = lm_rng_split(rng, (uint64_t)llround((double)k * 1e6));
-    lm_status st = eval_one(c, im, truth, k, to, &r, frame, out, pred, err);
+    lm_status st = eval_one(c, im, truth, k, to, &r, frame, out, pred, NULL, err);
     free(frame);
     return st;
 }

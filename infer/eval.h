@@ -57,7 +57,9 @@ lm_status lm_eval_simulate(const lm_infer_model *im, const lm_cube *truth,
  * `whole` is non-zero and the model declares a receptive field (lm_whole_halo > 0); models
  * with LM_CAP_WHOLE_FRAME (MST++: the RGB "mst", "mst-tiny", and the coded "mst-coded", whose
  * global attention has no windows) through lm_mst_reconstruct on the whole frame with lm_nthreads(c)
- * threads (in its own ctx; `to` and `whole` unused). c must hold no tensors. Errors: those of
+ * threads (in its own ctx; `to` and `whole` unused). A coded frame of a system whose gains
+ * differ from the model's (im->remap active, infer/raw.h) is rescaled per tile phase first,
+ * the model's given noise level converted with it. c must hold no tensors. Errors: those of
  * the inference paths; LM_ERR_ARG for a model that is neither coded nor MST++. */
 lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *frame,
                               int height, int width, const lm_tile_opts *to, int whole,
@@ -79,6 +81,17 @@ lm_status lm_eval_scene(lm_ctx *c, const lm_infer_model *im, const lm_cube *trut
 lm_status lm_eval_scene_one(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth, float k,
                             const lm_tile_opts *to, const lm_rng *rng, lm_metrics *out,
                             lm_cube *pred, lm_err *err);
+
+/* lm_eval_scene that also returns, per noise level, the seconds the reconstruction of the
+ * frame took (seconds[i], NULL-able; simulation and scoring not counted). */
+lm_status lm_eval_scene_timed(lm_ctx *c, const lm_infer_model *im, const lm_cube *truth,
+                              const float *k, int nnoise, const lm_tile_opts *to,
+                              const lm_rng *rng, lm_metrics *out, double *seconds, lm_err *err);
+
+/* Was the scene at path (a file or a CAVE folder) among the model's training scenes, by
+ * content (lm_scene_content_hash in im->train_scenes)? 1 yes, 0 no, -1 unknown (the model
+ * records no training scenes). */
+int lm_eval_trained_on(const lm_infer_model *im, const char *path);
 
 /* Peak wavelength of a spectrum sampled at wl0 + i * step (i < n): the largest sample m (first
  * one on ties), refined by the vertex of the parabola through m - 1, m, m + 1 when both

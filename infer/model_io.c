@@ -51,33 +51,73 @@ static lm_status read_meta(const char *path, lm_infer_model *im, char *preset, s
     return LM_OK;
 }
 
-/* Load the system (override or recorded; "" = bundled default) and check its hash. */
-static lm_status load_system(lm_infer_model *im, const char *override, uint64_t hash,
-                             lm_err *err)
+/* The file of the recorded system on this machine: the recorded path, else the bundled default
+ * when it has the recorded hash (recorded on another machine or checkout). "" if neither. */
+static void recorded_system(const char *recorded, uint64_t hash, char *out, size_t n)
 {
-    if (override && override[0])
-        snprintf(im->system_path, sizeof im->system_path, "%s", override);
-    else if (!im->system_path[0] &&
-             lm_data_path("systems/default.json", im->system_path, sizeof im->system_path, err))
-        return err->status;
-    if (!is_file(im->system_path) && hash) {
-        /* Recorded on another machine or checkout: the bundled default, if it is the same
-         * file (same hash), is the system the model was trained with. */
-        char def[sizeof im->system_path];
-        lm_err e2 = {0};
+    snprintf(out, n, "%s", recorded);
+    lm_err e2 = {0};
+    if (!out[0] && lm_data_path("systems/default.json", out, n, &e2)) out[0] = 0;
+    if (!is_file(out) && hash) {
+        char def[1024];
         if (lm_data_path("systems/default.json", def, sizeof def, &e2) == LM_OK && is_file(def) &&
             lm_file_hash(def) == hash)
-            snprintf(im->system_path, sizeof im->system_path, "%s", def);
+            snprintf(out, n, "%s", def);
     }
+    if (!is_file(out)) out[0] = 0;
+}
+
+/* An override of another hash: the recorded system's file, loaded into *msys, with the remap
+ * from the override's frames to it (im->remap); LM_ERR_ARG "model/system mismatch" with the
+ * reason when it cannot be mapped. */
+static lm_status load_remap(lm_infer_model *im, const char *recorded, uint64_t hash,
+                            uint64_t got, lm_system *msys, lm_err *err)
+{
+    char path[1024];
+    recorded_system(recorded, hash, path, sizeof path);
+    if (!path[0] || lm_file_hash(path) != hash)
+        return lm_err_set(err, LM_ERR_ARG, "model/system mismatch: %s was trained with a system "
+                          "description of hash %016" PRIx64 " (not found here), %s has hash "
+                          "%016" PRIx64, im->weights, hash, im->system_path, got);
+    lm_err e2 = {0};
+    if (lm_system_load(path, msys, &e2))
+        return lm_err_set(err, e2.status, "%s: the model's system: %s", im->weights, e2.msg);
+    if (lm_gain_remap_init(msys, &im->sys, &im->remap, &e2))
+        return lm_err_set(err, LM_ERR_ARG, "model/system mismatch: %s cannot be mapped onto the "
+                          "system %s was trained with (%s): %s", im->system_path, im->weights,
+                          path, e2.msg);
+    snprintf(im->model_system, sizeof im->model_system, "%s", path);
+    return LM_OK;
+}
+
+/* Load the system (override or recorded; "" = bundled default) and check its hash. An override
+ * of another hash that differs from the recorded system in gains only is kept with a remap
+ * (infer/raw.h); *msys then holds the recorded system (else it stays zeroed). */
+static lm_status load_system(lm_infer_model *im, const char *override, uint64_t hash,
+                             lm_system *msys, lm_err *err)
+{
+    char recorded[sizeof im->system_path];
+    snprintf(recorded, sizeof recorded, "%s", im->system_path);
+    if (override && override[0])
+        snprintf(im->system_path, sizeof im->system_path, "%s", override);
+    else
+        recorded_system(recorded, hash, im->system_path, sizeof im->system_path);
+    if (!im->system_path[0] && !recorded[0] &&
+        lm_data_path("systems/default.json", im->system_path, sizeof im->system_path, err))
+        return err->status;
+    if (!im->system_path[0]) snprintf(im->system_path, sizeof im->system_path, "%s", recorded);
     if (!is_file(im->system_path))
         return lm_err_set(err, LM_ERR_IO, "%s: system description '%s' not found (give one with "
                           "--system)", im->weights, im->system_path);
     uint64_t got = lm_file_hash(im->system_path);
-    if (hash && got != hash)
+    const int other = hash && got != hash;
+    if (other && !(override && override[0]))
         return lm_err_set(err, LM_ERR_ARG, "model/system mismatch: %s was trained with a system "
                           "description of hash %016" PRIx64 ", %s has hash %016" PRIx64,
                           im->weights, hash, im->system_path, got);
-    return lm_system_load(im->system_path, &im->sys, err);
+    lm_status st = lm_system_load(im->system_path, &im->sys, err);
+    if (!st && other) st = load_remap(im, recorded, hash, got, msys, err);
+    return st;
 }
 
 lm_status lm_infer_model_load(const char *path, const char *system_override, lm_infer_model *im,
@@ -87,9 +127,12 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
     char preset[64];
     uint64_t hash = 0;
     lm_mosaic mo;
+    lm_system msys; /* with a remap: the model's own system, whose front the network keeps */
+    memset(&msys, 0, sizeof msys);
     lm_status st = read_meta(path, im, preset, sizeof preset, &hash, err);
-    if (!st) st = load_system(im, system_override, hash, err);
-    if (!st) st = lm_mosaic_from_system(&im->sys, &mo, err);
+    if (!st) st = load_system(im, system_override, hash, &msys, err);
+    if (!st) st = lm_mosaic_from_system(im->remap.active ? &msys : &im->sys, &mo, err);
+    lm_system_free(&msys);
     lm_err e3 = {0};
     char *base = st ? NULL : lm_safetensors_meta(im->weights, "base_preset", &e3);
     if (!st && base && base[0])
@@ -108,6 +151,7 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
         lm_infer_model_free(im);
         return st;
     }
+    im->train_scenes = lm_safetensors_meta(im->weights, "train_scenes", &e3);
     char *bk = lm_safetensors_meta(im->weights, "buckets", &e3); /* older files: none */
     if (bk && bk[0] && atoi(bk) != lm_model_buckets(im->model))
         st = lm_err_set(err, LM_ERR_FORMAT, "%s: records %s bucket(s), its preset %s reads %d",
@@ -119,6 +163,16 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
                         im->weights, fr, preset, lm_model_frames(im->model));
     free(fr);
     if (st) {
+        lm_infer_model_free(im);
+        return st;
+    }
+    if (im->remap.active && lm_model_buckets(im->model) == 0)
+        im->remap.active = 0; /* an RGB camera's image: no LED gains in it */
+    if (im->remap.active && lm_model_buckets(im->model) == 2) {
+        st = lm_err_set(err, LM_ERR_ARG, "model/system mismatch: %s has other LED gains than "
+                        "%s was trained with, and the two-bucket model %s reads bucket 0, which "
+                        "sums every other LED: it cannot be rescaled per tile phase",
+                        im->system_path, im->weights, preset);
         lm_infer_model_free(im);
         return st;
     }
@@ -171,5 +225,6 @@ void lm_infer_model_free(lm_infer_model *im)
     lm_system_free(&im->sys);
     if (im->qdo) lm_qdocam_free(im->qdo);
     free(im->qdo);
+    free(im->train_scenes);
     memset(im, 0, sizeof *im);
 }

@@ -11,6 +11,7 @@
 #define LM_MODEL_IO_H
 #include "data/qdocam.h"
 #include "data/system.h"
+#include "infer/raw.h"
 #include "models/model.h"
 
 typedef struct lm_infer_model {
@@ -18,6 +19,10 @@ typedef struct lm_infer_model {
     lm_system sys;        /* the system description the model runs with */
     char weights[1024];   /* the .safetensors file loaded */
     char system_path[1024];
+    lm_gain_remap remap;  /* frames of sys's gains to the model's (remap.active 0: none) */
+    char model_system[1024]; /* with a remap: the system file the model was trained with */
+    char *train_scenes;   /* content hashes of its training scenes ("train_scenes" metadata,
+                           * data/dataset.h); NULL when the file records none */
     int noise_oracle;     /* eval only: give noise-reading models the simulated level */
     int sensor_clip, sensor_bits; /* eval only: simulated frames clipped to [0, 1] / quantised
                                    * after the noise, as a 16-bit PNG holds them */
@@ -27,12 +32,17 @@ typedef struct lm_infer_model {
 } lm_infer_model;
 
 /* Load path (a folder holding model.safetensors, or a .safetensors file). system_override
- * (NULL or "" = the one recorded in the file) replaces the recorded system; its FNV-1a hash must
- * then equal the recorded system_hash when one is recorded, as must the recorded file's.
+ * (NULL or "" = the one recorded in the file) replaces the recorded system; the recorded file's
+ * FNV-1a hash must equal the recorded system_hash when one is recorded. An override of another
+ * hash is the camera the frames come from: when it differs from the recorded system (found
+ * here by its path or as the bundled default) only in LED gains or allocations, im->sys is the
+ * override, the network keeps the recorded system's front and im->remap rescales each tile
+ * phase of every frame to the recorded gains (lm_gain_remap_init; callers apply it with
+ * lm_gain_remap_frame); otherwise it is refused.
  * Errors (*im zeroed, message names the file): LM_ERR_IO (missing model or system file),
  * LM_ERR_FORMAT (not a Lumosaic model: no preset, bad weights), LM_ERR_ARG ("model/system
- * mismatch": the system differs from the one the model was trained for, or its tile does not fit
- * the model's weights), others from the model / parameter loaders. */
+ * mismatch": the system cannot be mapped onto the one the model was trained for, with the
+ * reason, or its tile does not fit the model's weights), others from the model / parameter loaders. */
 lm_status lm_infer_model_load(const char *path, const char *system_override, lm_infer_model *im,
                               lm_err *err);
 void lm_infer_model_free(lm_infer_model *im);

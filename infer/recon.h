@@ -10,6 +10,7 @@
 #ifndef LM_RECON_H
 #define LM_RECON_H
 #include "data/cube.h"
+#include "infer/model_io.h"
 #include "models/model.h"
 
 typedef struct lm_recon_opts {
@@ -34,6 +35,14 @@ lm_status lm_recon_check(const lm_model *m, int height, int width, lm_err *err);
  * no tensors. Errors: those of lm_recon_check, lm_whole_infer and lm_tile_infer. */
 lm_status lm_recon_frame(lm_ctx *c, lm_model *m, const float *in, int height, int width,
                          const lm_recon_opts *o, lm_cube *cube, lm_err *err);
+
+/* lm_recon_frame for a frame of the camera im->sys describes: when its LED gains differ from
+ * the model's (im->remap active, infer/raw.h) the frame is rescaled per tile phase (a copy) and
+ * the model's given noise level converted with it for this call; otherwise lm_recon_frame as
+ * it is. Errors: those of lm_recon_frame, LM_ERR_NOMEM. */
+lm_status lm_recon_camera_frame(lm_ctx *c, const lm_infer_model *im, const float *in,
+                                int height, int width, const lm_recon_opts *o, lm_cube *cube,
+                                lm_err *err);
 
 /* In place: every value below 0 set to 0 (reflectance is non-negative; the spectral EXR
  * writer refuses negative values). */

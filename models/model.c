@@ -175,6 +175,23 @@ const char *lm_model_preset_purpose(const char *name)
     return "";
 }
 
+const char *lm_model_name(const lm_model *m, char *out, size_t n)
+{
+    if (m->base) snprintf(out, n, "%s+%s", m->preset, m->base->preset);
+    else snprintf(out, n, "%s", m->preset);
+    return out;
+}
+
+int lm_model_name_split(const char *name, char *net, char *base, size_t n)
+{
+    const char *plus = strchr(name, '+');
+    if (!plus || strchr(plus + 1, '+') || (size_t)(plus - name) >= n || strlen(plus + 1) >= n)
+        return 0;
+    snprintf(net, n, "%.*s", (int)(plus - name), name);
+    snprintf(base, n, "%s", plus + 1);
+    return lm_model_preset_known(net) && lm_model_preset_known(base);
+}
+
 static const preset *find_preset(const char *name)
 {
     for (int i = 0; i < NPRESETS; i++)

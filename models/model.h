@@ -122,6 +122,13 @@ int lm_model_preset_known(const char *name);
 const char *const *lm_model_presets(void);
 /* One line on what a preset is for ("" for a name that is not a preset). */
 const char *lm_model_preset_purpose(const char *name);
+/* The model's name as results tables, the README and `info --model` write it: its preset, or
+ * for a residual "NET+BASE" (e.g. "rt-16-nc+lmmse"). Into out (n bytes, truncated); returns
+ * out. */
+const char *lm_model_name(const lm_model *m, char *out, size_t n);
+/* Split "NET+BASE" into its two presets (each at most n bytes); 1 when name has that form with
+ * two known presets, else 0. */
+int lm_model_name_split(const char *name, char *net, char *base, size_t n);
 
 /* ---- families (one file each) ---------------------------------------------------------- */
 /* noise_cond 1 ("han-tiny-nc"): the head conv's output also gets a per-channel bias

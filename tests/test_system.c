@@ -195,6 +195,8 @@ static void test_inline_system_by_hand(void)
         rewind(f);
         size_t n = fread(buf, 1, sizeof buf - 1, f);
         CHECK(n > 0 && strstr(buf, "small") && strstr(buf, "B "));
+        CHECK_MSG(strstr(buf, "row 0 | B           | A           | A") && strstr(buf, "pixel (y, x) sees the LED at row") &&
+                  strstr(buf, "white reflector"), "%s", buf);
         fclose(f);
     }
     lm_system_free(&s);

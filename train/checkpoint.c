@@ -82,9 +82,11 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
     snprintf(fr, sizeof fr, "%d", lm_model_frames(m));
     const char *meta[] = {"format", CKPT_FORMAT, "preset", m->preset, "system", sys,
                           "system_hash", hash, "iteration", it, "seconds", secs, "buckets", bk,
-                          "frames", fr, "base_preset", m->base ? m->base->preset : ""};
+                          "frames", fr, "train_scenes",
+                          opts && opts->train_scenes ? opts->train_scenes : "",
+                          "base_preset", m->base ? m->base->preset : ""};
     dir_file(path, sizeof path, dir, "model.safetensors");
-    return lm_params_save(&m->params, path, meta, m->base ? 9 : 8, err);
+    return lm_params_save(&m->params, path, meta, m->base ? 10 : 9, err);
 }
 
 int lm_train_checkpoint_cpu_clock(const char *dir)

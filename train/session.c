@@ -277,6 +277,9 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         st = err->status;
     if (!st && !(d = open_data(cfg, &sys, closed, opts.data_parallel, pad_y, pad_x, err)))
         st = err->status;
+    char *hashes = st ? NULL : lm_dataset_split_hashes(d, LM_SPLIT_TRAIN);
+    if (!st && !hashes) st = lm_err_set(err, LM_ERR_NOMEM, "out of memory");
+    opts.train_scenes = hashes; /* eval warns when it scores one of them */
     if (!st && opts.progress && (!opts.data_parallel || lm_dist_rank() == 0))
         lm_dataset_describe(d, opts.progress_out ? opts.progress_out : stderr);
     if (!st && closed) {
@@ -321,6 +324,7 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         st = lm_train_run(cfg, m, &src, &opts, res, err);
     }
     lm_dataset_close(d);
+    free(hashes);
     lm_model_free(m);
     lm_system_free(&sys);
     return st;

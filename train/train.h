@@ -297,6 +297,8 @@ typedef struct lm_train_opts {
     FILE *progress_out;        /* NULL = stderr */
     const char *system_path;   /* recorded in checkpoints ("" = bundled default) */
     uint64_t system_hash;      /* FNV-1a of the system file (0 = unknown) */
+    const char *train_scenes;  /* content hashes of the training scenes, recorded in
+                                * checkpoints ("train_scenes"; lm_dataset_split_hashes) */
     double stop_seconds;       /* stop (with a checkpoint) once training time over all
                                 * invocations reaches this; 0 = no such stop. Unlike
                                 * cfg.minutes it does not shape the schedule (the study stops

@@ -8,7 +8,10 @@
 # eval.json and eval_motion.csv (px/frame, static reference, aligned, unaligned), the still
 # row's unaligned score equals its static reference, aligned >= unaligned (- 0.1 dB) at 0 and
 # 240 px/s, --align plain runs and --align bogus is refused; --photons / --read-noise add shot and
-# read noise (recorded in eval.json, lower PSNR); bad input: missing model, not a model, no DATA,
+# read noise (recorded in eval.json, lower PSNR); seconds per frame in the table and eval.json;
+# scoring the scene it was trained on gives a warning line, also for a renamed copy of it
+# (content hashes recorded in the checkpoint), not for another scene; --scenes picks scenes by
+# name (an unknown name, or --split with it, refused); bad input: missing model, not a model, no DATA,
 # missing scene, bad noise / motion list, too small rainbow, bad split, unknown option, used output
 # folder — one line on stderr, exit 2, no output left.
 # The passive RGB baseline: a 3-iteration mst-tiny run (its saved model takes 3-channel RGB
@@ -34,7 +37,16 @@ cat "$T/table"
 check "json written" [ -s "$O/eval.json" ]
 check "no staging folder left" no_output "$O.tmp"
 check "table has a row per noise level" \
-  [ "$(grep -cE '^ +(0|10) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/table")" -eq 2 ]
+  [ "$(grep -cE '^ +(0|10) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/table")" -eq 2 ]
+check "table times the frames" grep -qE '^ +noise % +PSNR dB .* s/frame$' "$T/table"
+check "seconds per frame in eval.json" python3 -c "
+import json, sys
+j = json.load(open(sys.argv[1]))
+assert all(r['seconds_per_frame'] > 0 for r in j['mean'])
+assert all(r['seconds_per_frame'] > 0 for s in j['scenes'] for r in s['results'])" "$O/eval.json"
+# the model was trained on the scene it is scored on: one warning line, by content
+check "training-set overlap warned: $(cat "$T/err")" \
+  grep -q "^lumosaic eval: warning: scene balloons_crop100 (.*) was in the model's training set" "$T/err"
 check "table reports the rainbow" grep -q '^rainbow 96 x 96: peak error mean' "$T/table"
 # fields, ranges and PSNR(noise 0) >= PSNR(noise 10), per scene and for the mean
 python3 - "$O/eval.json" <<'PY'
@@ -142,6 +154,24 @@ for clean, noisy in zip(rows[:2], rows[2:]):
     assert noisy["psnr_static"] < clean["psnr_static"] - 0.3, (clean, noisy)
 PY
 check "motion rows at 0 and 10 % noise (noise-free rows as without the flag)" [ $? -eq 0 ]
+# the same scene copied under another name is still the training scene; another scene is not
+mkdir -p "$T/copy" "$T/other"
+cp -r "$CAVE" "$T/copy/renamed"
+for f in "$T/copy/renamed"/*; do mv "$f" "$(dirname "$f")/$(basename "$f" | sed 's/^balloons_crop100/renamed/')"; done
+"$MK" "$T/other/synthetic.exr" good 66 64
+"$LM" eval --model "$R" "$T/copy" "$T/other" --scenes renamed,synthetic --noise 0 --rainbow 0 \
+  > "$T/stable" 2> "$T/serr"
+check "eval --scenes: $(cat "$T/serr")" [ $? -eq 0 ]
+check "--scenes: two scenes scored" grep -q '^2 scene(s), chosen by --scenes' "$T/stable"
+check "a renamed copy of a training scene is warned" \
+  grep -q "warning: scene renamed (.*) was in the model's training set" "$T/serr"
+check "one warning only (not the other scene)" [ "$(grep -c 'warning: scene' "$T/serr")" -eq 1 ]
+"$LM" eval --model "$R" "$T/other" --split all --noise 0 --rainbow 0 > /dev/null 2> "$T/serr"
+check "no training scene scored: no warning ($(cat "$T/serr"))" bash -c "! grep -q warning '$T/serr'"
+expect_error "--scenes: unknown name" 2 "--scenes: no scene 'nope' among the 2 given" "$T/e14" -- \
+  "$LM" eval --model "$R" "$T/copy" "$T/other" --scenes synthetic,nope --output "$T/e14"
+expect_error "--scenes with --split" 2 "not both" "$T/e15" -- \
+  "$LM" eval --model "$R" "$CAVE" --scenes balloons_crop100 --split all --output "$T/e15"
 expect_error "bad motion noise" 2 "--motion-noise" "$T/e13" -- "$LM" eval --model "$R" "$CAVE" --motion 0 --motion-noise 0,x --output "$T/e13"
 "$LM" eval --model "$R" "$CAVE" --split all --noise 0 --rainbow 0 --motion 240 --align plain \
   > "$T/ptable" 2> "$T/perr"
@@ -168,7 +198,7 @@ check "mst-tiny run takes RGB input" [ $? -eq 0 ]
 check "eval mst-tiny: $(cat "$T/rerr")" [ $? -eq 0 ]
 cat "$T/rtable"
 check "mst table has a row per noise level" \
-  [ "$(grep -cE '^ +(0|10) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/rtable")" -eq 2 ]
+  [ "$(grep -cE '^ +(0|10) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/rtable")" -eq 2 ]
 check "mst table reports the rainbow" grep -q '^rainbow 64 x 66: peak error mean' "$T/rtable"
 python3 - "$T/evr/eval.json" <<'PY'
 import json, math, sys
@@ -178,7 +208,7 @@ s = j["scenes"][0]
 for rows in (s["results"], j["mean"]):
     assert [r["noise_percent"] for r in rows] == [0, 10]
     for r in rows:
-        assert sorted(r) == ["mae", "noise_percent", "psnr", "sam", "ssim"], r
+        assert sorted(r) == ["mae", "noise_percent", "psnr", "sam", "seconds_per_frame", "ssim"], r
         assert all(math.isfinite(v) for v in r.values()) and r["mae"] > 0, r
 for rows in (s["motion"], j["motion_mean"]):
     assert [r["speed_px_s"] for r in rows] == [0, 120], rows
@@ -210,7 +240,7 @@ check "train qdo-mst: $(cat "$T/qlog")" [ -s "$RQ/model.safetensors" ]
   > "$T/qtable" 2> "$T/qerr"
 check "eval qdo-mst: $(cat "$T/qerr")" [ $? -eq 0 ]
 check "qdo table has a row per noise level" \
-  [ "$(grep -cE '^ +(0|10) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/qtable")" -eq 2 ]
+  [ "$(grep -cE '^ +(0|10) +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+ +[0-9.]+$' "$T/qtable")" -eq 2 ]
 check "qdo csv rows" [ "$(grep -cE '^(balloons_crop100|mean),(0|10),' "$T/evq/eval.csv")" -eq 4 ]
 "$LM" info --doe default > "$T/doe_info" 2>&1
 check "info --doe default: $(cat "$T/doe_info")" grep -qE '^ +550 +0\.[0-9]+ ' "$T/doe_info"

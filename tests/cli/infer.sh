@@ -89,7 +89,14 @@ expect_error "missing model" 2 "no such model" "$T/e1" -- "$LM" infer --model "$
 echo "not safetensors" > "$T/bogus.safetensors"
 expect_error "not a model" 2 "bogus.safetensors" "$T/e2" -- "$LM" infer --model "$T/bogus.safetensors" --input "$F" --output "$T/e2"
 SYS=$(grep -o '"path": "[^"]*default.json"' "$T/sim/simulate.json" | head -1 | cut -d'"' -f4)
-{ cat "$SYS"; echo " "; } > "$T/other.json"
+python3 - "$SYS" "$T/other.json" <<'PY'  # another tile map: cannot be mapped onto the model's
+import json, os, sys
+d = os.path.dirname(os.path.abspath(sys.argv[1])); s = json.load(open(sys.argv[1]))
+for l in s["leds"]: l["emission"]["csv"] = os.path.join(d, l["emission"]["csv"])
+s["sensor"]["qe"]["csv"] = os.path.join(d, s["sensor"]["qe"]["csv"])
+s["tile_map"][0][0], s["tile_map"][0][1] = s["tile_map"][0][1], s["tile_map"][0][0]
+json.dump(s, open(sys.argv[2], "w"))
+PY
 expect_error "model/system mismatch" 2 "model/system mismatch" "$T/e3" -- "$LM" infer --model "$R" --input "$F" --system "$T/other.json" --output "$T/e3"
 "$MK" "$T/small.exr" good 60 60
 "$LM" simulate --input "$T/small.exr" --output "$T/small" > /dev/null 2>&1
