@@ -66,10 +66,14 @@ static void help(void)
            "work) unless --tiles. Writes DIR/cube_NNNN.exr (spectral OpenEXR, channels T.<nm>nm;\n"
            "negative outputs clamped to 0) and DIR/srgb_NNNN.png (D65 preview) per frame.\n\n"
            "  --model RUN      a training run folder (its model.safetensors) or a .safetensors\n"
-           "                   file written by 'lumosaic train'; or 'auto' (with --auto):\n"
-           "                   per window, the cheapest calibrated model whose expected PSNR\n"
-           "                   is within --auto-tol dB of the best model's (patch-wise only;\n"
-           "                   prints the share of windows per model)\n"
+           "                   file written by 'lumosaic train'; or 'auto': without --auto,\n"
+           "                   the bundled two-bucket model when bucket 0 is there (--bucket0,\n"
+           "                   or a bucket0/ folder beside the input's frames/), else the\n"
+           "                   bundled single-bucket model (models/demo/, or LM_MODELS_DIR);\n"
+           "                   with --auto, per window, the cheapest calibrated model whose\n"
+           "                   expected PSNR is within --auto-tol dB of the best model's\n"
+           "                   (patch-wise only; prints the share of windows per model).\n"
+           "                   One line names the model used and the buckets it read\n"
            "  --auto FILE      calibration written by 'lumosaic fit-auto' (for --model auto)\n"
            "  --auto-tol DB    accuracy the auto choice may give up per window, in dB of\n"
            "                   expected PSNR (>= 0; default 0.5; 0 = always the best model)\n"
@@ -173,9 +177,7 @@ static int parse(lm_cli *c, infer_opts *o)
     if (!o->model) return lm_cli_error(c, "--model is required (see 'lumosaic infer --help')");
     if (!o->input) return lm_cli_error(c, "--input is required (see 'lumosaic infer --help')");
     if (!o->output) return lm_cli_error(c, "--output is required (see 'lumosaic infer --help')");
-    o->is_auto = !strcmp(o->model, "auto");
-    if (o->is_auto && !o->auto_file)
-        return lm_cli_error(c, "--model auto needs --auto FILE (see 'lumosaic fit-auto')");
+    o->is_auto = !strcmp(o->model, "auto") && o->auto_file; /* else a bundled model, below */
     if (!o->is_auto && o->auto_file)
         return lm_cli_error(c, "--auto is only for --model auto");
     return 1;
@@ -205,6 +207,8 @@ typedef struct infer_align {
 typedef struct infer_run {
     const lm_cli *c;
     const infer_opts *o;
+    const char *model_path; /* --model, or the bundled model --model auto picked */
+    int said_model;         /* the model line is printed */
     lm_infer_model im;
     lm_infer_model more[LM_AUTO_MAX_MODELS]; /* auto: models 1.. (model 0 is im) */
     lm_model *models[LM_AUTO_MAX_MODELS];
@@ -552,6 +556,14 @@ static int run_frames(infer_run *r)
         char al[48] = "alignment off";
         if (r->al.on || (r->al.mf && !r->o->no_align))
             snprintf(al, sizeof al, "alignment %.2f s", ta - t0);
+        if (!r->o->is_auto && !r->said_model) { /* which model, and what it read (once, with
+                                                  * the first frame done: an error stays alone) */
+            char name[160];
+            fprintf(stderr, "model %s (%s%s): %s\n", lm_model_name(r->im.model, name, sizeof name),
+                    r->im.weights, strcmp(r->o->model, "auto") ? "" : ", picked by --model auto",
+                    r->seq0.count ? "both buckets" : "bucket 1");
+            r->said_model = 1;
+        }
         fprintf(stderr, "frame %d/%d %s: %.2f s (%s, reconstruction %.2f s, writing %.2f s); "
                 "saturated %.3f %%\n", i + 1, r->seq.count, r->seq.paths[i], t2 - t0, al,
                 t1 - ta, t2 - t1, 100.0 * r->sat[i]);
@@ -594,12 +606,32 @@ static int open_auto(infer_run *r, lm_err *e)
 
 static int open_bucket0(infer_run *r, lm_err *e);
 
+static void bucket0_beside(const char *input, char *out, size_t n);
+
+/* --model auto without a calibration: the bundled two-bucket model when bucket 0 is there
+ * (--bucket0, or a bucket0/ folder beside the input's frames/), else the single-bucket one. */
+static int pick_bundled(infer_run *r, lm_err *e)
+{
+    static char path[1200];
+    char beside[1100] = "";
+    if (!r->o->bucket0) bucket0_beside(r->o->input, beside, sizeof beside);
+    const int two = r->o->bucket0 || beside[0];
+    if (lm_infer_bundled_model(two ? 2 : 1, path, sizeof path, e)) return fail(r->c, e, 0);
+    r->model_path = path;
+    return 0;
+}
+
 static int open_inputs(infer_run *r, lm_err *e)
 {
+    r->model_path = r->o->model;
+    if (!r->o->is_auto && !strcmp(r->o->model, "auto")) {
+        int rc = pick_bundled(r, e);
+        if (rc) return rc;
+    }
     if (r->o->is_auto) {
         int rc = open_auto(r, e);
         if (rc) return rc;
-    } else if (lm_infer_model_load(r->o->model, r->o->system, &r->im, e)) {
+    } else if (lm_infer_model_load(r->model_path, r->o->system, &r->im, e)) {
         return fail(r->c, e, 0);
     } else {
         r->im.model->noise_given = (float)r->o->noise_level;

@@ -228,3 +228,22 @@ void lm_infer_model_free(lm_infer_model *im)
     free(im->train_scenes);
     memset(im, 0, sizeof *im);
 }
+
+lm_status lm_infer_bundled_model(int buckets, char *out, size_t n, lm_err *err)
+{
+    const char *dir = getenv("LM_MODELS_DIR");
+#ifdef LM_SOURCE_DIR
+    if (!dir || !dir[0]) dir = LM_SOURCE_DIR "/models/demo";
+#endif
+    if (!dir || !dir[0])
+        return lm_err_set(err, LM_ERR_IO, "no bundled models: set LM_MODELS_DIR to the folder "
+                          "holding %s", LM_BUNDLED_MODEL_1);
+    const char *file = buckets == 2 ? LM_BUNDLED_MODEL_2 : LM_BUNDLED_MODEL_1;
+    int k = snprintf(out, n, "%s/%s", dir, file);
+    if (k < 0 || (size_t)k >= n) return lm_err_set(err, LM_ERR_ARG, "%s: path too long", dir);
+    if (!is_file(out))
+        return lm_err_set(err, LM_ERR_IO, "%s: the bundled %s model is missing (set "
+                          "LM_MODELS_DIR to the folder holding it)", out,
+                          buckets == 2 ? "two-bucket" : "single-bucket");
+    return LM_OK;
+}

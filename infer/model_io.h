@@ -31,6 +31,14 @@ typedef struct lm_infer_model {
     lm_qdocam *qdo;       /* LM_CAP_QDO_OPTICS models: the camera (NULL: eval builds one) */
 } lm_infer_model;
 
+/* The bundled models (models/demo/ of the source tree, or LM_MODELS_DIR when set): the best
+ * single-bucket model (buckets 1) and the two-bucket one (buckets 2), the models `infer --model
+ * auto` picks from when no calibration is given. Into out (n bytes); LM_ERR_IO naming the file
+ * when it is missing. */
+#define LM_BUNDLED_MODEL_1 "tn96nc-lmmse.safetensors"
+#define LM_BUNDLED_MODEL_2 "tn96nc-b2-lmmseb2.safetensors"
+lm_status lm_infer_bundled_model(int buckets, char *out, size_t n, lm_err *err);
+
 /* Load path (a folder holding model.safetensors, or a .safetensors file). system_override
  * (NULL or "" = the one recorded in the file) replaces the recorded system; the recorded file's
  * FNV-1a hash must equal the recorded system_hash when one is recorded. An override of another

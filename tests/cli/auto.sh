@@ -8,7 +8,7 @@
 # --model auto with tolerance 0 and a huge tolerance (every window on one model: the summary
 # says so and the cube equals that model's patch-wise cube, cli_cube_diff); the linear model runs
 # on the whole frame by default and agrees with --tiles (PSNR between them > 40 dB); bad input:
-# missing / broken calibration, --auto without auto, auto without --auto, one model, no scenes,
+# missing / broken calibration, --auto without auto, one model, no scenes,
 # bad --split / --measure / --test-synth / --test-tol — one line on stderr, exit 2, no output
 # left.
 # usage: auto.sh LUMOSAIC MAKE_CUBE CUBE_PSNR CUBE_DIFF
@@ -150,8 +150,6 @@ expect_error "missing calibration" 2 "cannot open calibration" "$T/e1" -- \
   "$LM" infer --model auto --auto "$T/none.json" --input "$F" --output "$T/e1"
 expect_error "broken calibration" 2 "missing or bad field" "$T/e2" -- \
   "$LM" infer --model auto --auto "$T/broken.json" --input "$F" --output "$T/e2"
-expect_error "auto without --auto" 2 "needs --auto" "$T/e3" -- \
-  "$LM" infer --model auto --input "$F" --output "$T/e3"
 expect_error "--auto without auto" 2 "only for --model auto" "$T/e4" -- \
   "$LM" infer --model "$T/lin" --auto "$T/auto.json" --input "$F" --output "$T/e4"
 expect_error "negative tol" 2 "--auto-tol" "$T/e5" -- \
