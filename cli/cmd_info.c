@@ -137,7 +137,7 @@ int lm_cmd_info(int argc, char **argv)
         for (const char *const *p = lm_model_presets(); *p; p++)
             printf("%-15s %s\n", *p, lm_model_preset_purpose(*p));
         printf("\nalso: lmmse-K (window K, odd 1..31), lmmse-K-b2, lmmse-K-rfD (D random "
-               "features),\nlmmse-K-gG-b2 (the panchromatic guide over G x G, odd G <= K - 2);"
+               "features),\nlmmse-K-gG-b2 (the panchromatic guide over G x G, odd G <= K);"
                "\nNET+BASE in results tables: NET trained as a residual on BASE "
                "(train --model NET --base RUN)\n");
         if (!a.model) return 0;

@@ -26,17 +26,18 @@
  * none for a two-bucket model (whole frames of it run patch-wise).
  * Panchromatic guide ("lmmse-guide-b2", G > 0): both buckets give a full-resolution
  * panchromatic image g = (bucket 1 + (P - 1) bucket 0 / (LEDs - 1)) / P (white = 1, P phases,
- * one LED each); gs = its 3 x 3 mean and rho = bucket 1 / gs, the pixel's share of the light
- * (its LED's response over the mean response of all LEDs: 1 for white), which stays constant
- * across a shading or texture edge of one material where the raw samples jump. The model is
- * lmmse-b2 plus a ratio term: D = G^2 + 1 fixed features gs(p) rho(p + d) (d over a G x G
- * window, phases reflected at frame borders as the raw windows are) and gs(p), read out per
- * phase and level like the random features:
- *     y[c](p) = lmmse-b2(p) + gs(p) (sum_d R_l[ph][c][d] rho(p + d) + r_l[ph][c]),
- * i.e. a closed-form guided interpolation of each LED's share, multiplied back by the local
+ * one LED each), and rho = bucket 1 / g, the pixel's share of its own light (its LED's
+ * response over the mean response of all LEDs: 1 for white), which stays constant across a
+ * shading or texture edge of one material where the raw samples jump. The model is lmmse-b2
+ * plus a ratio term: D = G^2 + 1 fixed features g(p) rho(p + d) (d over a G x G window, phases
+ * reflected at frame borders as the raw windows are) and g(p), read out per phase and level
+ * like the random features:
+ *     y[c](p) = lmmse-b2(p) + g(p) (sum_d R_l[ph][c][d] rho(p + d) + r_l[ph][c]),
+ * i.e. a closed-form guided interpolation of each LED's share, multiplied back by the pixel's
  * panchromatic level: nonlinear in the frame, linear in its parameters, so fitted in closed
  * form as lmmse-rf is (noise sampled at six levels). The features are computed on the host
- * (no device path) and hold no parameters.
+ * (no device path) and hold no parameters. (The share against a 3 x 3 mean of g instead: 1.0 dB
+ * lower validation PSNR clean, the same at 2-15 % noise; docs/results.md.)
  * What it is not: the fit (train/fit_lmmse.c) or the noise estimator. */
 #include "models/model.h"
 #include "models/lmmse_direct.h"
@@ -224,28 +225,15 @@ static void build_pad(const lm_model *m, const lmmse_net *n, const float *raw, i
 #define GUIDE_EPS 0.01f
 
 /* The D = G^2 + 1 feature planes of one frame (b1, b0: bucket 1 and bucket 0 / (LEDs - 1),
- * H x W each) into out (D x H x W); gs, rho: H x W scratch each. */
+ * H x W each) into out (D x H x W); g (the panchromatic image), rho: H x W scratch each. */
 static void guide_frame(const lm_model *m, const lmmse_net *n, const float *b1, const float *b0,
-                        int H, int W, float *gs, float *rho, float *out)
+                        int H, int W, float *g, float *rho, float *out)
 {
     const int ty = m->mosaic.ty, tx = m->mosaic.tx, P = n->P, G = n->G, gr = G / 2;
     const size_t plane = (size_t)H * W;
-    /* the panchromatic image's 3 x 3 mean (over the pixels inside the frame) */
-    for (int y = 0; y < H; y++)
-        for (int x = 0; x < W; x++) {
-            float sum = 0.0f;
-            int cnt = 0;
-            for (int v = y - 1; v <= y + 1; v++)
-                for (int u = x - 1; u <= x + 1; u++)
-                    if (v >= 0 && v < H && u >= 0 && u < W) {
-                        const size_t k = (size_t)v * W + u;
-                        sum += b1[k] + (float)(P - 1) * b0[k];
-                        cnt++;
-                    }
-            gs[(size_t)y * W + x] = sum / (float)(cnt * P);
-        }
+    for (size_t k = 0; k < plane; k++) g[k] = (b1[k] + (float)(P - 1) * b0[k]) / (float)P;
     for (size_t k = 0; k < plane; k++) {
-        float r = b1[k] / (gs[k] > GUIDE_EPS ? gs[k] : GUIDE_EPS);
+        float r = b1[k] / (g[k] > GUIDE_EPS ? g[k] : GUIDE_EPS);
         rho[k] = r < -1.0f ? -1.0f : r > (float)P ? (float)P : r;
     }
     const int reflect = H / ty > (gr + ty - 1) / ty && W / tx > (gr + tx - 1) / tx;
@@ -257,11 +245,11 @@ static void guide_frame(const lm_model *m, const lmmse_net *n, const float *b1, 
                 for (int x = 0; x < W; x++) {
                     const int sx = pad_index(x + v - gr, tx, W, reflect);
                     const size_t k = (size_t)y * W + x;
-                    o[k] = sy < 0 || sx < 0 ? 0.0f : gs[k] * rho[(size_t)sy * W + sx];
+                    o[k] = sy < 0 || sx < 0 ? 0.0f : g[k] * rho[(size_t)sy * W + sx];
                 }
             }
         }
-    memcpy(out + (size_t)(G * G) * plane, gs, sizeof(float) * plane);
+    memcpy(out + (size_t)(G * G) * plane, g, sizeof(float) * plane);
 }
 
 /* The guide's feature maps of raw (B x 2 x H x W, host): B x D x H x W, no gradient. */
@@ -525,9 +513,9 @@ static lm_status build(lm_model *m, int K, int D, int G, lm_err *err)
     memcpy(n->sig, lm_lmmse_sigmas, sizeof n->sig);
     n->C = m->in_channels == 2 ? 2 : 1;
     n->G = G;
-    if (G > 0 && (n->C != 2 || G % 2 == 0 || G > K - 2))
+    if (G > 0 && (n->C != 2 || G % 2 == 0 || G > K))
         return lm_err_set(err, LM_ERR_ARG, "lmmse: the panchromatic guide reads both buckets, "
-                          "with an odd window of at most K - 2 = %d (got %d)", K - 2, G);
+                          "with an odd window of at most K = %d (got %d)", K, G);
     if (G > 0) D = n->D = G * G + 1;
     if (D > 0 && n->C == 2 && !G)
         return lm_err_set(err, LM_ERR_ARG, "lmmse: random features read one plane: no "

@@ -220,7 +220,7 @@ static int lmmse_k_plain(const char *name, int *D)
 }
 
 /* The same, or "lmmse-K-b2" (*b2 = 1: the two-bucket form, no random features), or
- * "lmmse-K-gG-b2" (*G: the panchromatic guide's window, odd, at most K - 2). */
+ * "lmmse-K-gG-b2" (*G: the panchromatic guide's window, odd, at most K). */
 static int lmmse_k2(const char *name, int *D, int *b2, int *G)
 {
     *b2 = 0;
@@ -232,7 +232,7 @@ static int lmmse_k2(const char *name, int *D, int *b2, int *G)
     if (end != name + 6 && !strncmp(end, "-g", 2)) {
         char *e2;
         long g = strtol(end + 2, &e2, 10);
-        if (e2 == end + 2 || strcmp(e2, "-b2") || g < 1 || g % 2 == 0 || g > k - 2) return 0;
+        if (e2 == end + 2 || strcmp(e2, "-b2") || g < 1 || g % 2 == 0 || g > k) return 0;
         *G = (int)g;
         end = e2;
     }

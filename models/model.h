@@ -151,9 +151,9 @@ lm_status lm_mst_reconstruct(lm_model *m, const float *in, int H, int W, float *
 extern const float lm_lmmse_sigmas[LM_LMMSE_LEVELS];
 lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err);
 /* lmmse-b2 plus the panchromatic guide's features (models/lmmse.c; preset "lmmse-guide-b2"):
- * both buckets, K x K windows, and the ratio of bucket 1 to the local panchromatic mean over a
- * G x G window (odd, at most K - 2), multiplied back by that mean: D = G^2 + 1 features read
- * out per phase and level, fitted in closed form as lmmse-rf's. */
+ * both buckets, K x K windows, and the ratio of bucket 1 to the panchromatic image over a
+ * G x G window (odd, at most K), multiplied back by the pixel's panchromatic value: D = G^2 + 1
+ * features read out per phase and level, fitted in closed form as lmmse-rf's. */
 lm_status lm_lmmse_guide_build(lm_model *m, int K, int G, lm_err *err);
 /* G of an lmmse model with the guide, 0 for any other model. */
 int lm_lmmse_guide(const lm_model *m);

@@ -43,8 +43,8 @@ e2=$(awk -F, 'NR == 2 { print $0 }' "$T/ev/eval.csv")
 check "eval table has a row ($e2)" [ -n "$e2" ]
 
 # ---- bad input ---------------------------------------------------------------------------
-expect_error "guide window too large" 2 "unknown preset 'lmmse-7-g7-b2'" "$T/e1" -- \
-  "$LM" train --model lmmse-7-g7-b2 $FIT --output "$T/e1"
+expect_error "guide window too large" 2 "unknown preset 'lmmse-7-g9-b2'" "$T/e1" -- \
+  "$LM" train --model lmmse-7-g9-b2 $FIT --output "$T/e1"
 expect_error "even guide window" 2 "unknown preset 'lmmse-7-g2-b2'" "$T/e2" -- \
   "$LM" train --model lmmse-7-g2-b2 $FIT --output "$T/e2"
 mkdir -p "$T/lone" && cp "$S/frames/frame_0000.png" "$T/lone/f.png"
