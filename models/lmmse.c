@@ -37,7 +37,7 @@
  * panchromatic level: nonlinear in the frame, linear in its parameters, so fitted in closed
  * form as lmmse-rf is (noise sampled at six levels). The features are computed on the host
  * (no device path) and hold no parameters. (The share against a 3 x 3 mean of g instead: 1.0 dB
- * lower validation PSNR clean, the same at 2-15 % noise; docs/results.md.)
+ * lower validation PSNR clean, the same from noise sd 0.02 up; docs/results.md.)
  * What it is not: the fit (train/fit_lmmse.c) or the noise estimator. */
 #include "models/model.h"
 #include "models/lmmse_direct.h"
