@@ -24,6 +24,20 @@
  * the two kernels are concatenated along the input channels; the direct path (below) runs the
  * taps over both planes' windows. The whole-frame host path (frame_forward) reads one plane:
  * none for a two-bucket model (whole frames of it run patch-wise).
+ * Panchromatic guide ("lmmse-guide-b2", G > 0): both buckets give a full-resolution
+ * panchromatic image g = (bucket 1 + (P - 1) bucket 0 / (LEDs - 1)) / P (white = 1, P phases,
+ * one LED each), and rho = bucket 1 / g, the pixel's share of its own light (its LED's
+ * response over the mean response of all LEDs: 1 for white), which stays constant across a
+ * shading or texture edge of one material where the raw samples jump. The model is lmmse-b2
+ * plus a ratio term: D = G^2 + 1 fixed features g(p) rho(p + d) (d over a G x G window, phases
+ * reflected at frame borders as the raw windows are) and g(p), read out per phase and level
+ * like the random features:
+ *     y[c](p) = lmmse-b2(p) + g(p) (sum_d R_l[ph][c][d] rho(p + d) + r_l[ph][c]),
+ * i.e. a closed-form guided interpolation of each LED's share, multiplied back by the pixel's
+ * panchromatic level: nonlinear in the frame, linear in its parameters, so fitted in closed
+ * form as lmmse-rf is (noise sampled at six levels). The features are computed on the host
+ * (no device path) and hold no parameters. (The share against a 3 x 3 mean of g instead: 1.0 dB
+ * lower validation PSNR clean, the same from noise sd 0.02 up; docs/results.md.)
  * What it is not: the fit (train/fit_lmmse.c) or the noise estimator. */
 #include "models/model.h"
 #include "models/lmmse_direct.h"
@@ -45,6 +59,8 @@ typedef struct lmmse_net {
     lm_conv feat;              /* D > 0: features 1 -> D, K x K (random at init) */
     lm_tensor *rw;             /* D > 0: readout L x P x 33 x D */
     int K, P, D, C;            /* C: input planes (1, or 2 = both buckets) */
+    int G;                     /* > 0: the panchromatic-guide features' window (D = G^2 + 1,
+                                * no random-feature conv) */
     int lo_y, hi_y, lo_x, hi_x; /* tile offsets the windows reach (lo <= 0 <= hi) */
     float sig[LM_LMMSE_LEVELS]; /* the levels' noise sd: lm_lmmse_sigmas unless a measurement
                                  * set others (lm_lmmse_set_sigmas) */
@@ -116,17 +132,12 @@ static void tile_kernel(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm_ten
     *cb = lm_reshape(c, lm_transpose(c, b, 0, 1), 1, s1);
 }
 
-/* The random-feature branch (D > 0) on the phase-padded raw frame rp (the padded phase planes
- * shuffled back): h = relu(features(window)) at every pixel, then per phase a readout D -> 33
- * (a grouped 1x1 conv at tile resolution), back to B x 33 x H x W. */
-static lm_tensor *feature_branch(lm_ctx *c, const lm_model *m, const lmmse_net *n,
-                                 lm_tensor *up, float s, int H, int W)
+/* The per-phase, per-level readout D -> 33 of feature maps h (B x D x H x W): a grouped 1x1
+ * conv at tile resolution, back to B x 33 x H x W. */
+static lm_tensor *readout(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm_tensor *h,
+                          float s)
 {
     const int ty = m->mosaic.ty, tx = m->mosaic.tx, P = n->P, D = n->D, O = LM_MODEL_OUT_CHANNELS;
-    const int r = n->K / 2;
-    lm_tensor *rp = lm_pixel_shuffle(c, up, ty, tx);
-    lm_tensor *h = lm_relu(c, lm_conv_forward(c, &n->feat, rp)); /* (H + 2 pad - 2r) rows */
-    h = lm_slice(c, lm_slice(c, h, 2, -ty * n->lo_y - r, H), 3, -tx * n->lo_x - r, W);
     lm_tensor *hu = lm_pixel_unshuffle(c, lm_contiguous(c, h), ty, tx); /* channel d P + p */
     if (!hu) return NULL;
     const int B = hu->shape[0], th = hu->shape[2], tw = hu->shape[3];
@@ -148,6 +159,18 @@ static lm_tensor *feature_branch(lm_ctx *c, const lm_model *m, const lmmse_net *
     int y5[5] = {B, P, O, th, tw}, y4[4] = {B, O * P, th, tw};
     y = lm_reshape(c, lm_permute(c, lm_reshape(c, y, 5, y5), pm), 4, y4); /* c P + p */
     return lm_pixel_shuffle(c, y, ty, tx);
+}
+
+/* The random-feature branch (D > 0) on the phase-padded raw frame rp (the padded phase planes
+ * shuffled back): h = relu(features(window)) at every pixel, then the readout. */
+static lm_tensor *feature_branch(lm_ctx *c, const lm_model *m, const lmmse_net *n,
+                                 lm_tensor *up, float s, int H, int W)
+{
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, r = n->K / 2;
+    lm_tensor *rp = lm_pixel_shuffle(c, up, ty, tx);
+    lm_tensor *h = lm_relu(c, lm_conv_forward(c, &n->feat, rp)); /* (H + 2 pad - 2r) rows */
+    h = lm_slice(c, lm_slice(c, h, 2, -ty * n->lo_y - r, H), 3, -tx * n->lo_x - r, W);
+    return readout(c, m, n, h, s);
 }
 
 /* ---- inference without gradients: the filters applied directly ------------------------- */
@@ -194,6 +217,65 @@ static void build_pad(const lm_model *m, const lmmse_net *n, const float *raw, i
             d[r + W + x] = rx[x] < 0 ? 0.0f : src[rx[x]];
         }
     }
+}
+
+/* ---- the panchromatic guide's features (G > 0) ------------------------------------------ */
+/* The share rho is clamped to [-1, P] (P: a pixel holding all the light; noise around dark
+ * pixels makes it wild) and its denominator held at GUIDE_EPS of white at least. */
+#define GUIDE_EPS 0.01f
+
+/* The D = G^2 + 1 feature planes of one frame (b1, b0: bucket 1 and bucket 0 / (LEDs - 1),
+ * H x W each) into out (D x H x W); g (the panchromatic image), rho: H x W scratch each. */
+static void guide_frame(const lm_model *m, const lmmse_net *n, const float *b1, const float *b0,
+                        int H, int W, float *g, float *rho, float *out)
+{
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, P = n->P, G = n->G, gr = G / 2;
+    const size_t plane = (size_t)H * W;
+    for (size_t k = 0; k < plane; k++) g[k] = (b1[k] + (float)(P - 1) * b0[k]) / (float)P;
+    for (size_t k = 0; k < plane; k++) {
+        float r = b1[k] / (g[k] > GUIDE_EPS ? g[k] : GUIDE_EPS);
+        rho[k] = r < -1.0f ? -1.0f : r > (float)P ? (float)P : r;
+    }
+    const int reflect = H / ty > (gr + ty - 1) / ty && W / tx > (gr + tx - 1) / tx;
+    for (int u = 0; u < G; u++)
+        for (int v = 0; v < G; v++) {
+            float *o = out + (size_t)(u * G + v) * plane;
+            for (int y = 0; y < H; y++) {
+                const int sy = pad_index(y + u - gr, ty, H, reflect);
+                for (int x = 0; x < W; x++) {
+                    const int sx = pad_index(x + v - gr, tx, W, reflect);
+                    const size_t k = (size_t)y * W + x;
+                    o[k] = sy < 0 || sx < 0 ? 0.0f : g[k] * rho[(size_t)sy * W + sx];
+                }
+            }
+        }
+    memcpy(out + (size_t)(G * G) * plane, g, sizeof(float) * plane);
+}
+
+/* The guide's feature maps of raw (B x 2 x H x W, host): B x D x H x W, no gradient. */
+static lm_tensor *guide_maps(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm_tensor *raw)
+{
+    if (c->backend && c->backend != lm_backend_cpu()) {
+        lm_ctx_fail(c, LM_ERR_ARG, "%s: the panchromatic guide runs on the CPU only", m->preset);
+        return NULL;
+    }
+    if (!raw || raw->ndim != 4 || raw->shape[1] != 2) {
+        lm_ctx_fail(c, LM_ERR_SHAPE, "%s: the guide needs both buckets (B x 2 x H x W)",
+                    m->preset);
+        return NULL;
+    }
+    const int B = raw->shape[0], H = raw->shape[2], W = raw->shape[3];
+    const size_t plane = (size_t)H * W;
+    lm_tensor *x = lm_contiguous(c, raw);
+    lm_tensor *h = x ? lm_tensor_new4(c, B, n->D, H, W) : NULL;
+    float *scratch = h ? lm_ctx_alloc(c, sizeof(float) * 2 * plane) : NULL;
+    if (!scratch) return NULL; /* the ctx has the error */
+    for (int b = 0; b < B; b++) {
+        const float *in = x->data + (size_t)b * 2 * plane;
+        guide_frame(m, n, in, in + plane, H, W, scratch, scratch + plane,
+                    h->data + (size_t)b * n->D * plane);
+    }
+    return h;
 }
 
 /* Packed filters of one phase: K x K taps of `lanes` floats (channels, zero beyond nch) for
@@ -282,13 +364,14 @@ static void direct_frame(const lm_model *m, const lmmse_net *n, float s, const f
 /* Can the direct path run? (no gradients needed, no device, no features, host parameters) */
 static int direct_ok(const lm_ctx *c, const lmmse_net *n, const lm_tensor *raw)
 {
-    return !n->D &&
+    return (!n->D || n->G) &&
            !(c->grad_enabled && ((raw && lm_requires_grad(raw)) || lm_requires_grad(n->w) ||
                                  lm_requires_grad(n->b) || (n->w0 && lm_requires_grad(n->w0)))) &&
            !(c->backend && c->backend != lm_backend_cpu()) && (!raw || raw->data) && n->w->data;
 }
 
-/* The fast path, or NULL when it does not apply (gradients needed, a device, features). */
+/* The fast path, or NULL when it does not apply (gradients needed, a device, random
+ * features); with the guide, its linear part only. */
 static lm_tensor *run_direct(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw, float s)
 {
     if (!direct_ok(c, n, raw)) return NULL;
@@ -333,6 +416,7 @@ static lm_tensor *run_group(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw
 {
     const int ty = m->mosaic.ty, tx = m->mosaic.tx;
     lm_tensor *d = run_direct(c, m, n, raw, s);
+    if (d && n->G) return lm_add(c, d, readout(c, m, n, guide_maps(c, m, n, raw), s));
     if (d || lm_ctx_status(c)) return d;
     lm_tensor *w, *b, *w0, *cw, *cb;
     blend(c, n, s, &w, &b, &w0);
@@ -354,6 +438,7 @@ static lm_tensor *run_group(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw
     if (cw) cw->name = "filters.weight";
     lm_tensor *y = lm_pixel_shuffle(c, lm_conv_forward(c, &tk, u), ty, tx);
     if (n->D == 0) return y;
+    if (n->G) return lm_add(c, y, readout(c, m, n, guide_maps(c, m, n, raw), s));
     return lm_add(c, y, feature_branch(c, m, n, u, s, raw->shape[2], raw->shape[3]));
 }
 
@@ -394,6 +479,10 @@ static void lmmse_init(lm_model *m, lm_rng *r)
     lm_init_uniform(n->b, r, bound);
     if (n->C == 2) lm_init_uniform(n->w0, r, bound);
     if (n->D == 0) return;
+    if (n->G) {
+        lm_init_uniform(n->rw, r, 1.0f / sqrtf((float)n->D));
+        return;
+    }
     /* random features: N(0, 1/K^2) weights (unit gain on a window of comparable values),
      * N(0, 0.1^2) biases (a probe of linear vs random-feature ridge: +1.2 dB validation PSNR
      * clean with these); readout default-initialised */
@@ -409,7 +498,7 @@ static void lmmse_free(lm_model *m)
     m->impl = NULL;
 }
 
-lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
+static lm_status build(lm_model *m, int K, int D, int G, lm_err *err)
 {
     lmmse_net *n = calloc(1, sizeof *n);
     m->impl = n;
@@ -423,7 +512,12 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
     n->P = ty * tx;
     memcpy(n->sig, lm_lmmse_sigmas, sizeof n->sig);
     n->C = m->in_channels == 2 ? 2 : 1;
-    if (D > 0 && n->C == 2)
+    n->G = G;
+    if (G > 0 && (n->C != 2 || G % 2 == 0 || G > K))
+        return lm_err_set(err, LM_ERR_ARG, "lmmse: the panchromatic guide reads both buckets, "
+                          "with an odd window of at most K = %d (got %d)", K, G);
+    if (G > 0) D = n->D = G * G + 1;
+    if (D > 0 && n->C == 2 && !G)
         return lm_err_set(err, LM_ERR_ARG, "lmmse: random features read one plane: no "
                           "two-bucket lmmse-rf");
     if (D < 0 || D > 4096) return lm_err_set(err, LM_ERR_ARG, "lmmse: %d features (0..4096)", D);
@@ -441,7 +535,7 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
         return err->status;
     int rws[4] = {LM_LMMSE_LEVELS, n->P, LM_MODEL_OUT_CHANNELS, D};
     lm_conv_spec fs = {1, D, K, K, 1, 0, 0, 1, 1};
-    if (D > 0 && (lm_conv_declare(&m->params, &n->feat, "features", fs, 1, err) ||
+    if (D > 0 && ((!G && lm_conv_declare(&m->params, &n->feat, "features", fs, 1, err)) ||
                   !(n->rw = lm_params_add(&m->params, "readout.weight", 4, rws, 1, err))))
         return err->status;
     m->forward = lmmse_forward;
@@ -452,6 +546,21 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
     m->noise_input = 1;
     snprintf(m->family, sizeof m->family, "lmmse");
     return LM_OK;
+}
+
+lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
+{
+    return build(m, K, D, 0, err);
+}
+
+lm_status lm_lmmse_guide_build(lm_model *m, int K, int G, lm_err *err)
+{
+    return build(m, K, 0, G, err);
+}
+
+int lm_lmmse_guide(const lm_model *m)
+{
+    return lm_lmmse_window(m) ? ((const lmmse_net *)m->impl)->G : 0;
 }
 
 int lm_lmmse_window(const lm_model *m)
@@ -499,6 +608,7 @@ lm_tensor *lm_lmmse_feature_maps(lm_ctx *c, const lm_model *m, lm_tensor *raw)
         lm_ctx_fail(c, LM_ERR_ARG, "lmmse: model has no random features");
         return NULL;
     }
+    if (n->G) return guide_maps(c, m, n, raw);
     lm_conv2d_opts o = {1, 1, n->K / 2, n->K / 2, 1, 1, 1};
     return lm_relu(c, lm_conv2d(c, raw, n->feat.w, n->feat.b, &o));
 }

@@ -12,7 +12,8 @@ struct preset {
     lm_status (*build)(lm_model *m, const preset *ps, lm_err *err); /* declares the family */
     unsigned caps;   /* lm_model_cap flags, copied to lm_model.caps */
     lm_han_cfg han;  /* han */
-    int width;       /* mcan: feats; srnet: dim; rt: width; mst: stages; lmmse: features */
+    int width;       /* mcan: feats; srnet: dim; rt: width; mst: stages; lmmse: features;
+                      * lmmse-guide: the guide's window */
 };
 
 /* The families' builders, called with their preset row. */
@@ -24,6 +25,10 @@ static lm_status build_linear(lm_model *m, const preset *ps, lm_err *err)
 static lm_status build_lmmse(lm_model *m, const preset *ps, lm_err *err)
 {
     return lm_lmmse_build(m, 11, ps->width, err);
+}
+static lm_status build_lmmse_guide(lm_model *m, const preset *ps, lm_err *err)
+{
+    return lm_lmmse_guide_build(m, 11, ps->width, err);
 }
 static lm_status build_han(lm_model *m, const preset *ps, lm_err *err)
 {
@@ -86,6 +91,8 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     {"rt-16", build_rt, CL, {0, 0, 0, 0, 0}, 16},
     /* both buckets: the same families reading bucket 1 and bucket 0 (2 input planes) */
     {"lmmse-b2", build_lmmse, CL | FIT | B2, {0, 0, 0, 0, 0}, 0},
+    /* lmmse-b2 plus the panchromatic guide's ratio features (host features: no OpenCL) */
+    {"lmmse-guide-b2", build_lmmse_guide, FIT | B2, {0, 0, 0, 0, 0}, 7},
     {"rt-8-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 8},
     {"rt-16-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 16},
     /* multi-frame: the current frame and its two neighbours aligned to it (3 input planes) */
@@ -156,6 +163,7 @@ static const struct { const char *name, *purpose; } purposes[] = {
     {"rt-8", "real-time residual network, 8 channels (~30-45 fps at 640 x 480, 2 cores)"},
     {"rt-16", "real-time residual network, 16 channels"},
     {"lmmse-b2", "closed-form floor reading both buckets (bucket 1 and bucket 0)"},
+    {"lmmse-guide-b2", "lmmse-b2 plus each LED's share of the panchromatic image (closed form)"},
     {"rt-8-b2", "rt-8 reading both buckets"},
     {"rt-16-b2", "rt-16 reading both buckets"},
     {"rt-8-mf3", "rt-8 reading three aligned frames (video)"},
@@ -207,7 +215,7 @@ static void unknown_preset(const char *name, lm_err *err)
         if (i + 1 < NPRESETS) strcat(list, ", ");
     }
     lm_err_set(err, LM_ERR_ARG, "unknown model '%s' (presets: %s, lmmse-K, lmmse-K-rfD, "
-               "lmmse-K-b2)", name, list);
+               "lmmse-K-b2, lmmse-K-gG-b2)", name, list);
 }
 
 /* "lmmse-K" or "lmmse-K-rfD": the lmmse window K (odd, 1..31), else 0; *D the random
@@ -228,14 +236,23 @@ static int lmmse_k_plain(const char *name, int *D)
     return *end || end == name + 6 || k < 1 || k > 31 || k % 2 == 0 ? 0 : (int)k;
 }
 
-/* The same, or "lmmse-K-b2" (*b2 = 1: the two-bucket form, no random features). */
-static int lmmse_k2(const char *name, int *D, int *b2)
+/* The same, or "lmmse-K-b2" (*b2 = 1: the two-bucket form, no random features), or
+ * "lmmse-K-gG-b2" (*G: the panchromatic guide's window, odd, at most K). */
+static int lmmse_k2(const char *name, int *D, int *b2, int *G)
 {
     *b2 = 0;
     *D = 0;
+    *G = 0;
     if (strncmp(name, "lmmse-", 6)) return 0;
     char *end;
     long k = strtol(name + 6, &end, 10);
+    if (end != name + 6 && !strncmp(end, "-g", 2)) {
+        char *e2;
+        long g = strtol(end + 2, &e2, 10);
+        if (e2 == end + 2 || strcmp(e2, "-b2") || g < 1 || g % 2 == 0 || g > k) return 0;
+        *G = (int)g;
+        end = e2;
+    }
     if (end != name + 6 && !strcmp(end, "-b2")) {
         *b2 = 1;
         return k < 1 || k > 31 || k % 2 == 0 ? 0 : (int)k;
@@ -245,8 +262,8 @@ static int lmmse_k2(const char *name, int *D, int *b2)
 
 static int lmmse_k(const char *name, int *D)
 {
-    int b2;
-    return lmmse_k2(name, D, &b2);
+    int b2, G;
+    return lmmse_k2(name, D, &b2, &G);
 }
 
 int lm_model_preset_known(const char *name)
@@ -259,7 +276,7 @@ int lm_model_preset_known(const char *name)
 static lm_status build(lm_model *m, const char *name, lm_err *err)
 {
     const preset *ps = find_preset(name);
-    int D = 0, b2 = 0, K = ps ? 0 : lmmse_k2(name, &D, &b2);
+    int D = 0, b2 = 0, G = 0, K = ps ? 0 : lmmse_k2(name, &D, &b2, &G);
     if (!ps && !K) return unknown_preset(name, err), err->status;
     snprintf(m->preset, sizeof m->preset, "%s", name);
     m->out_channels = LM_MODEL_OUT_CHANNELS;
@@ -268,9 +285,9 @@ static lm_status build(lm_model *m, const char *name, lm_err *err)
     m->noise_sigma = -1.0f;
     m->noise_given = -1.0f;
     if (K) {
-        m->caps = find_preset(b2 ? "lmmse-b2" : "lmmse")->caps;
+        m->caps = find_preset(G ? "lmmse-guide-b2" : b2 ? "lmmse-b2" : "lmmse")->caps;
         m->in_channels = lm_model_buckets(m);
-        return lm_lmmse_build(m, K, D, err);
+        return G ? lm_lmmse_guide_build(m, K, G, err) : lm_lmmse_build(m, K, D, err);
     }
     m->caps = ps->caps;
     if (m->caps & LM_CAP_TWO_BUCKETS) m->in_channels = 2; /* builders may set it otherwise */

@@ -157,6 +157,13 @@ lm_status lm_mst_reconstruct(lm_model *m, const float *in, int H, int W, float *
 #define LM_LMMSE_LEVELS 12
 extern const float lm_lmmse_sigmas[LM_LMMSE_LEVELS];
 lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err);
+/* lmmse-b2 plus the panchromatic guide's features (models/lmmse.c; preset "lmmse-guide-b2"):
+ * both buckets, K x K windows, and the ratio of bucket 1 to the panchromatic image over a
+ * G x G window (odd, at most K), multiplied back by the pixel's panchromatic value: D = G^2 + 1
+ * features read out per phase and level, fitted in closed form as lmmse-rf's. */
+lm_status lm_lmmse_guide_build(lm_model *m, int K, int G, lm_err *err);
+/* G of an lmmse model with the guide, 0 for any other model. */
+int lm_lmmse_guide(const lm_model *m);
 /* K of an lmmse model, 0 for any other model. */
 int lm_lmmse_window(const lm_model *m);
 /* The noise sd of each level of an lmmse model (lm_lmmse_sigmas for any other model). */
@@ -171,7 +178,8 @@ int lm_lmmse_custom_levels(const lm_model *m);
  * read out per phase and level (readout.weight L x P x 33 x D): a nonlinear model whose readout
  * is still fitted in closed form (random-features ridge regression). 0 for plain lmmse. */
 int lm_lmmse_features(const lm_model *m);
-/* The feature maps relu(features(raw)) (B x D x H x W, zero-padded borders), for the fit. */
+/* The feature maps relu(features(raw)) (B x D x H x W, zero-padded borders), or the guide's
+ * (host only), for the fit. */
 lm_tensor *lm_lmmse_feature_maps(lm_ctx *c, const lm_model *m, lm_tensor *raw);
 /* Set the filter of (level, phase) from coef[(C*K*K + D + 1) x 33] (rows: window position
  * u * K + v of plane 0 (bucket 1), then of plane 1 (bucket 0) when C = 2, then the D

@@ -1004,6 +1004,50 @@ static void test_shot_and_read_noise(void)
     CHECK(lm_dataset_open(&bad, &e) == NULL && e.status == LM_ERR_ARG);
 }
 
+/* Shot noise with both buckets (cfg.buckets 2): bucket 0 collects the other LEDs' light with
+ * the same signal per photo-electron, so in its stored units (/ (LEDs - 1)) the added variance
+ * is mean / (photons x (LEDs - 1)), and its noise relative to its signal is several times
+ * lower than bucket 1's (about eleven times more electrons). */
+static void test_shot_noise_two_buckets(void)
+{
+    const char *pa[1] = {g_pospath};
+    lm_dataset_cfg c0 = base_cfg(pa, 1), c1;
+    c0.buckets = 2;
+    c1 = c0;
+    c1.photons = 200.0;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *a = lm_dataset_open(&c0, &e), *b = lm_dataset_open(&c1, &e);
+    CHECK_MSG(a && b, "%s", e.msg);
+    enum { NB = 16 };
+    static float ra[NB * 2 * PH * PW], rb[NB * 2 * PH * PW], t[NB * 33 * PH * PW];
+    if (a && b) {
+        double sum[2] = {0, 0}, sq[2] = {0, 0}, d2[2] = {0, 0};
+        for (int k = 0; k < 8; k++) {
+            CHECK(lm_dataset_batch(a, k, NB, ra, t, &e) == LM_OK);
+            CHECK(lm_dataset_batch(b, k, NB, rb, t, &e) == LM_OK);
+            for (int i = 0; i < NB * 2 * PH * PW; i++) {
+                const int q = (i / (PH * PW)) % 2; /* plane: 0 bucket 1, 1 bucket 0 */
+                sum[q] += ra[i];
+                sq[q] += (double)ra[i] * ra[i];
+                d2[q] += (double)(rb[i] - ra[i]) * (rb[i] - ra[i]);
+            }
+        }
+        const int L = g_sys.nleds;
+        double shot1 = d2[0] / sum[0] * 200.0, shot0 = d2[1] / sum[1] * 200.0 * (L - 1);
+        CHECK_MSG(fabs(shot1 - 1) < 0.1, "bucket 1: variance / (mean / photons) = %g", shot1);
+        CHECK_MSG(fabs(shot0 - 1) < 0.1, "bucket 0: variance / (mean / (photons (LEDs - 1))) "
+                  "= %g", shot0);
+        /* noise power over signal power, per bucket */
+        double rel1 = d2[0] / sq[0], rel0 = d2[1] / sq[1];
+        printf("     relative noise power: bucket 1 %.3g, bucket 0 %.3g (%.1fx lower)\n", rel1,
+               rel0, rel1 / rel0);
+        CHECK_MSG(rel0 < rel1 / 4, "bucket 0's relative noise %g is not well below bucket 1's %g",
+                  rel0, rel1);
+    }
+    lm_dataset_close(a), lm_dataset_close(b);
+}
+
 static void test_scene_normalised(void)
 {
     char dark[1200];
@@ -1061,6 +1105,7 @@ int main(void)
     RUN(test_lru_bound);
     RUN(test_scene_normalised);
     RUN(test_shot_and_read_noise);
+    RUN(test_shot_noise_two_buckets);
     RUN(test_bad_input);
     rm_tree(tmpdir);
     lm_system_free(&g_sys);

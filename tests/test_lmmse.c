@@ -2,7 +2,9 @@
  * models (lm_model_create_residual): the forward against a direct per-pixel double loop (with
  * the tile-reflected borders), noise-level interpolation, finite-difference gradients, the
  * fit's optimality on the very samples it was fitted on, and a residual that starts at its base;
- * the same for the two-bucket form ("-b2": a second K x K window on the bucket-0 plane). */
+ * the same for the two-bucket form ("-b2": a second K x K window on the bucket-0 plane) and the
+ * panchromatic guide ("-gG-b2": bucket 1's share of the local panchromatic mean, read out);
+ * the guide's fit is deterministic and beats a constant spectrum on held-out patches. */
 #include "data/dataset.h"
 #include "data/system.h"
 #include "data/spectra.h"
@@ -30,6 +32,28 @@ static int reflect_raw(int v, int n, int t)
     return q * t + ph;
 }
 
+/* The panchromatic image at (Y, X), white = 1. */
+static double ref_gs(const lm_model *m, const float *raw, int H, int W, int Y, int X)
+{
+    const int P = m->mosaic.ty * m->mosaic.tx;
+    return (raw[Y * W + X] + (P - 1.0) * raw[(size_t)H * W + Y * W + X]) / P;
+}
+
+/* Guide feature d at (Y, X): g(Y, X) x bucket 1's share at the window position d (phases
+ * reflected), the last one g(Y, X). */
+static double ref_guide(const lm_model *m, const float *raw, int H, int W, int Y, int X, int d)
+{
+    const int G = lm_lmmse_guide(m), gr = G / 2, ty = m->mosaic.ty, tx = m->mosaic.tx;
+    const int P = ty * tx;
+    const double g = ref_gs(m, raw, H, W, Y, X);
+    if (d == G * G) return g;
+    const int sy = reflect_raw(Y + d / G - gr, H, ty), sx = reflect_raw(X + d % G - gr, W, tx);
+    const double gi = ref_gs(m, raw, H, W, sy, sx);
+    double rho = raw[sy * W + sx] / (gi > 0.01 ? gi : 0.01);
+    rho = rho < -1 ? -1 : rho > P ? P : rho;
+    return g * rho;
+}
+
 /* y[c] at (Y, X) for level weights (level l, blend t with l + 1), in double. */
 static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y, int X, int c,
                         int l, double t)
@@ -38,9 +62,9 @@ static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y
     const lm_param *bp = lm_params_find(&m->params, "filters.bias");
     const int K = lm_lmmse_window(m), r = K / 2, ty = m->mosaic.ty, tx = m->mosaic.tx;
     const int P = ty * tx, p = (Y % ty) * tx + X % tx;
-    const int D = lm_lmmse_features(m);
-    const lm_param *fw = D ? lm_params_find(&m->params, "features.weight") : NULL;
-    const lm_param *fb = D ? lm_params_find(&m->params, "features.bias") : NULL;
+    const int D = lm_lmmse_features(m), G = lm_lmmse_guide(m);
+    const lm_param *fw = D && !G ? lm_params_find(&m->params, "features.weight") : NULL;
+    const lm_param *fb = D && !G ? lm_params_find(&m->params, "features.bias") : NULL;
     const lm_param *rw = D ? lm_params_find(&m->params, "readout.weight") : NULL;
     /* two buckets: plane 1 (bucket 0) through its own filters */
     const lm_param *w0p = lm_params_find(&m->params, "filters.bucket0");
@@ -59,7 +83,12 @@ static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y
             for (int v = 0; v < K; v++)
                 s += w0[u * K + v] *
                      raw0[reflect_raw(Y - r + u, H, ty) * W + reflect_raw(X - r + v, W, tx)];
-        for (int d = 0; d < D; d++) { /* random feature d at (Y, X), read out */
+        for (int d = 0; d < D; d++) { /* random or guide feature d at (Y, X), read out */
+            if (G) {
+                s += ref_guide(m, raw, H, W, Y, X, d) *
+                     rw->t.data[(((size_t)lv * P + p) * O + c) * D + d];
+                continue;
+            }
             double h = fb->t.data[d];
             for (int u = 0; u < K; u++)
                 for (int v = 0; v < K; v++)
@@ -192,6 +221,38 @@ static void test_forward_matches_direct_loop(void)
     check_forward("lmmse-b2", 18, 24, 0.0f, 0, 0.0);
     check_forward("lmmse-5-b2", 12, 16, s, 4, 0.5);
     check_forward("lmmse-3-b2", 6, 8, lm_lmmse_sigmas[3], 3, 0.0); /* zero-padded borders */
+    /* the panchromatic guide: its features read out beside both buckets' windows */
+    check_forward("lmmse-5-g3-b2", 12, 16, 0.0f, 0, 0.0);
+    check_forward("lmmse-7-g5-b2", 18, 24, s, 4, 0.5);
+}
+
+/* Guide preset names: odd windows of at most K, both buckets only; no OpenCL (host
+ * features); D = G^2 + 1 readout features, no random-feature conv. */
+static void test_guide_presets(void)
+{
+    lm_err e = {0};
+    const char *bad[] = {"lmmse-5-g7-b2", "lmmse-5-g2-b2", "lmmse-5-g3", "lmmse-5-g0-b2",
+                         "lmmse-5-gx-b2"};
+    for (int i = 0; i < 5; i++) {
+        CHECK_MSG(!lm_model_preset_known(bad[i]), "%s", bad[i]);
+        lm_model *m = lm_model_create(bad[i], NULL, 1, &e);
+        CHECK_MSG(m == NULL && e.status == LM_ERR_ARG, "%s", bad[i]);
+        lm_model_free(m);
+    }
+    const char *good[] = {"lmmse-guide-b2", "lmmse-5-g3-b2"};
+    const int G[2] = {7, 3};
+    for (int i = 0; i < 2; i++) {
+        lm_model *m = lm_model_create(good[i], NULL, 1, &e);
+        CHECK_MSG(m != NULL, "%s: %s", good[i], e.msg);
+        if (!m) continue;
+        CHECK(lm_lmmse_guide(m) == G[i] && lm_lmmse_features(m) == G[i] * G[i] + 1);
+        CHECK(lm_model_buckets(m) == 2 && m->in_channels == 2 && m->noise_input);
+        CHECK(lm_model_has(m, LM_CAP_CLOSED_FORM) && !lm_model_has(m, LM_CAP_OPENCL));
+        CHECK(lm_params_find(&m->params, "features.weight") == NULL &&
+              lm_params_find(&m->params, "readout.weight") != NULL);
+        lm_model_free(m);
+    }
+    CHECK(strlen(lm_model_preset_purpose("lmmse-guide-b2")) > 0);
 }
 
 static void test_counts_and_capabilities(void)
@@ -467,6 +528,85 @@ static void test_fit_is_least_squares(void)
     fit_least_squares("lmmse-5");
     fit_least_squares("lmmse-5-rf6"); /* random features: the readout is still least squares */
     fit_least_squares("lmmse-5-b2");  /* both buckets: two windows per pixel */
+    fit_least_squares("lmmse-5-g3-b2"); /* the guide: its readout fitted with the windows */
+}
+
+/* The guide's fit: the same parameters twice (deterministic), and on held-out training
+ * patches (after those fitted) far better than the best constant spectrum (the targets' mean
+ * over the held-out pixels, an oracle); lmmse-5-b2 fitted the same way is printed beside it. */
+static void test_guide_fit(void)
+{
+    char sysp[1024], cave[1024];
+    lm_err e = {0};
+    const char *sh = getenv("LM_SHARED_DIR");
+    snprintf(cave, sizeof cave, "%s/data/cave", sh ? sh : "../shared");
+    lm_system sys;
+    CHECK_MSG(lm_data_path("systems/default.json", sysp, sizeof sysp, &e) == LM_OK &&
+              lm_system_load(sysp, &sys, &e) == LM_OK, "%s", e.msg);
+    lm_mosaic mo;
+    CHECK(lm_mosaic_from_system(&sys, &mo, &e) == LM_OK);
+    const char *paths[1] = {cave};
+    lm_dataset_cfg dc;
+    lm_dataset_default_cfg(&dc);
+    dc.paths = paths, dc.npaths = 1, dc.sys = &sys, dc.workers = 0;
+    dc.patch_h = 24, dc.patch_w = 32, dc.noise_min = dc.noise_max = 0.0f;
+    dc.buckets = 2;
+    const int NP = 64, B = 16, HO = 16; /* fitted, then held out */
+    lm_model *m[3] = {NULL, NULL, NULL};
+    for (int k = 0; k < 3; k++) {
+        lm_dataset *d = lm_dataset_open(&dc, &e);
+        m[k] = lm_model_create(k < 2 ? "lmmse-5-g3-b2" : "lmmse-5-b2", &mo, 1, &e);
+        CHECK_MSG(d && m[k], "%s", e.msg);
+        lm_lmmse_fit_report rep;
+        if (d && m[k])
+            CHECK_MSG(lm_lmmse_fit(m[k], d, 24, 32, NP, B, -1.0, NULL, &rep, &e) == LM_OK, "%s",
+                      e.msg);
+        lm_dataset_close(d);
+    }
+    if (!m[0] || !m[1] || !m[2]) goto out;
+    const char *names[4] = {"filters.weight", "filters.bucket0", "filters.bias", "readout.weight"};
+    for (int i = 0; i < 4; i++) {
+        const lm_param *a = lm_params_find(&m[0]->params, names[i]);
+        const lm_param *b = lm_params_find(&m[1]->params, names[i]);
+        CHECK_MSG(a && b && !memcmp(a->t.data, b->t.data, sizeof(float) * lm_tensor_numel(&a->t)),
+                  "%s differs between two fits", names[i]);
+    }
+    lm_dataset *d = lm_dataset_open(&dc, &e);
+    float *raw = malloc(sizeof(float) * HO * 2 * 24 * 32), *tgt = malloc(sizeof(float) * HO * O * 24 * 32);
+    CHECK(d && lm_dataset_batch(d, NP / HO, HO, raw, tgt, &e) == LM_OK);
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    m[0]->noise_sigma = m[2]->noise_sigma = 0.0f;
+    lm_tensor *y = lm_model_forward(&c, m[0], lm_tensor_from(&c, 4, (int[]){HO, 2, 24, 32}, raw));
+    lm_tensor *yl = lm_model_forward(&c, m[2], lm_tensor_from(&c, 4, (int[]){HO, 2, 24, 32}, raw));
+    CHECK_MSG(y && yl, "%s", c.msg);
+    double sse = 0, sse0 = 0, ssel = 0;
+    long n = 0;
+    for (int ch = 1; y && yl && ch <= 31; ch++) {
+        double mean = 0;
+        for (int b = 0; b < HO; b++)
+            for (int Y = 0; Y < 24; Y++)
+                for (int X = 0; X < 32; X++) mean += tgt[(((size_t)b * O + ch) * 24 + Y) * 32 + X];
+        mean /= HO * 24 * 32;
+        for (int b = 0; b < HO; b++)
+            for (int Y = 0; Y < 24; Y++)
+                for (int X = 0; X < 32; X++, n++) {
+                    size_t i = (((size_t)b * O + ch) * 24 + Y) * 32 + X;
+                    sse += (y->data[i] - tgt[i]) * (double)(y->data[i] - tgt[i]);
+                    sse0 += (mean - tgt[i]) * (mean - tgt[i]);
+                    ssel += (yl->data[i] - tgt[i]) * (double)(yl->data[i] - tgt[i]);
+                }
+    }
+    double psnr = -10 * log10(sse / n), psnr0 = -10 * log10(sse0 / n);
+    printf("     held-out patches: lmmse-5-g3-b2 %.2f dB, lmmse-5-b2 %.2f dB, best constant "
+           "spectrum %.2f dB\n", psnr, -10 * log10(ssel / n), psnr0);
+    CHECK_MSG(psnr > psnr0 + 5, "guide %.2f dB, constant %.2f dB", psnr, psnr0);
+    free(raw), free(tgt);
+    lm_ctx_free(&c);
+    lm_dataset_close(d);
+out:
+    lm_model_free(m[0]), lm_model_free(m[1]), lm_model_free(m[2]);
+    lm_system_free(&sys);
 }
 
 /* Levels other than the bundled ones (bench_lmmse_levels' exact-level filters): checked,
@@ -520,7 +660,9 @@ int main(void)
     RUN(test_counts_and_capabilities);
     RUN(test_gradients);
     RUN(test_residual_starts_at_base);
+    RUN(test_guide_presets);
     RUN(test_fit_is_least_squares);
+    RUN(test_guide_fit);
     RUN(test_custom_levels);
     return check_summary();
 }

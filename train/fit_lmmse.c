@@ -17,7 +17,8 @@
  * mixture holds, and the validation split is real scenes.
  * With random features (lmmse-rf, D > 0) the features of noisy inputs are nonlinear in the
  * noise, so the statistics are accumulated again, with sampled noise, at six of the levels
- * (0, 0.005, 0.02, 0.05, 0.15, 0.3), and the levels between are interpolated linearly.
+ * (0, 0.005, 0.02, 0.05, 0.15, 0.3), and the levels between are interpolated linearly. The
+ * panchromatic guide's features (lmmse-K-gG-b2, both buckets) are fitted the same way.
  * Both buckets (lmmse-b2: the loader opened with buckets 2): x = the K x K window of bucket 1,
  * then that of bucket 0 / (LEDs - 1), then the 1. The analytic noise term puts the same s^2 on
  * every window entry of both planes: the same noise sd in the stored units of either bucket
@@ -371,7 +372,7 @@ static lm_status features(fitter *f, lm_model *m, lm_ctx *c, const float *raw, i
                           lm_err *err)
 {
     lm_ctx_reset(c);
-    lm_tensor *x = lm_tensor_from(c, 4, (int[]){nb, 1, f->ph, f->pw}, (float *)raw);
+    lm_tensor *x = lm_tensor_from(c, 4, (int[]){nb, f->C, f->ph, f->pw}, (float *)raw);
     lm_tensor *h = lm_lmmse_feature_maps(c, m, x);
     if (!h || lm_tensor_read(c, h, buf)) {
         lm_err_set(err, lm_ctx_status(c), "lmmse fit: %s", lm_ctx_message(c));
