@@ -34,7 +34,7 @@ static void usage(FILE *f)
     fprintf(f, "\nRun 'lumosaic <command> --help' for a command's options.\n");
 }
 
-/* How OpenMP threads wait (issue 16, item 9). libgomp's default spins ~300,000 times at each
+/* How OpenMP threads wait. libgomp's default spins ~300,000 times at each
  * barrier before it sleeps: on a machine where another process holds a core, the spinning
  * threads take turns with the one that does the work, and a training step of han-tiny / mcan /
  * srnet on 2 threads took 2.6-3.7x its quiet time (median; passive waiting: 1.8-1.9x). Spinning

@@ -21,7 +21,7 @@
 #include "data/system.h"
 #include "data/flow.h"
 
-/* Trust in the warp, per pixel (issue 14 item 4: alignment that never hurts). With
+/* Trust in the warp, per pixel (alignment that never hurts). With
  * `confidence` on, each aligned pixel is blended with the unaligned one,
  *   out = cur + c (warped - cur),  c in [0, 1],
  * c ramping from 1 to 0 as the forward-backward inconsistency of the flow, scaled to the

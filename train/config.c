@@ -625,7 +625,7 @@ static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
                                                    "optimise", c->doe_optimise, "lr",
                                                    (double)c->doe_lr, "quantise",
                                                    c->doe_quantise, "bands", c->doe_bands));
-    if (root) /* moving samples (issue 18, item 2) */
+    if (root) /* moving samples */
         json_object_update_new(root, json_pack("{s:f, s:f, s:f, s:i}", "motion_fraction",
                                (double)c->motion_fraction, "motion_speed", (double)c->motion_speed,
                                "motion_rotation", (double)c->motion_rotation, "motion_samples",

@@ -1,4 +1,4 @@
-/* recipe.c — measured training recipes per preset (issue 13, item 4) and their application to a
+/* recipe.c — measured training recipes per preset and their application to a
  * run config: the fields a file or flag did not give take the recipe's values.
  * How they were chosen: each preset trained for 3 minutes of CPU time (one thread, batch 8 of
  * 66 x 64, cosine from a 100-update warm-up to 1e-5, the 27 shared CAVE scenes' training split)

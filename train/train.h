@@ -43,7 +43,7 @@ typedef struct lm_train_cfg {
                                      * narrowband patches (paper 0.33) */
     float procedural_fraction;      /* share of procedural scenes (not in the paper); -1 (the
                                      * default): lm_train_procedural_share */
-    float motion_fraction;          /* share of real-scene samples seen moving (0; issue 18) */
+    float motion_fraction;          /* share of real-scene samples seen moving (0) */
     float motion_speed;             /* their translation speed: uniform in [0, this] px/s (240) */
     float motion_rotation;          /* their rotation: uniform in [-this, this] deg/s (0) */
     int motion_samples;             /* instants per LED window (2) */
@@ -119,7 +119,7 @@ typedef struct lm_train_cfg {
                                      * flag (internal, not a JSON field) */
 } lm_train_cfg;
 
-/* A training recipe measured for a preset on this project's machines (issue 13, item 4): the
+/* A training recipe measured for a preset on this project's machines: the
  * learning rate, batch and schedule that reached the best validation PSNR in a short
  * CPU-time-budgeted sweep (README "Training recipes"). residual: trained on a base (--base). */
 typedef struct lm_train_recipe {
