@@ -8,7 +8,8 @@ Searches README.md, every Markdown page under docs/, the output of `lumosaic --h
 command's `--help` and of `info --list`, and the comments of every C/OpenCL source for words of
 development history: numbered work periods ("Session 9", "sessions 6-9", "this session"),
 issue references ("issue 13", "(issue", "#12"), "previously", "the previous demo", "git show",
-commit hashes in parentheses. History belongs in CHANGELOG.md (not searched). Prints each hit
+commit hashes in parentheses; and, in pages and help texts, references to files outside the
+repository ("system.md §9", "models.md", "the supplement"). History belongs in CHANGELOG.md (not searched). Prints each hit
 as FILE:LINE: TEXT and exits 1 if there is any, 0 otherwise.
 """
 import os
@@ -29,6 +30,14 @@ PATTERNS = [
     (r"\((?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,12}\)", "commit hash"),
 ]
 REGEX = [(re.compile(p), why) for p, why in PATTERNS]
+# Pages and help texts also must not send the user to files outside the repository.
+OUTSIDE = [
+    (r"(?<![/\w])system\.md ?§", "a section of a file outside the repository (use docs/system.md#...)"),
+    (r"(?<![/\w])(models|design|style)\.md\b", "a file outside the repository"),
+    (r"\b[Tt]he supplement\b", "the paper's supplement (not in the repository)"),
+    (r"shared/(docs|reference)\b", "a file outside the repository"),
+]
+OUTSIDE = [(re.compile(p), why) for p, why in OUTSIDE]
 
 
 def c_comments(text):
@@ -61,9 +70,9 @@ def c_comments(text):
     return out
 
 
-def scan(name, lines, hits):
+def scan(name, lines, hits, extra=()):
     for no, text in lines:
-        for rx, why in REGEX:
+        for rx, why in list(REGEX) + list(extra):
             m = rx.search(text)
             if m:
                 hits.append(f"{name}:{no}: {why}: {text.strip()[:160]}")
@@ -72,16 +81,20 @@ def scan(name, lines, hits):
 
 SHOULD_HIT = ["Session 9", "sessions 6-9", "until session 6", "as the session ended",
               "(issue 13, item 3)", "issue 18", "see #12", "previously 30 dB", "the previous demo model",
-              "git show cc3afa1:x", "a binary (a33fc87) in which"]
+              "git show cc3afa1:x", "a binary (a33fc87) in which",
+              "(system.md §10)", "as in models.md.", "the supplement, \"Calibration\"",
+              "../shared/docs/system.md"]
 SHOULD_PASS = ["train/session.c", "lm_train_session(&cfg)", "session(cfg, opts)", "a##i##0",
                "#include <x.h>", "[link](system.md#4-forward-model)", "## 4. Forward model",
-               "a known issue with the driver", "0x9e3779b9", "seed 12345678", "previous frame"]
+               "a known issue with the driver", "0x9e3779b9", "seed 12345678", "previous frame",
+               "[the system](docs/system.md#4-forward-model)", "docs/system.md", "supplementary data"]
 
 
 def self_test():
     """The patterns find every kind of history and leave legitimate words alone."""
-    bad = [t for t in SHOULD_HIT if not any(rx.search(t) for rx, _ in REGEX)]
-    bad += [t for t in SHOULD_PASS if any(rx.search(t) for rx, _ in REGEX)]
+    rxs = [rx for rx, _ in REGEX + OUTSIDE]
+    bad = [t for t in SHOULD_HIT if not any(rx.search(t) for rx in rxs)]
+    bad += [t for t in SHOULD_PASS if any(rx.search(t) for rx in rxs)]
     for t in bad:
         print(f"check_history self-test: wrong verdict on {t!r}")
     return 1 if bad else 0
@@ -99,7 +112,7 @@ def main():
         pages += [os.path.join(d, f) for f in sorted(files) if f.endswith(".md")]
     for p in pages:
         with open(p, encoding="utf-8") as f:
-            scan(os.path.relpath(p, root), enumerate(f.read().split("\n"), 1), hits)
+            scan(os.path.relpath(p, root), enumerate(f.read().split("\n"), 1), hits, OUTSIDE)
     skip = {"build", ".git"}
     for d, dirs, files in os.walk(root):
         dirs[:] = [x for x in dirs if x not in skip and not x.startswith("build")]
@@ -116,12 +129,12 @@ def main():
         text = r.stdout + r.stderr
         if r.returncode != 0 or not text.strip():
             hits.append(f"lumosaic {' '.join(args)}: exit {r.returncode}, no help text")
-        scan("lumosaic " + " ".join(args), enumerate(text.split("\n"), 1), hits)
+        scan("lumosaic " + " ".join(args), enumerate(text.split("\n"), 1), hits, OUTSIDE)
     for h in hits:
         print(h)
     if hits:
-        print(f"check_history: {len(hits)} line(s) of development history in user-facing text; "
-              "say it for the user, and put history in CHANGELOG.md")
+        print(f"check_history: {len(hits)} line(s) of development history or outside references in "
+              "user-facing text; say it for the user (history goes to CHANGELOG.md; link into docs/)")
         return 1
     print(f"check_history: {len(pages)} pages, {len(runs)} help texts and the C comments are clean")
     return 0
