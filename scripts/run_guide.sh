@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # run_guide.sh — runs the commands of the guide, so that it cannot rot.
 #
-#   scripts/run_guide.sh BUILD_DIR [PAGE.md ...]     (default: every docs/guide/*.md)
+#   scripts/run_guide.sh BUILD_DIR [PAGE.md ...]     (default: README.md and docs/guide/*.md)
 #
 # Every fenced block tagged ```sh in a page is run, in the page's order, with bash -euo pipefail,
 # in a fresh folder laid out like a checkout: build/ (BUILD_DIR), models/, data/, study/,
@@ -20,7 +20,7 @@ shift
 shared=${LM_SHARED_DIR:-$root/../shared}
 shared=$(cd "$shared" && pwd)
 lm=$build/lumosaic
-if [ $# -eq 0 ]; then set -- "$root"/docs/guide/*.md; fi
+if [ $# -eq 0 ]; then set -- "$root"/README.md "$root"/docs/guide/*.md; fi
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
 fails=0 blocks=0 checked=0
@@ -57,9 +57,11 @@ check_norun() {
   return $ok
 }
 
+i=0
 for page in "$@"; do
+  i=$((i + 1))
   name=$(basename "$page" .md)
-  w=$T/$name
+  w=$T/$i-$name
   mkdir -p "$w/blocks" "$w/repo"
   ln -s "$shared" "$w/shared"
   ln -s "$build" "$w/repo/build"
