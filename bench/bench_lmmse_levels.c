@@ -1,5 +1,5 @@
 /* bench_lmmse_levels.c — how much the lmmse floor loses by meeting noise levels between the
- * ones it was fitted for, and by estimating the level (issue 13: "within 0.5 dB of a filter
+ * ones it was fitted for, and by estimating the level (the target: "within 0.5 dB of a filter
  * fitted for exactly that level").
  * What it is: one data set opened as `train --model lmmse` opens it (defaults of the run config:
  * 66 x 64 patches, synthetic share 0.33, seed 1, 4096 clean patches, ridge and share chosen on the

@@ -64,7 +64,7 @@ int lm_cli_choice(lm_cli *c, const char *name, const char *const *choices, int *
 int lm_cli_parse_ll(const char *s, long long *out);
 int lm_cli_parse_real(const char *s, double *out);
 
-/* Exit statuses, the same for every command (README, "Commands"). */
+/* Exit statuses, the same for every command (docs/guide/troubleshooting.md). */
 enum {
     LM_EXIT_OK = 0,
     LM_EXIT_FAILED = 1,  /* the work failed: cannot write an output (LM_ERR_WRITE), out of

@@ -22,7 +22,7 @@ static void help(void)
            "parameters and multiply-accumulates (MACs) for a B x 1 x H x W coded input, and the\n"
            "totals. Nothing is computed: the forward runs on a dry-run backend.\n"
            "MACs count conv/linear layers only (attention matmuls, HAN's CSAM Conv3d and MCAN's\n"
-           "fixed bilinear/mosaic convolutions are not counted), as in models.md.\n\n"
+           "fixed bilinear/mosaic convolutions are not counted), as the paper counts them.\n\n"
            "  --model NAME   preset (see --list), or NET+BASE: NET as a residual on BASE\n"
            "  --batch B      batch size (default 1)\n"
            "  --height H     input rows, a multiple of the tile rows (default 66)\n"

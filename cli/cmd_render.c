@@ -19,7 +19,7 @@ static void help(void)
            "  --input CUBE     a CAVE folder (31 band PNGs), a .mat (ARAD 'cube', KAUST 'hsi',\n"
            "                   ICVL 'rad', Harvard 'ref', ...) or a spectral OpenEXR (.exr);\n"
            "                   31 bands 400-700 nm or 41 bins 380-780 nm as they are, other\n"
-           "                   grids covering 420-680 nm resampled to 400-700 nm (see README)\n"
+           "                   grids covering 420-680 nm resampled to 400-700 nm (docs/system.md)\n"
            "  --mat-key NAME   the .mat variable holding the cube (default: automatic)\n"
            "  --output PNG     the image to write (.png); written atomically\n"
            "  --exposure X     multiply the cube by X before rendering (0 < X <= 1e6; default 1)\n"

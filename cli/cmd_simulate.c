@@ -41,7 +41,7 @@ static void help(void)
         "                      31 bands 400-700 nm (mirrored to 41 bins 380-780 nm), the\n"
         "                      system's grid, or any bands covering 420-680 nm (resampled to\n"
         "                      400-700 nm; wavelengths from the file or a sidecar\n"
-        "                      CUBE.wavelengths.txt, see README)\n"
+        "                      CUBE.wavelengths.txt, docs/guide/training.md)\n"
         "  --mat-key NAME      the .mat variable holding the cube (default: the first of cube,\n"
         "                      hsi, rad, ref, ...)\n"
         "  --output DIR        output folder (must not exist, or be empty): frames/, bucket0/,\n"

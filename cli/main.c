@@ -35,13 +35,13 @@ static void usage(FILE *f)
     fprintf(f, "\nRun 'lumosaic <command> --help' for a command's options.\n");
 }
 
-/* How OpenMP threads wait (issue 16, item 9). libgomp's default spins ~300,000 times at each
+/* How OpenMP threads wait. libgomp's default spins ~300,000 times at each
  * barrier before it sleeps: on a machine where another process holds a core, the spinning
  * threads take turns with the one that does the work, and a training step of han-tiny / mcan /
  * srnet on 2 threads took 2.6-3.7x its quiet time (median; passive waiting: 1.8-1.9x). Spinning
  * 1,000 times, then sleeping, costs 5-12 % when the machine is quiet and keeps the busy case
- * within 3-9 % of passive waiting (bench_train, README "Benchmarks"). libgomp reads the setting
- * when it loads, before main, so for the commands that compute (train, infer, eval, study,
+ * within 3-9 % of passive waiting (bench_train, docs/guide/performance.md). libgomp reads the
+ * setting when it loads, before main, so for the commands that compute (train, infer, eval, study,
  * simulate, fit-auto) the program sets GOMP_SPINCOUNT=1000 and runs itself again once (~0.2 s
  * of start-up), unless the user chose a policy (OMP_WAIT_POLICY or GOMP_SPINCOUNT set) or
  * LM_KEEP_OMP_WAIT=1. */

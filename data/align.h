@@ -21,7 +21,7 @@
 #include "data/system.h"
 #include "data/flow.h"
 
-/* Trust in the warp, per pixel (issue 14 item 4: alignment that never hurts). With
+/* Trust in the warp, per pixel (alignment that never hurts). With
  * `confidence` on, each aligned pixel is blended with the unaligned one,
  *   out = cur + c (warped - cur),  c in [0, 1],
  * c ramping from 1 to 0 as the forward-backward inconsistency of the flow, scaled to the
@@ -29,10 +29,10 @@
  * used), goes from fb_tol / 2 to fb_tol: where the two flows disagree (occlusion, content
  * entering the view, an LED's image too dark or too aliased to match) the warp would move the
  * pixel to a wrong place by about that much, and the recorded pixel is the safer guess.
- * Measured (README "Temporal alignment"): on translating CAVE scenes the bicubic warp alone
- * already never does worse than no alignment, and this fallback changes the scores by
- * < 0.001 dB there; with an elliptic region moving over a still CAVE background (occlusion) it
- * lowers the aligned mosaic's RMS error by 0.4 % at 480 px/s and changes nothing at 120-240,
+ * Measured (docs/guide/reconstructing.md, "How the alignment works"): on translating CAVE
+ * scenes the bicubic warp alone already never does worse than no alignment, and this fallback
+ * changes the scores by < 0.001 dB there; with an elliptic region moving over a still CAVE
+ * background (occlusion) it lowers the aligned mosaic's RMS error by 0.4 % at 480 px/s and changes nothing at 120-240,
  * while tighter tolerances hurt (fb_tol 1: +4 %, 0.5: +21 % at 480 px/s): a guard, not a gain.
  * Gating small shifts (keeping the recorded pixel where |tau F| < 0.25 px) cost 0.3 dB of the
  * gain at 60 px/s and was dropped. */
@@ -41,7 +41,7 @@ typedef struct lm_align_opts {
     float fb_tol;      /* sub-image px, > 0 (default 2) */
 } lm_align_opts;
 
-/* The defaults (measured, see README "Temporal alignment"). */
+/* The defaults (measured, see docs/guide/reconstructing.md). */
 void lm_align_default_opts(lm_align_opts *o);
 
 /* Normalised timestamp of each tile phase: t[p] = midpoint of the window of the LED at phase p,

@@ -588,10 +588,15 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
 {
     static const char *names[3] = {"train", "val", "test"};
     const lm_dataset_cfg *c = &d->cfg;
+    char noise[64]; /* the training noise level k (docs/system.md, Noise) */
+    if (c->noise_max <= 0) snprintf(noise, sizeof noise, "noise: none");
+    else if (c->noise_min == c->noise_max)
+        snprintf(noise, sizeof noise, "noise k = %g", c->noise_min);
+    else snprintf(noise, sizeof noise, "noise k ~ U[%g, %g]", c->noise_min, c->noise_max);
     fprintf(f, "dataset: %d scenes in %d groups; patch %d x %d; narrowband synthetic %.0f%%, "
-            "procedural %.0f%%; noise k ~ U[%g, %g]; flips %s; seed %llu; %d "
+            "procedural %.0f%%; %s; flips %s; seed %llu; %d "
             "workers; cache %d scenes%s\n", d->nscenes, d->ngroups, c->patch_h, c->patch_w,
-            100.0 * c->synth_fraction, 100.0 * c->procedural_fraction, c->noise_min, c->noise_max,
+            100.0 * c->synth_fraction, 100.0 * c->procedural_fraction, noise,
             c->flips ? "on" : "off", (unsigned long long)c->seed, d->nthreads, d->cache_cap,
             c->buckets == 2 ? "; both buckets (bucket 1, bucket 0 / (LEDs - 1))" : "");
     fprintf(f, "  split by scene group (name without a _crop<N> or _<height|width> tag): test "

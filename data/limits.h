@@ -1,4 +1,5 @@
-/* limits.h — the largest inputs the file readers accept, in one place (listed in the README).
+/* limits.h — the largest inputs the file readers accept, in one place (listed in
+ * docs/guide/troubleshooting.md).
  * What it is: a maximum image side, frame size and cube size, and the most each compression a
  * reader meets can expand (decoded bytes per byte on disk), so that a file of n bytes can only
  * make a reader allocate what n bytes can really decode to. Every reader checks a file's header

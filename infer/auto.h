@@ -1,5 +1,5 @@
 /* auto.h — `--model auto`: per window, the cheapest model whose expected error stays within a
- * tolerance of the best (issue 8, item 5).
+ * tolerance of the best.
  * What it is:
  *   - a cheap difficulty measure of one window of the coded frame, computed on the raw mosaic
  *     with same-phase differences only (pixels one tile apart, so the mosaic pattern itself

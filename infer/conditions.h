@@ -1,4 +1,4 @@
-/* conditions.h — where methods fail (issue 8 item 3): adverse capture conditions applied when
+/* conditions.h — where methods fail: adverse capture conditions applied when
  * simulating the frame of a prepared cube (infer/eval.h), a level sweep per condition family,
  * and the level at which a model loses 3 dB against its own clean-input accuracy.
  * Families and their levels (the sweep goes from mild to severe):

@@ -1,4 +1,4 @@
-/* lmmse.c — the closed-form linear floor (issue 13): per mosaic phase p (ty x tx phases), a
+/* lmmse.c — the closed-form linear floor: per mosaic phase p (ty x tx phases), a
  * K x K window of the raw coded frame centred on the pixel, plus a bias, maps linearly to the
  * 33 output channels:
  *     y[c](Y, X) = sum_{u,v} W_l[p][c][u][v] raw(Y - r + u, X - r + v) + b_l[p][c],

@@ -1,4 +1,4 @@
-/* rt.c — the real-time family (issue 7): the phase-aware demosaic front, then a small branch of
+/* rt.c — the real-time family: the phase-aware demosaic front, then a small branch of
  * two 3x3 convolutions at `width` channels, and one 1x1 head over the demosaic and the branch:
  *     x = demosaic(raw);  f = relu(body2(relu(body0([x, raw]))));  y = head([x, f])
  * The branch also reads the raw mosaic itself, where each pixel's exact sample and its tile

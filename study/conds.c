@@ -1,4 +1,4 @@
-/* conds.c — the failure study of a model (study.h, issue 8 item 3) and the rainbow's per-row
+/* conds.c — the failure study of a model (study.h) and the rainbow's per-row
  * peaks: per held-out scene the clean score and every (family, level) of the config
  * (infer/conditions.h), accumulated into means; then the record's "conditions" object with
  * each family's PSNR per level and its 3-dB point against the model's own clean PSNR.

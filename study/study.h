@@ -1,4 +1,4 @@
-/* study.h — the speed-against-accuracy study behind `lumosaic study` (issue 8).
+/* study.h — the speed-against-accuracy study behind `lumosaic study`.
  * What it is: a study configuration (JSON: presets, one shared training budget, evaluation
  * noise levels and scenes), and the run: for each preset train it (train/train.h) into
  * <dir>/runs/<preset>/, evaluate it on the held-out scenes at every noise level

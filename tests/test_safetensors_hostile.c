@@ -1,4 +1,4 @@
-/* test_safetensors_hostile.c — safetensors files with hostile headers (issue 16): data offsets
+/* test_safetensors_hostile.c — safetensors files with hostile headers: data offsets
  * that overflow 64-bit arithmetic (the two fuzzed files of ../shared/reliability and generated
  * variants: INT64_MIN/INT64_MAX ends, negative, reversed, non-integer, missing or extra offsets,
  * a header that is not an object, a header length past the file). Each must give LM_ERR_FORMAT

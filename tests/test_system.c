@@ -324,7 +324,7 @@ static void test_validation_errors_schedule_and_spectra(void)
 }
 
 /* Every number is range-checked: values that overflow or make no physical sense are errors
- * naming the field and the range, never an inf that turns every frame into zeros (issue 16). */
+ * naming the field and the range, never an inf that turns every frame into zeros. */
 static void test_numeric_ranges(void)
 {
     const lm_status F = LM_ERR_FORMAT;

@@ -392,7 +392,7 @@ static void test_config_validation(void)
     expect_cfg_error("{\"version\": 1, \"data\": [3]}", "data[0]");
     expect_cfg_error("{\"version\": 1, \"accum_steps\": 0}", "accum_steps");
     expect_cfg_error("{\"version\": 1, \"step_every\": 0, \"schedule\": \"step\"}", "step_every");
-    /* issue 16: values that do not fit are errors, never wrapped, infinite or endless */
+    /* values that do not fit are errors, never wrapped, infinite or endless */
     expect_cfg_error("{\"version\": 1, \"patch\": [4294967362, 64]}", "patch");
     expect_cfg_error("{\"version\": 1, \"val_patches\": 2147483647}", "val_patches");
     expect_cfg_error("{\"version\": 1, \"lr\": 1e39}", "lr");

@@ -1,4 +1,4 @@
-/* test_train_reliability.c — the training loop under failures (issue 16): a log.csv that cannot
+/* test_train_reliability.c — the training loop under failures: a log.csv that cannot
  * be written (the file-size limit reached, as on a full disk) stops the run with the message; a
  * fresh run that fails before its first iteration (a batch that cannot be read, a NaN at once)
  * leaves no run folder; an interrupt flag (what `lumosaic train` sets on SIGINT/SIGTERM) ends

@@ -1,4 +1,4 @@
-/* coding.h — learned coding (issue 18, item 1): the sub-frame allocation and the tile map of the
+/* coding.h — learned coding: the sub-frame allocation and the tile map of the
  * imaging system chosen jointly with the closed-form linear reconstruction (the lmmse floor), under
  * a physical noise model.
  *

@@ -131,7 +131,7 @@ static const field fields[] = {
         "gradient per update (4)", 1, 31),
     FLD("recipe", F_STR, recipe, "R", "preset | paper: what lr, batch, accum_steps, schedule, "
         "lr_min, warmup and synth_fraction default to: the model preset's measured recipe "
-        "(README \"Training recipes\"; presets without one: the paper's values shown here) or "
+        "(docs/guide/training.md \"Training recipes\"; presets without one: the paper's values shown here) or "
         "the paper's protocol", 0, 0),
 };
 #define NFIELDS (int)(sizeof fields / sizeof fields[0])
@@ -151,7 +151,7 @@ void lm_train_cfg_default(lm_train_cfg *c)
     c->version = LM_TRAIN_CFG_VERSION;
     snprintf(c->model, sizeof c->model, "han-paper");
     c->synth_fraction = 0.33f;
-    c->procedural_fraction = -1.0f; /* lm_train_procedural_share: 0.2 (measured, README) */
+    c->procedural_fraction = -1.0f; /* lm_train_procedural_share: 0.2 (docs/guide/training.md) */
     c->motion_speed = 240.0f, c->motion_samples = 2;
     c->patch_h = 66, c->patch_w = 64;
     c->batch = 14, c->accum_steps = 2;
@@ -629,7 +629,7 @@ static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
                                                    "optimise", c->doe_optimise, "lr",
                                                    (double)c->doe_lr, "quantise",
                                                    c->doe_quantise, "bands", c->doe_bands));
-    if (root) /* moving samples (issue 18, item 2) */
+    if (root) /* moving samples */
         json_object_update_new(root, json_pack("{s:f, s:f, s:f, s:i}", "motion_fraction",
                                (double)c->motion_fraction, "motion_speed", (double)c->motion_speed,
                                "motion_rotation", (double)c->motion_rotation, "motion_samples",

@@ -1,10 +1,11 @@
-/* recipe.c — measured training recipes per preset (issue 13, item 4) and their application to a
+/* recipe.c — measured training recipes per preset and their application to a
  * run config: the fields a file or flag did not give take the recipe's values.
  * How they were chosen: each preset trained for 3 minutes of CPU time (one thread, batch 8 of
  * 66 x 64, cosine from a 100-update warm-up to 1e-5, the 27 shared CAVE scenes' training split)
  * at three or four learning rates; the one with the best validation PSNR (real validation
  * scenes, noise 0, 32 patches) is the recipe's, or the middle one (of two, the larger) where
- * they are within 0.05 dB (README "Training recipes", with the table and the command).
+ * they are within 0.05 dB (docs/guide/training.md, "Training recipes", with the table and the
+ * command).
  * Residuals on the closed-form floor train with a 10 % synthetic share (the study's measured
  * choice: the floor already saw the synthetic spectra).
  * What it is not: a schedule search per run, or recipes for the paper-size presets (too slow to
@@ -14,8 +15,9 @@
 #include <string.h>
 
 static const lm_train_recipe recipes[] = {
-    /* preset, residual, lr, batch, accum, schedule, lr_min, warmup, synth; lr swept: README
-     * "Training recipes" (not swept: the nearest measured kin's, said there) */
+    /* preset, residual, lr, batch, accum, schedule, lr_min, warmup, synth; lr swept:
+     * docs/guide/training.md, "Training recipes" (not swept: the nearest measured kin's, said
+     * there) */
     {"linear", 0, 5e-3f, 8, 1, "cosine", 1e-5f, 100, -1.0f},
     {"rt-8", 0, 4e-3f, 8, 1, "cosine", 1e-5f, 100, -1.0f},     /* rt-16's */
     {"rt-8", 1, 2e-3f, 8, 1, "cosine", 1e-5f, 100, 0.1f},

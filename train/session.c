@@ -310,7 +310,7 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
                         "'buckets' 2: moving and multi-frame samples are simulated for bucket 1 "
                         "only");
     } else if (!st && (cfg->motion_fraction > 0.0f || cfg->frames == 3)) {
-        /* moving scenes, multi-frame samples (issue 18, item 2) */
+        /* moving scenes, multi-frame samples */
         lm_train_source src;
         lm_train_motion_opts mo = {cfg->motion_fraction, cfg->motion_speed, cfg->motion_rotation,
                                    cfg->motion_samples, cfg->sensor_clip, cfg->sensor_bits,

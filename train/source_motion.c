@@ -1,4 +1,4 @@
-/* source_motion.c — training batches with moving scenes (issue 18, item 2): the dataset's own
+/* source_motion.c — training batches with moving scenes: the dataset's own
  * samples (same scenes, split, tile-aligned patch positions, flips, noise level k), of which a
  * share `fraction` of the real-scene ones is replaced by the same patch seen moving during the
  * exposure, as the video forward model simulates it (data/video.h): each LED's pixels average

@@ -43,7 +43,7 @@ typedef struct lm_train_cfg {
                                      * narrowband patches (paper 0.33) */
     float procedural_fraction;      /* share of procedural scenes (not in the paper); -1 (the
                                      * default): lm_train_procedural_share */
-    float motion_fraction;          /* share of real-scene samples seen moving (0; issue 18) */
+    float motion_fraction;          /* share of real-scene samples seen moving (0) */
     float motion_speed;             /* their translation speed: uniform in [0, this] px/s (240) */
     float motion_rotation;          /* their rotation: uniform in [-this, this] deg/s (0) */
     int motion_samples;             /* instants per LED window (2) */
@@ -119,9 +119,10 @@ typedef struct lm_train_cfg {
                                      * flag (internal, not a JSON field) */
 } lm_train_cfg;
 
-/* A training recipe measured for a preset on this project's machines (issue 13, item 4): the
+/* A training recipe measured for a preset on this project's machines: the
  * learning rate, batch and schedule that reached the best validation PSNR in a short
- * CPU-time-budgeted sweep (README "Training recipes"). residual: trained on a base (--base). */
+ * CPU-time-budgeted sweep (docs/guide/training.md, "Training recipes"). residual: trained on a
+ * base (--base). */
 typedef struct lm_train_recipe {
     const char *preset;
     int residual;
@@ -144,7 +145,8 @@ const lm_train_recipe *lm_train_cfg_apply_recipe(lm_train_cfg *cfg);
 /* Was field `key` (JSON or flag spelling) given by a file or a flag? */
 int lm_train_cfg_given(const lm_train_cfg *cfg, const char *key);
 
-/* The default share of procedural scenes, chosen on the real validation split (README). */
+/* The default share of procedural scenes, chosen on the real validation split
+ * (docs/guide/training.md). */
 #define LM_TRAIN_PROCEDURAL_DEFAULT 0.2f
 /* The share of procedural scenes a run draws: procedural_fraction, or when it is -1 the
  * default share, at most 1 - synth_fraction. */

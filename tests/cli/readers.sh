@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# readers.sh — end-to-end tests of cubes on other wavelength grids (README "Readers that
+# readers.sh — end-to-end tests of cubes on other wavelength grids (docs/guide/training.md "Readers that
 # resample"): a KAUST-like .mat (34 bands of 12-bit counts), a 61-band 5 nm EXR and a .mat with
 # two cube variables go through `simulate` and `render`; --mat-key picks a variable, a wrong key
 # lists the file's variables, a cube narrower than 420-680 nm and a bad sidecar are refused

@@ -238,4 +238,10 @@ expect_error "PNG with a bad IDAT CRC: one line" 2 "ms_01.png: corrupt PNG: chun
 expect_error "PNG with a bad filter byte: one line" 2 "ms_01.png: truncated or corrupt image: bad adaptive filter value" \
   "$T/p2" -- "$LM" simulate --input "$T/png/filter/balloons_crop100" --crop --output "$T/p2"
 
+# the progress output says "noise: none" for a run without training noise, not "U[0, 0]"
+"$LM" train --model linear --data "$CAVE" --batch 2 --accum-steps 1 --iterations 1 --noise 0,0 \
+  --val-patches 1 --output "$T/nonoise" > "$T/nonoise.log" 2>&1
+check "train --noise 0,0: progress says 'noise: none'" grep -q "; noise: none;" "$T/nonoise.log"
+check_not "train --noise 0,0: no empty range" grep -q "U\[0, 0\]" "$T/nonoise.log"
+
 finish

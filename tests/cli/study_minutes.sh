@@ -72,6 +72,8 @@ PY
 check "residual checkpoint carries its base" [ $? -eq 0 ]
 check "results.md: training-time table" grep -q "Accuracy against training time" "$S/results.md"
 check "results.md: per-preset training fields" grep -q 'linear `{"lr":0.005}`' "$S/results.md"
+check "results.md: a time budget is stated as minutes" grep -q "same budget: 0.3 minutes of training time" "$S/results.md"
+check_not "results.md: the iteration cap is not claimed as the budget" grep -q "100000 iterations" "$S/results.md"
 check "accuracy_minutes chart" [ -s "$S/charts/accuracy_minutes.png" ]
 "$LM" study --config "$T/m.json" --output "$S" --threads 2 --quiet > /dev/null 2> "$T/err2"
 check "rerun skips all" [ "$(grep -c 'done before' "$T/err2")" -eq 3 ]
