@@ -198,7 +198,7 @@ wait $pid
 rc=$?
 kill $dog
 check "infer SIGINT: exit $rc: $(cat "$T/isig.err")" [ $rc -eq 130 ]
-check "infer SIGINT: one line: $(cat "$T/isig.err")" [ "$(grep -vc '^frame ' "$T/isig.err")" -eq 1 ]
+check "infer SIGINT: one line: $(cat "$T/isig.err")" [ "$(grep -vc -e '^frame ' -e '^model ' "$T/isig.err")" -eq 1 ]
 check "infer SIGINT: says so: $(cat "$T/isig.err")" \
   grep -q "interrupted (SIGINT): partial output removed" "$T/isig.err"
 check "infer SIGINT: no staging folder or output left: $(ls -d "$O"* 2>&1)" no_output "$O"
