@@ -428,6 +428,18 @@ static lm_status sample_cube(lm_dataset *d, sample_plan *p, lm_data_split split,
     return st;
 }
 
+/* The sample's photo-electrons at full scale: photons, or for a training sample with a
+ * photons_min, log-uniform in [photons_min, photons] (from a stream of its own, so the other
+ * noise numbers of the sample stay those of a fixed count). */
+static double sample_photons(const lm_dataset_cfg *c, lm_data_split split, const lm_rng *noise)
+{
+    if (!(c->photons_min > 0.0 && c->photons > c->photons_min) || split != LM_SPLIT_TRAIN)
+        return c->photons;
+    lm_rng r = lm_rng_split(noise, 7);
+    double u = lm_rng_uniform(&r);
+    return exp(log(c->photons_min) + u * (log(c->photons) - log(c->photons_min)));
+}
+
 /* Sample i of a split; noisy 0: the clean frame (no noise, clipping or quantisation). */
 static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, int noisy, float *raw,
                              float *target, lm_err *err)
@@ -447,7 +459,7 @@ static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, int noi
         no.gauss_k = p.info.noise_k;
         no.clip = d->cfg.sensor_clip;
         no.bits = d->cfg.sensor_bits;
-        no.photons = d->cfg.photons;      /* shot and read noise (system.md section 4 options) */
+        no.photons = sample_photons(&d->cfg, split, &p.noise_rng); /* shot and read noise */
         no.read_noise = d->cfg.read_noise;
         st = lm_forward_noise(raw, ph, pw, &no, &p.noise_rng, 1, err);
         /* bucket 0 next from the same generator (lm_forward_noise advanced it), as
@@ -593,10 +605,19 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
     else if (c->noise_min == c->noise_max)
         snprintf(noise, sizeof noise, "noise k = %g", c->noise_min);
     else snprintf(noise, sizeof noise, "noise k ~ U[%g, %g]", c->noise_min, c->noise_max);
+    char shot[128] = ""; /* shot and read noise, drawn before k */
+    if (c->photons > 0 && c->photons_min > 0)
+        snprintf(shot, sizeof shot, "; shot noise %g..%g e- at full scale (log-uniform; "
+                 "validation %g)", c->photons_min, c->photons, c->photons);
+    else if (c->photons > 0)
+        snprintf(shot, sizeof shot, "; shot noise %g e- at full scale", c->photons);
+    if (c->read_noise > 0)
+        snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; read noise %g %s",
+                 (double)c->read_noise, c->photons > 0 ? "e-" : "of full scale");
     fprintf(f, "dataset: %d scenes in %d groups; patch %d x %d; narrowband synthetic %.0f%%, "
-            "procedural %.0f%%; %s; flips %s; seed %llu; %d "
+            "procedural %.0f%%; %s%s; flips %s; seed %llu; %d "
             "workers; cache %d scenes%s\n", d->nscenes, d->ngroups, c->patch_h, c->patch_w,
-            100.0 * c->synth_fraction, 100.0 * c->procedural_fraction, noise,
+            100.0 * c->synth_fraction, 100.0 * c->procedural_fraction, noise, shot,
             c->flips ? "on" : "off", (unsigned long long)c->seed, d->nthreads, d->cache_cap,
             c->buckets == 2 ? "; both buckets (bucket 1, bucket 0 / (LEDs - 1))" : "");
     fprintf(f, "  split by scene group (name without a _crop<N> or _<height|width> tag): test "
@@ -649,6 +670,9 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
     if (c->mat_key && strlen(c->mat_key) >= LM_DATASET_KEY_LEN)
         return lm_err_set(err, LM_ERR_ARG, "dataset: .mat key longer than %d characters",
                           LM_DATASET_KEY_LEN - 1);
+    if (!(c->photons_min >= 0 && c->photons_min <= c->photons) && c->photons_min != 0)
+        return lm_err_set(err, LM_ERR_ARG, "dataset: photons_min %g must be in [0, photons %g]",
+                          c->photons_min, c->photons);
     if (!(c->photons >= 0 && c->photons <= 1e12) || !(c->read_noise >= 0 && c->read_noise <= 1e6))
         return lm_err_set(err, LM_ERR_ARG, "dataset: photons %g (0..1e12) or read noise %g "
                           "(0..1e6) out of range", c->photons, (double)c->read_noise);

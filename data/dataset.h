@@ -57,6 +57,8 @@ typedef struct lm_dataset_cfg {
     int sensor_bits;            /* quantise to this many bits (0 = off, 16 = PNG) */
     double photons;             /* > 0: shot noise, photo-electrons at full scale (the white
                                  * response of the brightest LED), before the Gaussian k; 0 = off */
+    double photons_min;         /* > 0: each training sample's photons drawn log-uniformly in
+                                 * [photons_min, photons] (validation and test: photons) */
     float read_noise;           /* read noise: electrons with photons, else a fraction of full
                                  * scale (data/forward.h); 0 = off */
     int batch_stride;           /* the caller asks for batch index + stride after index (data-

@@ -1048,6 +1048,57 @@ static void test_shot_noise_two_buckets(void)
     lm_dataset_close(a), lm_dataset_close(b);
 }
 
+/* photons_min: each training sample's photon count log-uniform in [photons_min, photons]
+ * (measured per sample from its shot-noise variance), validation samples at photons. */
+static void test_photon_range(void)
+{
+    const char *pa[1] = {g_pospath};
+    lm_dataset_cfg c0 = base_cfg(pa, 1), c1, c2;
+    c1 = c0;
+    c1.photons = 5000.0;
+    c2 = c1;
+    c2.photons_min = 50.0;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *a = lm_dataset_open(&c0, &e), *b = lm_dataset_open(&c1, &e),
+               *r = lm_dataset_open(&c2, &e);
+    CHECK_MSG(a && b && r, "%s", e.msg);
+    enum { NB = 16 };
+    static float ra[NB * PH * PW], rb[NB * PH * PW], rr[NB * PH * PW], t[NB * 33 * PH * PW];
+    if (a && b && r) {
+        double lo = 1e30, hi = 0, fixed_lo = 1e30, fixed_hi = 0;
+        for (int k = 0; k < 4; k++) {
+            CHECK(lm_dataset_batch(a, k, NB, ra, t, &e) == LM_OK);
+            CHECK(lm_dataset_batch(b, k, NB, rb, t, &e) == LM_OK);
+            CHECK(lm_dataset_batch(r, k, NB, rr, t, &e) == LM_OK);
+            for (int s = 0; s < NB; s++) {
+                double sum = 0, d2b = 0, d2r = 0;
+                for (int i = s * PH * PW; i < (s + 1) * PH * PW; i++) {
+                    sum += ra[i];
+                    d2b += (double)(rb[i] - ra[i]) * (rb[i] - ra[i]);
+                    d2r += (double)(rr[i] - ra[i]) * (rr[i] - ra[i]);
+                }
+                const double pb = sum / d2b, pr = sum / d2r; /* variance = mean / photons */
+                fixed_lo = fmin(fixed_lo, pb), fixed_hi = fmax(fixed_hi, pb);
+                lo = fmin(lo, pr), hi = fmax(hi, pr);
+            }
+        }
+        printf("     photons per sample: fixed %.0f..%.0f, range 50..5000: %.0f..%.0f\n",
+               fixed_lo, fixed_hi, lo, hi);
+        CHECK_MSG(fixed_lo > 5000 / 1.6 && fixed_hi < 5000 * 1.6, "fixed photons %g..%g",
+                  fixed_lo, fixed_hi);
+        CHECK_MSG(lo > 50 / 1.6 && hi < 5000 * 1.6 && hi / lo > 10, "photons drawn %g..%g",
+                  lo, hi);
+        /* validation samples keep the fixed count: the same numbers */
+        CHECK(lm_dataset_eval_sample(b, LM_SPLIT_VAL, 0, rb, t, &e) == LM_OK);
+        CHECK(lm_dataset_eval_sample(r, LM_SPLIT_VAL, 0, rr, t, &e) == LM_OK);
+        CHECK(memcmp(rb, rr, sizeof(float) * PH * PW) == 0);
+    }
+    lm_dataset_close(a), lm_dataset_close(b), lm_dataset_close(r);
+    c2.photons_min = 6000.0; /* above photons */
+    CHECK(lm_dataset_open(&c2, &e) == NULL && e.status == LM_ERR_ARG);
+}
+
 static void test_scene_normalised(void)
 {
     char dark[1200];
@@ -1106,6 +1157,7 @@ int main(void)
     RUN(test_scene_normalised);
     RUN(test_shot_and_read_noise);
     RUN(test_shot_noise_two_buckets);
+    RUN(test_photon_range);
     RUN(test_bad_input);
     rm_tree(tmpdir);
     lm_system_free(&g_sys);

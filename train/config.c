@@ -100,6 +100,9 @@ static const field fields[] = {
         "PNG frame holds them (0)", 0, 1),
     FLD("photons", F_FLOAT, photons, "P", "shot noise: photo-electrons at full scale (the "
         "brightest LED's white response; 0 = off), as simulate --poisson", 0, 1e12),
+    FLD("photons_min", F_FLOAT, photons_min, "P", "shot noise over a range of light: each "
+        "training sample's photo-electrons at full scale drawn log-uniformly in [this, photons] "
+        "(0 = every sample at photons; validation samples: photons)", 0, 1e12),
     FLD("read_noise", F_FLOAT, read_noise, "E", "read noise: electrons with photons, else a "
         "fraction of full scale (0 = off), as simulate --read-noise", 0, 1e6),
     FLD("sensor_bits", F_INT, sensor_bits, "N", "quantise samples to N bits (0 = off; 16 = PNG)",
@@ -520,6 +523,9 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     if (!(c->step_gamma > 0)) BAD("'step_gamma': must be in (0, 1] (got %g)", c->step_gamma);
     if (c->noise_min > c->noise_max)
         BAD("'noise': need 0 <= min <= max <= 1 (got %g,%g)", c->noise_min, c->noise_max);
+    if (c->photons_min > 0.0f && !(c->photons > c->photons_min))
+        BAD("'photons_min': must be below 'photons' (got %g, photons %g)", (double)c->photons_min,
+            (double)c->photons);
     if (strcmp(c->device, "cpu") && strcmp(c->device, "opencl"))
         BAD("'device': must be cpu or opencl (got '%s'; --device, the config or $LM_DEVICE)",
             c->device);
@@ -638,6 +644,7 @@ static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
     if (root) json_object_set_new(root, "frames", json_integer(c->frames));
     if (root) json_object_set_new(root, "recipe", json_string(c->recipe));
     if (root) json_object_set_new(root, "photons", json_real(c->photons));
+    if (root) json_object_set_new(root, "photons_min", json_real(c->photons_min));
     if (root) json_object_set_new(root, "read_noise", json_real(c->read_noise));
     if (root) json_object_set_new(root, "ema", json_real(c->ema));
     if (root) json_object_set_new(root, "precision", json_string(c->precision));

@@ -58,6 +58,7 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.mat_key = cfg->mat_key;
     dc.buckets = cfg->buckets;
     dc.photons = cfg->photons, dc.read_noise = cfg->read_noise;
+    dc.photons_min = cfg->photons_min;
     if (clean) { /* the fit adds noise, clipping and quantisation itself */
         dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
         dc.sensor_clip = dc.sensor_bits = 0;
@@ -309,6 +310,11 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         st = lm_err_set(err, LM_ERR_ARG, "config: 'motion_fraction' or 'frames' 3 with "
                         "'buckets' 2: moving and multi-frame samples are simulated for bucket 1 "
                         "only");
+    } else if (!st && (cfg->motion_fraction > 0.0f || cfg->frames == 3) &&
+               cfg->photons_min > 0.0f) {
+        st = lm_err_set(err, LM_ERR_ARG, "config: 'photons_min' with 'motion_fraction' or "
+                        "'frames' 3: moving and multi-frame samples take one photon count "
+                        "('photons')");
     } else if (!st && (cfg->motion_fraction > 0.0f || cfg->frames == 3)) {
         /* moving scenes, multi-frame samples */
         lm_train_source src;

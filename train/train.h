@@ -88,6 +88,8 @@ typedef struct lm_train_cfg {
                                      * PNG frame holds them (0) */
     int sensor_bits;                /* quantisation of the samples (0 = off; 16 = PNG) */
     float photons;                  /* shot noise: photo-electrons at full scale (0 = off) */
+    float photons_min;              /* > 0: training samples' photons log-uniform in
+                                     * [photons_min, photons] (0 = all at photons) */
     float read_noise;               /* read noise: electrons with photons, else a fraction of
                                      * full scale (0 = off) */
     char snapshots[128];            /* "5,15,30": weights at these minutes of training time into
