@@ -18,7 +18,7 @@
  *     by model and runs each model on its windows in batches of at most `batch`. Windows
  *     assigned to one model give exactly that model's lm_tile_infer result (same windows, same
  *     per-window outputs, same fold order).
- * What it is not: model loading (infer/model_io.h), the CLI (cli/cmd_fit_auto.c, cmd_infer.c),
+ * What it is not: model loading (infer/model_io.h), calibration runs (infer/auto_fit.h), the CLI,
  * a device backend (CPU only: the callback reads the batch on the host). */
 #ifndef LM_AUTO_H
 #define LM_AUTO_H

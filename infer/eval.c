@@ -1,5 +1,5 @@
 /* eval.c — evaluation of a trained model on prepared cubes and on the rainbow scene (see
- * eval.h). What it is not: scene listing or output (cli/cmd_eval.c). */
+ * eval.h). What it is not: scene listing or output (eval_run.c, eval_write.c). */
 #include "infer/eval.h"
 #include <inttypes.h>
 #include <math.h>

@@ -18,7 +18,8 @@
  * spaced over lm_system_exposure_us from the frame's start; noise-free), scored against the same
  * lime-instant truth; there is nothing to align, so aligned = unaligned.
  * Reconstructions are scored as the network returns them (no clamping).
- * What it is not: scene listing, printing or file output (cli/cmd_eval.c). */
+ * What it is not: scene listing and the run over scenes (infer/eval_run.h), file output
+ * (infer/eval_write.h) or printing (cli/cmd_eval.c). */
 #ifndef LM_EVAL_H
 #define LM_EVAL_H
 #include "data/cube.h"

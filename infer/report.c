@@ -480,7 +480,7 @@ lm_status lm_report_eval_files(lm_ctx *c, const lm_infer_model *im, const char *
 {
     lm_cube truth, pred;
     memset(&pred, 0, sizeof pred);
-    lm_cube_read_opts ro; /* as cmd_eval reads scenes */
+    lm_cube_read_opts ro; /* as eval_run.c reads scenes */
     lm_cube_read_opts_default(&ro);
     ro.keep.count = 0;
     ro.mat_key = mat_key;
