@@ -246,8 +246,9 @@ static lm_status open_device(lm_eval_run *r, lm_err *e)
     lm_status st = lm_tile_device_open(&r->dev, r->o->device, r->im.model, &r->ctx, e);
     if (st) return st;
     if (r->dev.backend->device != LM_DEVICE_CPU && !lm_model_has(r->im.model, LM_CAP_OPENCL))
-        return lm_err_set(e, LM_ERR_UNSUPPORTED, "--device %s: MST++ models (%s) run on the "
-                          "CPU only", lm_tile_device_name(&r->dev), r->im.model->preset);
+        return lm_err_set(e, LM_ERR_UNSUPPORTED, "--device %s: model %s runs on the CPU only "
+                          "(its layers have no OpenCL kernels)", lm_tile_device_name(&r->dev),
+                          r->im.model->preset);
     if (r->dev.backend->device != LM_DEVICE_CPU) {
         snprintf(line, sizeof line, "device: %s", lm_tile_device_name(&r->dev));
         say(r, line);
