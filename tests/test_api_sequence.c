@@ -4,10 +4,12 @@
  * alignment on equals, bit for bit, the cubes `lumosaic infer --threads 2` writes for the same
  * frames (and with alignment off, those of --no-align; the two differ); a calibrated choice
  * (lm_api_model_load_auto, a hand-written calibration of two models with a choice per bin)
- * equals `infer --model auto --auto FILE`; the bundled model loads; errors: NULL arguments,
- * zero frames, frames of different sizes, a small buffer, a bad calibration, bad bucket counts
- * (a status and a one-line message, no crash).
- * What it is not: the single-frame API (test_api.c) or alignment's accuracy (test_align_infer.c). */
+ * equals `infer --model auto --auto FILE`; the bundled two-bucket model on a video with
+ * bucket 0 equals `infer --model auto` (bucket 0 found beside frames/, no alignment); errors:
+ * NULL arguments, zero frames, frames of different sizes, a small buffer, a bad calibration,
+ * bad bucket counts (a status and a one-line message, no crash).
+ * What it is not: the single-frame API (test_api.c) or alignment's accuracy
+ * (test_align_infer.c). */
 #include <stdint.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -158,21 +160,47 @@ static void test_auto_as_infer(void)
           LM_API_ERR_IO && strstr(err.message, "/nonexistent/auto.json") != NULL);
 }
 
+/* The bundled two-bucket model on a 2-frame video with bucket 0: infer --model auto's cubes
+ * (unaligned: bucket 0 is not aligned in time). */
 static void test_bundled(void)
 {
     lm_api_error err;
     lm_api_model *m = (lm_api_model *)1;
     CHECK(lm_api_model_load_bundled(3, NULL, &m, &err) == LM_API_ERR_ARG && !m);
     CHECK(lm_api_model_load_bundled(1, NULL, NULL, &err) == LM_API_ERR_ARG);
+    CHECK(lm_api_model_load("auto", NULL, &m, &err) == LM_API_ERR_ARG && !m);
     int buckets = 0;
     CHECK_MSG(lm_api_model_load_bundled(2, NULL, &m, &err) == LM_API_OK, "%s", err.message);
+    if (!m) return;
     CHECK(lm_api_model_info(m, NULL, &buckets, NULL, NULL, &err) == LM_API_OK && buckets == 2);
-    lm_api_frame f[NF];
-    api_frames(f); /* no bucket 0 */
-    float one;
-    CHECK(lm_api_reconstruct_sequence(m, f, NF, 1, &one, 1, NULL, &err) != LM_API_OK);
+    CHECK(lm_api_model_set_threads(m, 2, &err) == LM_API_OK);
+    lm_api_frame f[2];
+    lm_frame b1[2] = {{0}}, b0[2] = {{0}};
+    lm_err e;
+    lm_err_clear(&e);
+    for (int i = 0; i < 2; i++) {
+        char path[1200];
+        snprintf(path, sizeof path, "%s/b2/frames/frame_%04d.png", tmpdir, i);
+        CHECK_MSG(lm_frame_read(path, &b1[i], &e) == LM_OK, "%s", e.msg);
+        snprintf(path, sizeof path, "%s/b2/bucket0/frame_%04d.png", tmpdir, i);
+        CHECK_MSG(lm_frame_read(path, &b0[i], &e) == LM_OK, "%s", e.msg);
+        f[i] = (lm_api_frame){b1[i].height, b1[i].width, LM_API_PIXEL_F32, b1[i].data,
+                              b0[i].data};
+    }
+    const size_t nc = (size_t)31 * b1[0].height * b1[0].width;
+    float *a = malloc(sizeof(float) * 2 * nc);
+    if (b1[1].data && b0[1].data) {
+        CHECK_MSG(lm_api_reconstruct_sequence(m, f, 2, 1, a, 2 * nc, NULL, &err) == LM_API_OK,
+                  "%s", err.message);
+        for (int i = 0; i < 2; i++) CHECK_MSG(same_as_written("b2o", i, a + i * nc), "%d", i);
+        f[1].bucket0 = NULL;
+        CHECK(lm_api_reconstruct_sequence(m, f, 2, 1, a, 2 * nc, NULL, &err) == LM_API_ERR_ARG);
+        CHECK_MSG(strstr(err.message, "frame 1") && strstr(err.message, "bucket0"), "%s",
+                  err.message);
+    }
+    free(a);
+    for (int i = 0; i < 2; i++) lm_frame_free(&b1[i]), lm_frame_free(&b0[i]);
     lm_api_model_free(m);
-    CHECK(lm_api_model_load("auto", NULL, &m, &err) == LM_API_ERR_ARG && !m);
 }
 
 int main(void)
@@ -191,6 +219,10 @@ int main(void)
     snprintf(args, sizeof args, "simulate --input '%s' --output mv --crop --video --frames 3 "
              "--motion translate:150,-60", cave);
     CHECK(lm(args, "sim.err") == 0);
+    snprintf(args, sizeof args, "simulate --input '%s' --output b2 --crop --video --frames 2 "
+             "--bucket0", cave);
+    CHECK(lm(args, "sim2.err") == 0);
+    CHECK(lm("infer --model auto --input b2/frames --output b2o --threads 2", "b2o.err") == 0);
     lm_err e;
     for (int i = 0; i < NF; i++) {
         char path[1200];

@@ -182,8 +182,9 @@ def test_reconstruct_sequence_equals_the_cli(tmp_path, model):
     assert cubes.shape == (3, h, w, 31) and cubes.dtype == np.float32
     plain = model.reconstruct_sequence(np.stack(frames), align=False)
     for i in range(3):
-        np.testing.assert_array_equal(cubes[i], lumosaic.read_cube(tmp_path / f"al/cube_{i:04d}.exr"))
-        np.testing.assert_array_equal(plain[i], lumosaic.read_cube(tmp_path / f"na/cube_{i:04d}.exr"))
+        name = f"cube_{i:04d}.exr"
+        np.testing.assert_array_equal(cubes[i], lumosaic.read_cube(tmp_path / "al" / name))
+        np.testing.assert_array_equal(plain[i], lumosaic.read_cube(tmp_path / "na" / name))
     assert not np.array_equal(cubes[1], plain[1])
     # one frame: the frame as reconstruct gives it
     np.testing.assert_array_equal(model.reconstruct_sequence(frames[:1])[0],
