@@ -35,7 +35,7 @@ extern "C" {
 /* The version of this header. A library with the same major version and a minor version at
  * least this one runs programs built against it (lm_api_version gives the library's). */
 #define LM_API_VERSION_MAJOR 0
-#define LM_API_VERSION_MINOR 1
+#define LM_API_VERSION_MINOR 2
 #define LM_API_VERSION_PATCH 0
 
 #if defined(__GNUC__)
@@ -159,9 +159,24 @@ typedef struct lm_api_model lm_api_model;
  * the file); a system given must be that same description. */
 LM_API lm_api_status lm_api_model_load(const char *path, const lm_api_system *sys,
                                        lm_api_model **out, lm_api_error *err);
+/* Load the bundled model for frames of `buckets` buckets (1: bucket 1 only; 2: both, bucket 0
+ * as lm_api_frame.bucket0 holds it), as `lumosaic infer --model auto` picks it: from the
+ * models/demo/ folder of the source tree, or $LM_MODELS_DIR. sys: as lm_api_model_load. */
+LM_API lm_api_status lm_api_model_load_bundled(int buckets, const lm_api_system *sys,
+                                               lm_api_model **out, lm_api_error *err);
+/* Load a calibrated per-window choice, as `lumosaic infer --model auto --auto FILE
+ * --auto-tol tol_db`: calibration is a file written by `lumosaic fit-auto` naming one-bucket,
+ * one-frame models of one system; each 66 x 64 window of a frame is reconstructed by the
+ * cheapest model whose expected PSNR is within tol_db dB (>= 0; 0.5 is infer's default; 0 =
+ * always the best model) of the best model's, and the windows are blended. Such a model's
+ * preset (lm_api_model_info) is "auto"; it always runs patch-wise. sys: NULL for the system
+ * the models were trained with; a system of other LED gains is refused. */
+LM_API lm_api_status lm_api_model_load_auto(const char *calibration, double tol_db,
+                                            const lm_api_system *sys, lm_api_model **out,
+                                            lm_api_error *err);
 LM_API void lm_api_model_free(lm_api_model *model);
-/* The model's preset name (e.g. "rt-16-nc+lmmse"), the buckets it reads (1 or 2) and its
- * mosaic tile; any pointer may be NULL. */
+/* The model's preset name (e.g. "rt-16-nc+lmmse"; "auto" for a calibrated choice), the
+ * buckets it reads (1 or 2) and its mosaic tile; any pointer may be NULL. */
 LM_API lm_api_status lm_api_model_info(const lm_api_model *model, const char **preset,
                                        int *buckets, int *tile_rows, int *tile_cols,
                                        lm_api_error *err);
@@ -218,6 +233,22 @@ LM_API lm_api_status lm_api_reconstruct(lm_api_model *model, const lm_api_frame 
 /* The same into a new library-owned cube (lm_api_cube_free). */
 LM_API lm_api_status lm_api_reconstruct_cube(lm_api_model *model, const lm_api_frame *frame,
                                              lm_api_cube **out, lm_api_error *err);
+
+/* Reconstruct a sequence of `count` frames (a video, in time order) as `lumosaic infer` does
+ * with a folder of frames: cube receives count cubes of 31 x height x width floats one after
+ * the other (n: its element count, checked), frame i's at cube + i * 31 * height * width;
+ * wavelengths (NULL or 31 floats) receives the bands. Every frame has frame 0's size and
+ * pixel type. align 1: for 2 or more frames, each LED sub-image of a frame is moved to the
+ * frame's lime-LED time by optical flow to the neighbouring frames (sub-images of at least
+ * 24 x 24 pixels; smaller frames are reconstructed unaligned); 0: as recorded. Multi-frame
+ * models ("-mf3" presets) need 2 or more frames and read each frame with its neighbours (moved
+ * onto it when align is 1). Two-bucket models read each frame's bucket0 and reconstruct the
+ * frames unaligned (bucket 0 is not aligned in time). Values below 0 are set to 0 unless
+ * lm_api_model_set_clamp(0). On failure the message names the frame ("frame 3: ..."). */
+LM_API lm_api_status lm_api_reconstruct_sequence(lm_api_model *model,
+                                                 const lm_api_frame *frames, int count,
+                                                 int align, float *cube, size_t n,
+                                                 float *wavelengths, lm_api_error *err);
 
 /* ---- metrics -------------------------------------------------------------------------- */
 /* PSNR (dB, peak 1, over every value), SSIM (11 x 11 Gaussian window, sigma 1.5, per band,

@@ -17,8 +17,8 @@ Arrays:
 Errors of the library, and arguments it cannot take, raise :class:`Error` with the library's
 one-line message and a :class:`Status`.
 
-What it is not: training, evaluation over datasets or sequences with alignment (the
-``lumosaic`` program's ``train``, ``eval`` and ``infer`` on files).
+What it is not: training, evaluation over datasets, or reading frame files (the ``lumosaic``
+program's ``train``, ``eval`` and ``infer`` on files).
 
 Example::
 
@@ -334,19 +334,63 @@ class Model:
     def __init__(self, path: PathLike, threads: Optional[int] = None,
                  precision: Optional[str] = None, system: Union[System, PathLike, None] = None,
                  patchwise: bool = False, clamp: bool = True) -> None:
+        self._open(lambda sys_, h: _capi.call("model_load", _path(path), sys_, h), threads,
+                   precision, system, patchwise, clamp)
+
+    @classmethod
+    def bundled(cls, buckets: int = 1, threads: Optional[int] = None,
+                precision: Optional[str] = None, system: Union[System, PathLike, None] = None,
+                patchwise: bool = False, clamp: bool = True) -> "Model":
+        """The bundled model for frames of ``buckets`` buckets, as ``lumosaic infer --model
+        auto`` picks it (from ``models/demo/`` of the source tree, or ``$LM_MODELS_DIR``).
+
+        Args:
+            buckets: 1 (bucket 1 only) or 2 (both buckets: ``reconstruct`` then needs
+                ``bucket0``).
+            threads, precision, system, patchwise, clamp: as for :class:`Model`.
+        """
+        if isinstance(buckets, bool) or not isinstance(buckets, (int, np.integer)):
+            raise Error(Status.ARG, f"buckets {buckets!r}: 1 or 2")
+        self = cls.__new__(cls)
+        self._open(lambda sys_, h: _capi.call("model_load_bundled", int(buckets), sys_, h),
+                   threads, precision, system, patchwise, clamp)
+        return self
+
+    @classmethod
+    def auto(cls, calibration: PathLike, tol: float = 0.5, threads: Optional[int] = None,
+             precision: Optional[str] = None, system: Union[System, PathLike, None] = None,
+             clamp: bool = True) -> "Model":
+        """A calibrated per-window choice of models, as ``lumosaic infer --model auto --auto
+        FILE --auto-tol TOL``: each 66 x 64 window is reconstructed by the cheapest model whose
+        expected PSNR is within ``tol`` dB of the best model's, and the windows are blended.
+
+        Args:
+            calibration: a file written by ``lumosaic fit-auto`` (one-bucket, one-frame models
+                of one system).
+            tol: the accuracy the choice may give up per window, in dB of expected PSNR (>= 0;
+                0 = always the best model).
+            threads, precision, system, clamp: as for :class:`Model` (such a model always runs
+                patch-wise; its :attr:`preset` is ``"auto"``).
+        """
+        self = cls.__new__(cls)
+        self._open(lambda sys_, h: _capi.call("model_load_auto", _path(calibration),
+                                              float(tol), sys_, h),
+                   threads, precision, system, False, clamp)
+        return self
+
+    def _open(self, load, threads, precision, system, patchwise, clamp) -> None:
         self._lock = threading.Lock()
         self._handle = ctypes.c_void_p()
         if precision not in (None, "fp32", "bf16"):
             raise Error(Status.ARG, f"precision {precision!r}: 'fp32' or 'bf16'")
         sys_ = None if system is None else system if isinstance(system, System) else \
             System(system)
-        _capi.call("model_load", _path(path), sys_._handle if sys_ else None,
-                   ctypes.byref(self._handle))
+        load(sys_._handle if sys_ else None, ctypes.byref(self._handle))
         preset, buckets, tr, tc = ctypes.c_char_p(), ctypes.c_int(), ctypes.c_int(), \
             ctypes.c_int()
         _capi.call("model_info", self._handle, ctypes.byref(preset), ctypes.byref(buckets),
                    ctypes.byref(tr), ctypes.byref(tc))
-        #: the model's preset name, e.g. "rt-16-nc+lmmse"
+        #: the model's preset name, e.g. "rt-16-nc+lmmse" ("auto" for a calibrated choice)
         self.preset: str = preset.value.decode()
         #: the buckets it reads: 1, or 2 (``reconstruct`` then needs ``bucket0``)
         self.buckets: int = buckets.value
@@ -405,6 +449,61 @@ class Model:
                        out.size, wl.ctypes.data)
         self._wavelengths = wl
         return out.transpose(1, 2, 0)
+
+    def reconstruct_sequence(self, frames: Sequence[np.ndarray],
+                             bucket0: Optional[Sequence[np.ndarray]] = None, align: bool = True,
+                             noise: Optional[float] = None) -> np.ndarray:
+        """Reconstruct a sequence of coded frames (a video, in time order), as ``lumosaic
+        infer`` does with a folder of frames.
+
+        Args:
+            frames: ``N`` coded frames of one size (a sequence of ``(height, width)`` arrays or
+                an ``(N, height, width)`` array), float (1.0 = full scale) or uint16 (65535 =
+                full scale), as for :meth:`reconstruct`.
+            bucket0: two-bucket models: bucket 0 of each frame (the same count and size); such
+                sequences are reconstructed without alignment (bucket 0 is not aligned in time).
+            align: for 2 or more frames, move each LED sub-image of a frame to the frame's
+                lime-LED time by optical flow to the neighbouring frames (sub-images of at least
+                24 x 24 pixels; smaller frames are reconstructed unaligned); False: as recorded
+                (``lumosaic infer --no-align``). Multi-frame models ("-mf3") need 2 or more
+                frames and read each frame with its neighbours.
+            noise: as for :meth:`reconstruct`.
+
+        Returns:
+            The cubes, ``(N, height, width, 31)`` float32 on :attr:`wavelengths`: a view of a new
+            ``(N, 31, height, width)`` array (``.base``), written by the library.
+        """
+        f1 = [_frame_array(f, f"frames[{i}]") for i, f in enumerate(frames)]
+        if not f1:
+            raise Error(Status.ARG, "frames: an empty sequence (at least 1 frame)")
+        f0 = None
+        if bucket0 is not None:
+            f0 = [_frame_array(f, f"bucket0[{i}]") for i, f in enumerate(bucket0)]
+            if len(f0) != len(f1):
+                raise Error(Status.SHAPE, f"bucket0: {len(f0)} frames, frames {len(f1)}")
+        if len({f.dtype for f in f1 + (f0 or [])}) > 1:
+            f1 = [_to_float(f) for f in f1]
+            f0 = [_to_float(f) for f in f0] if f0 is not None else None
+        for i, f in enumerate(f1):
+            if f.shape != f1[0].shape or (f0 is not None and f0[i].shape != f.shape):
+                raise Error(Status.SHAPE, f"frames[{i}]: shape {f.shape} is not frame 0's "
+                                          f"{f1[0].shape} (or its bucket 0's)")
+        level = -1.0 if noise is None else float(noise)
+        n, (h, w) = len(f1), f1[0].shape
+        kind = _capi.PIXEL_U16 if f1[0].dtype == np.uint16 else _capi.PIXEL_F32
+        arr = (_capi.Frame * n)(*[
+            _capi.Frame(h, w, kind, f1[i].ctypes.data,
+                        f0[i].ctypes.data if f0 is not None else None) for i in range(n)])
+        out = np.empty((n, 31, h, w), np.float32)
+        wl = np.empty(31, np.float32)
+        with self._lock:
+            if not self._handle:
+                raise Error(Status.ARG, "the model is closed")
+            _capi.call("model_set_noise_level", self._handle, level)
+            _capi.call("reconstruct_sequence", self._handle, arr, n, int(bool(align)),
+                       out.ctypes.data, out.size, wl.ctypes.data)
+        self._wavelengths = wl
+        return out.transpose(0, 2, 3, 1)
 
     def close(self) -> None:
         """Free the model now (otherwise when it is garbage collected)."""

@@ -99,6 +99,8 @@ _SIGNATURES = {
     "lm_api_simulate": (c_int, [_VP, _VP, POINTER(NoiseStruct), c_uint64, c_int, _VP, _VP,
                                 c_size_t, _E]),
     "lm_api_model_load": (c_int, [c_char_p, _VP, POINTER(_VP), _E]),
+    "lm_api_model_load_bundled": (c_int, [c_int, _VP, POINTER(_VP), _E]),
+    "lm_api_model_load_auto": (c_int, [c_char_p, c_double, _VP, POINTER(_VP), _E]),
     "lm_api_model_free": (None, [_VP]),
     "lm_api_model_info": (c_int, [_VP, POINTER(c_char_p), POINTER(c_int), POINTER(c_int),
                                   POINTER(c_int), _E]),
@@ -108,6 +110,8 @@ _SIGNATURES = {
     "lm_api_model_set_precision": (c_int, [_VP, c_int, _E]),
     "lm_api_model_set_clamp": (c_int, [_VP, c_int, _E]),
     "lm_api_reconstruct": (c_int, [_VP, POINTER(Frame), _VP, c_size_t, _VP, _E]),
+    "lm_api_reconstruct_sequence": (c_int, [_VP, POINTER(Frame), c_int, c_int, _VP, c_size_t,
+                                            _VP, _E]),
     "lm_api_metrics_compute": (c_int, [_VP, _VP, c_int, c_int, c_int, POINTER(MetricsStruct),
                                        _E]),
 }

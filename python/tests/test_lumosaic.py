@@ -154,6 +154,94 @@ def test_bf16_equals_the_cli(tmp_path, truth):
     np.testing.assert_array_equal(cube, lumosaic.read_cube(tmp_path / "inf/cube_0000.exr"))
 
 
+VIDEO_SCENE = SHARED / "data/cave/balloons_crop100"
+
+
+def read_png16(path):
+    image = pytest.importorskip("PIL.Image")
+    with image.open(path) as im:
+        a = np.array(im)
+    assert a.dtype == np.uint16, f"{path}: {a.dtype}"
+    return a
+
+
+@pytest.mark.skipif(not VIDEO_SCENE.is_dir(), reason=f"{VIDEO_SCENE} not found")
+def test_reconstruct_sequence_equals_the_cli(tmp_path, model):
+    """A translating 3-frame video: aligned and unaligned cubes bit for bit infer's."""
+    need_cli()
+    run_cli("simulate", "--input", VIDEO_SCENE, "--output", tmp_path / "mv", "--crop",
+            "--video", "--frames", 3, "--motion", "translate:150,-60")
+    frames = [read_png16(tmp_path / f"mv/frames/frame_{i:04d}.png") for i in range(3)]
+    err = run_cli("infer", "--model", MODEL, "--input", tmp_path / "mv/frames", "--output",
+                  tmp_path / "al", "--threads", THREADS).stderr
+    assert re.search(r"alignment [0-9.]+ s", err), err
+    run_cli("infer", "--model", MODEL, "--input", tmp_path / "mv/frames", "--output",
+            tmp_path / "na", "--threads", THREADS, "--no-align")
+    cubes = model.reconstruct_sequence(frames)
+    h, w = frames[0].shape
+    assert cubes.shape == (3, h, w, 31) and cubes.dtype == np.float32
+    plain = model.reconstruct_sequence(np.stack(frames), align=False)
+    for i in range(3):
+        name = f"cube_{i:04d}.exr"
+        np.testing.assert_array_equal(cubes[i], lumosaic.read_cube(tmp_path / "al" / name))
+        np.testing.assert_array_equal(plain[i], lumosaic.read_cube(tmp_path / "na" / name))
+    assert not np.array_equal(cubes[1], plain[1])
+    # one frame: the frame as reconstruct gives it
+    np.testing.assert_array_equal(model.reconstruct_sequence(frames[:1])[0],
+                                  model.reconstruct(frames[0]))
+
+
+def test_reconstruct_sequence_errors(model):
+    f = np.zeros((66, 64), np.float32)
+    with pytest.raises(lumosaic.Error) as e:
+        model.reconstruct_sequence([])
+    assert e.value.status == lumosaic.Status.ARG
+    with pytest.raises(lumosaic.Error) as e:
+        model.reconstruct_sequence([f, np.zeros((72, 64), np.float32)])
+    assert e.value.status == lumosaic.Status.SHAPE and "frames[1]" in str(e.value)
+    with pytest.raises(lumosaic.Error) as e:
+        model.reconstruct_sequence([f, f], bucket0=[f, f])  # a one-bucket model
+    assert e.value.status == lumosaic.Status.ARG and "bucket" in str(e.value)
+    bad = f.copy()
+    bad[3, 4] = np.nan
+    with pytest.raises(lumosaic.Error) as e:
+        model.reconstruct_sequence([f, bad])
+    assert e.value.status == lumosaic.Status.NUMERIC and "frame 1" in str(e.value)
+    assert "\n" not in str(e.value)
+
+
+def test_auto_and_bundled_models(tmp_path):
+    with pytest.raises(lumosaic.Error) as e:
+        lumosaic.Model.bundled(buckets=3)
+    assert e.value.status == lumosaic.Status.ARG
+    with pytest.raises(lumosaic.Error) as e:
+        lumosaic.Model.auto(tmp_path / "missing.json")
+    assert e.value.status == lumosaic.Status.IO and "missing.json" in str(e.value)
+    with pytest.raises(lumosaic.Error) as e:
+        lumosaic.Model.auto(tmp_path / "missing.json", tol=-1)
+    assert e.value.status == lumosaic.Status.ARG
+    calib = tmp_path / "auto.json"
+    calib.write_text(
+        '{"version": 1, "measure": "grad", "window": [66, 64], "stride": [30, 32], '
+        '"edges": [0.02], "windows": [10, 10], "models": ['
+        f'{{"model": "{MODEL}", "preset": "rt-16-nc+lmmse", "cost_s_per_window": 1, '
+        '"macs_per_window": 1, "psnr": [30, 40]}, '
+        f'{{"model": "{MODEL}", "preset": "rt-16-nc+lmmse", "cost_s_per_window": 2, '
+        '"macs_per_window": 2, "psnr": [40, 40]}]}')
+    with lumosaic.Model.auto(calib, tol=0.5, threads=THREADS) as m:
+        assert m.preset == "auto" and m.buckets == 1
+        frame = np.random.default_rng(0).random((132, 128), dtype=np.float32)
+        cube = m.reconstruct(frame)
+        assert cube.shape == (132, 128, 31)
+        np.testing.assert_array_equal(m.reconstruct_sequence([frame])[0], cube)
+    try:
+        m = lumosaic.Model.bundled(buckets=1, threads=THREADS)
+    except lumosaic.Error as e:
+        pytest.skip(f"no bundled model: {e}")
+    with m:
+        assert m.buckets == 1 and m.preset != "auto"
+
+
 @need_scene
 def test_metrics_as_defined(model, truth):
     """The library's metrics (the code `lumosaic eval` scores with) against their definitions

@@ -1,0 +1,291 @@
+/* pipeline_frame.c — one frame through the frame pipeline (infer/pipeline.h): read (raw
+ * conversion, saturation share), aligned in time with its neighbours (each frame's LED
+ * sub-images moved to its lime timestamp with frames i-1, i, i+1 and re-mosaicked; only three
+ * frames' sub-images held, read one frame ahead) or stacked with them for multi-frame models
+ * (lm_align_stack_frames: the first and last frame take frame i for the missing neighbour),
+ * paired with bucket 0, and reconstructed by the model's path or per window (--model auto).
+ * What it is not: opening the run (pipeline.c), the flow or alignment scheme (data/align.c). */
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+#include "infer/pipeline.h"
+#include "infer/pipeline_internal.h"
+#include "infer/recon.h"
+
+/* Read frame i of bucket 1 converted to the system's scale (infer/raw.h), its share of
+ * saturated pixels noted in p->sat[i]. */
+static lm_status read_frame(lm_pipe *p, int i, lm_frame *f, lm_err *e)
+{
+    if (p->src.read(p->src.self, i, f, e)) return e->status;
+    p->sat[i] = lm_raw_saturated(&p->o.raw, f, NULL);
+    if (lm_raw_apply(&p->raw, f, p->src.name(p->src.self, i), e)) {
+        lm_frame_free(f);
+        return e->status;
+    }
+    return LM_OK;
+}
+
+void lm_pipe_align_free(lm_pipe_align *a)
+{
+    for (int k = 0; k < 3; k++) free(a->buf[k]), free(a->fr[k]);
+    free(a->mf3);
+    free(a->t);
+    free(a->aligned);
+    free(a->raw);
+    memset(a, 0, sizeof *a);
+    a->next_i = -1;
+}
+
+static void flow_opts(const lm_pipe *p, lm_flow_opts *fo)
+{
+    lm_flow_default_opts(fo, LM_FLOW_MEDIUM);
+    fo->nthreads = p->o.threads > 0 ? p->o.threads : omp_get_max_threads();
+}
+
+lm_status lm_pipe_mf_init(lm_pipe *p, lm_err *e)
+{
+    lm_pipe_align *a = &p->al;
+    if (p->is_auto || lm_model_frames(p->im.model) == 1) return LM_OK;
+    if (p->src.count < 2)
+        return lm_err_set(e, LM_ERR_ARG, "%s: model %s reads three frames (the current one and "
+                          "its neighbours): give a sequence of at least 2 frames",
+                          p->input[0] ? p->input : p->src.name(p->src.self, 0),
+                          p->im.model->preset);
+    size_t n = (size_t)p->src.height * p->src.width;
+    for (int k = 0; k < 3; k++) a->fr[k] = malloc(sizeof(float) * n);
+    a->mf3 = malloc(sizeof(float) * 3 * n);
+    if (!a->fr[0] || !a->fr[1] || !a->fr[2] || !a->mf3)
+        return lm_err_set(e, LM_ERR_NOMEM, "out of memory (multi-frame buffers)");
+    a->mf = 1;
+    flow_opts(p, &a->fo);
+    const lm_system *s = &p->im.sys;
+    int need = lm_flow_min_size(&a->fo);
+    if (!p->o.no_align && (p->src.height / s->tile_rows < need ||
+                           p->src.width / s->tile_cols < need))
+        lm_pipe_say(p, LM_PIPE_WARNING, "sub-images %dx%d are smaller than %dx%d: the frames "
+                    "are stacked without temporal alignment", p->src.width / s->tile_cols,
+                    p->src.height / s->tile_rows, need, need);
+    return LM_OK;
+}
+
+/* Multi-frame models: frame i's stacked input in al.mf3 (frames read as needed). */
+static lm_status mf_step(lm_pipe *p, int i, lm_err *e)
+{
+    lm_pipe_align *a = &p->al;
+    const float *fr[3] = {NULL, NULL, NULL};
+    for (int k = 0; k < 3; k++) {
+        int j = i - 1 + k;
+        if (j < 0 || j >= p->src.count) continue;
+        lm_frame f;
+        if (read_frame(p, j, &f, e)) return e->status;
+        memcpy(a->fr[k], f.data, sizeof(float) * (size_t)f.height * f.width);
+        lm_frame_free(&f);
+        fr[k] = a->fr[k];
+    }
+    lm_err ae;
+    lm_err_clear(&ae);
+    if (lm_align_stack_frames(&p->im.sys, fr[0], fr[1], fr[2], p->src.height, p->src.width,
+                              !p->o.no_align, &a->fo, NULL, a->mf3, &ae))
+        return lm_err_set(e, ae.status, "%s: %s", p->src.name(p->src.self, i), ae.msg);
+    return LM_OK;
+}
+
+lm_status lm_pipe_align_init(lm_pipe *p, lm_err *e)
+{
+    lm_pipe_align *a = &p->al;
+    const lm_system *s = &p->im.sys;
+    if (a->mf || p->o.no_align || p->src.count < 2 || p->src0.count) return LM_OK;
+    a->ty = s->tile_rows;
+    a->tx = s->tile_cols;
+    a->np = a->ty * a->tx;
+    a->ph = p->src.height / a->ty;
+    a->pw = p->src.width / a->tx;
+    flow_opts(p, &a->fo);
+    int need = lm_flow_min_size(&a->fo);
+    if (a->ph < need || a->pw < need) {
+        lm_pipe_say(p, LM_PIPE_WARNING, "sub-images %dx%d are smaller than %dx%d: frames are "
+                    "reconstructed without temporal alignment", a->pw, a->ph, need, need);
+        return LM_OK;
+    }
+    size_t n = (size_t)a->np * a->ph * a->pw;
+    a->t = malloc(sizeof(float) * a->np);
+    a->aligned = malloc(sizeof(float) * n);
+    a->raw = malloc(sizeof(float) * n);
+    for (int k = 0; k < 3; k++) a->buf[k] = malloc(sizeof(float) * n);
+    if (!a->t || !a->aligned || !a->raw || !a->buf[0] || !a->buf[1] || !a->buf[2])
+        return lm_err_set(e, LM_ERR_NOMEM, "out of memory (alignment buffers)");
+    if (lm_align_phase_times(s, a->t, &a->ref, e)) return e->status;
+    a->on = 1;
+    return LM_OK;
+}
+
+/* Read frame i and unshuffle it into dst (np planes). */
+static lm_status load_planes(lm_pipe *p, int i, float *dst, lm_err *e)
+{
+    lm_frame f;
+    if (read_frame(p, i, &f, e)) return e->status;
+    lm_status st = lm_align_unshuffle(f.data, f.height, f.width, p->al.ty, p->al.tx, dst, e);
+    lm_frame_free(&f);
+    return st;
+}
+
+/* Frame i aligned and re-mosaicked into al.raw; cur = frame i and next = frame i + 1 loaded
+ * (frame i - 1 as prev). Frames i - 1 and i are read unless the previous call was frame i - 1. */
+static lm_status align_step(lm_pipe *p, int i, lm_err *e)
+{
+    lm_pipe_align *a = &p->al;
+    if (i != a->next_i) {
+        a->cur = a->buf[i % 3];
+        if (load_planes(p, i, a->cur, e)) return e->status;
+        a->prev = i > 0 ? a->buf[(i - 1) % 3] : NULL;
+        if (i > 0 && load_planes(p, i - 1, a->prev, e)) return e->status;
+    }
+    a->next_i = -1;
+    if (i + 1 < p->src.count) {
+        a->next = a->buf[(i + 1) % 3];
+        if (load_planes(p, i + 1, a->next, e)) return e->status;
+    } else {
+        a->next = NULL;
+    }
+    lm_err ae;
+    lm_err_clear(&ae);
+    if (lm_align_frame(a->prev, a->cur, a->next, a->np, a->ph, a->pw, a->t, a->ref, &a->fo,
+                       NULL, a->aligned, &ae) ||
+        lm_align_remosaic(a->aligned, a->ph, a->pw, a->ty, a->tx, a->raw, &ae))
+        return lm_err_set(e, ae.status, "%s: %s", p->src.name(p->src.self, i), ae.msg);
+    a->prev = a->cur; /* i -> prev, i + 1 -> cur */
+    a->cur = a->next;
+    a->next_i = i + 1;
+    return LM_OK;
+}
+
+/* Frame i's input to the network: stacked, aligned, or read as is into *f. */
+static lm_status frame_input(lm_pipe *p, int i, lm_frame *f, const float **data, lm_err *e)
+{
+    memset(f, 0, sizeof *f);
+    if (p->al.mf) {
+        if (mf_step(p, i, e)) return e->status;
+        *data = p->al.mf3;
+        return LM_OK;
+    }
+    if (p->al.on) {
+        if (align_step(p, i, e)) return e->status;
+        *data = p->al.raw;
+        return LM_OK;
+    }
+    if (read_frame(p, i, f, e)) return e->status;
+    *data = f->data;
+    return LM_OK;
+}
+
+/* A calibrated choice on one frame: difficulty per window, its bin's model, the mixed fold. */
+static lm_status auto_frame(lm_pipe *p, const float *in, int H, int W, lm_tile_opts *to,
+                            lm_cube *cube, lm_err *e)
+{
+    const lm_auto_calib *a = &p->cal;
+    to->win_h = a->win_h, to->win_w = a->win_w, to->stride_y = a->stride_y,
+    to->stride_x = a->stride_x;
+    const lm_mosaic *mo = &p->im.model->mosaic;
+    if (lm_tile_check(to, H, W, mo->ty, mo->tx, e)) return e->status;
+    int n = lm_auto_window_count(H, W, to);
+    double *d = malloc(sizeof(double) * n);
+    int *wm = malloc(sizeof(int) * n);
+    lm_status st = d && wm ? LM_OK : lm_err_set(e, LM_ERR_NOMEM, "out of memory");
+    if (!st) st = lm_auto_frame_difficulty(a->measure, in, H, W, mo->ty, mo->tx, to,
+                                           lm_nthreads(&p->ctx), d, e);
+    for (int i = 0; i < n && !st; i++) wm[i] = p->choice[lm_auto_bin(a, d[i])];
+    long win[LM_AUTO_MAX_MODELS] = {0};
+    if (!st) st = lm_auto_infer(&p->ctx, p->models, a->nmodels, wm, in, H, W, to, cube, win, e);
+    if (!st) {
+        char line[1200];
+        int k = snprintf(line, sizeof line, "auto:");
+        for (int m = 0; m < a->nmodels; m++) {
+            if (k >= 0 && (size_t)k < sizeof line)
+                k += snprintf(line + k, sizeof line - k, " %s %.0f%%", a->models[m].preset,
+                              100.0 * win[m] / n);
+            p->windows[m] += win[m];
+        }
+        lm_pipe_say(p, LM_PIPE_INFO, "%s of %d windows", line, n);
+    }
+    free(d);
+    free(wm);
+    return st;
+}
+
+/* Two-bucket models: frame i's bucket 0 after bucket 1 (in) in p->in2; *in points at it.
+ * bits, is_float: bucket 1's frame (bits 0: not known). */
+static lm_status with_bucket0(lm_pipe *p, int i, const float **in, int H, int W, int bits,
+                              int is_float, lm_err *e)
+{
+    if (!p->src0.count) return LM_OK;
+    lm_frame f0;
+    if (p->src0.read(p->src0.self, i, &f0, e)) return e->status;
+    lm_status st = LM_OK;
+    const char *n0 = p->src0.name(p->src0.self, i), *n1 = p->src.name(p->src.self, i);
+    if (f0.height != H || f0.width != W)
+        st = lm_err_set(e, LM_ERR_SHAPE, "%s: bucket 0 is %d x %d, bucket 1 (%s) %d x %d", n0,
+                        f0.width, f0.height, n1, W, H);
+    else if (bits && (f0.bits != bits || f0.is_float != is_float))
+        st = lm_err_set(e, LM_ERR_FORMAT, "%s: bucket 0 is %d-bit%s, bucket 1 (%s) %d-bit%s: the "
+                        "two buckets of a frame come from one read-out, in one format", n0,
+                        f0.bits, f0.is_float ? " float" : "", n1, bits,
+                        is_float ? " float" : "");
+    if (!st) {
+        const size_t n = (size_t)H * W;
+        memcpy(p->in2, *in, sizeof(float) * n);
+        memcpy(p->in2 + n, f0.data, sizeof(float) * n);
+        *in = p->in2;
+    }
+    lm_frame_free(&f0);
+    return st;
+}
+
+lm_status lm_pipe_reconstruct(lm_pipe *p, const float *in, int H, int W, lm_cube *cube,
+                              lm_err *e)
+{
+    if (p->is_auto) {
+        lm_tile_opts to;
+        lm_tile_default_opts(&to);
+        to.batch = p->o.batch;
+        return auto_frame(p, in, H, W, &to, cube, e);
+    }
+    lm_recon_opts ro = {.batch = p->o.batch, .tiles = p->o.tiles};
+    return lm_recon_camera_frame(&p->ctx, &p->im, in, H, W, &ro, cube, e);
+}
+
+lm_status lm_pipe_frame(lm_pipe *p, int i, lm_cube *cube, lm_pipe_info *info, lm_err *e)
+{
+    memset(cube, 0, sizeof *cube);
+    if (i < 0 || i >= p->src.count)
+        return lm_err_set(e, LM_ERR_ARG, "frame %d of %d", i, p->src.count);
+    double t0 = omp_get_wtime();
+    lm_frame f;
+    const float *in = NULL;
+    lm_status st = frame_input(p, i, &f, &in, e);
+    double ta = omp_get_wtime();
+    const int H = f.height ? f.height : p->src.height, W = f.width ? f.width : p->src.width;
+    if (!st) st = with_bucket0(p, i, &in, H, W, f.height ? f.bits : 0, f.is_float, e);
+    if (!st && lm_pipe_reconstruct(p, in, H, W, cube, e))
+        st = lm_pipe_restate(e, p->src.name(p->src.self, i));
+    lm_frame_free(&f);
+    if (info)
+        *info = (lm_pipe_info){.align_s = ta - t0, .recon_s = omp_get_wtime() - ta,
+                               .aligned = p->al.on || (p->al.mf && !p->o.no_align),
+                               .saturated = p->sat[i]};
+    return st;
+}
+
+lm_status lm_pipe_saturation_mask(lm_pipe *p, int i, lm_frame *mask, lm_err *e)
+{
+    if (p->src.read(p->src.self, i, mask, e)) return e->status;
+    const size_t n = (size_t)mask->height * mask->width;
+    uint8_t *m = malloc(n);
+    if (!m) {
+        lm_frame_free(mask);
+        return lm_err_set(e, LM_ERR_NOMEM, "out of memory (saturation mask)");
+    }
+    lm_raw_saturated(&p->o.raw, mask, m);
+    for (size_t k = 0; k < n; k++) mask->data[k] = m[k];
+    free(m);
+    return LM_OK;
+}
