@@ -381,6 +381,14 @@ static lm_status plan_sample(const lm_dataset *d, lm_data_split split, long i, s
     }
     in->flip_h = train && c->flips ? fh : 0;
     in->flip_v = train && c->flips ? fv : 0;
+    /* spectral augmentation from a stream of its own (the draws above keep their values) */
+    lm_rng ra = lm_rng_split(&r, 3);
+    const float tilt = lm_rng_uniform_range(&ra, -1.0f, 1.0f);
+    in->illum_tilt = train ? tilt * c->illum_jitter : 0.0f;
+    for (int l = 0; l < c->sys->nleds && l < LM_SYSTEM_MAX_LEDS; l++) {
+        const float g = 1.0f + c->gain_jitter * lm_rng_normal(&ra);
+        in->led_gain[l] = train && c->gain_jitter > 0.0f ? (g > 0.1f ? g : 0.1f) : 1.0f;
+    }
     return LM_OK;
 }
 
@@ -440,6 +448,47 @@ static double sample_photons(const lm_dataset_cfg *c, lm_data_split split, const
     return exp(log(c->photons_min) + u * (log(c->photons) - log(c->photons_min)));
 }
 
+/* The illumination tilt of a sample on its 31-band cube (400..700 nm), in place. */
+static void apply_tilt(lm_cube *c31, float t)
+{
+    if (t == 0.0f) return;
+    double f[LM_GRID31_COUNT], mx = 0.0;
+    for (int b = 0; b < LM_GRID31_COUNT; b++) {
+        f[b] = exp(t * (LM_GRID31_START + 10.0 * b - 550.0) / 150.0);
+        if (f[b] > mx) mx = f[b];
+    }
+    const size_t np = (size_t)c31->height * c31->width;
+    for (int b = 0; b < LM_GRID31_COUNT; b++) {
+        float *p = lm_cube_band(c31, b);
+        const float s = (float)(f[b] / mx);
+        for (size_t i = 0; i < np; i++) p[i] *= s;
+    }
+}
+
+/* The noise-free buckets of a sample: the system's, or with the sample's LED gain factors a
+ * copy of it whose responses are scaled (the tile map and everything else shared). */
+static lm_status clean_frame(const lm_system *sys, const lm_dataset_sample_info *in,
+                             const lm_cube *c41, float *b1, float *b0, lm_err *err)
+{
+    int jitter = 0;
+    for (int l = 0; l < sys->nleds; l++) jitter |= in->led_gain[l] != 1.0f;
+    if (!jitter) return lm_forward_clean(sys, c41, 0, 0, b1, b0, 1, err);
+    lm_system js = *sys;
+    lm_led leds[LM_SYSTEM_MAX_LEDS];
+    float *resp = malloc(sizeof(float) * (size_t)sys->nleds * sys->nbins);
+    if (!resp) return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory");
+    for (int l = 0; l < sys->nleds; l++) {
+        leds[l] = sys->leds[l];
+        leds[l].response = resp + (size_t)l * sys->nbins;
+        for (int b = 0; b < sys->nbins; b++)
+            leds[l].response[b] = sys->leds[l].response[b] * in->led_gain[l];
+    }
+    js.leds = leds;
+    lm_status st = lm_forward_clean(&js, c41, 0, 0, b1, b0, 1, err);
+    free(resp);
+    return st;
+}
+
 /* Sample i of a split; noisy 0: the clean frame (no noise, clipping or quantisation). */
 static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, int noisy, float *raw,
                              float *target, lm_err *err)
@@ -448,10 +497,11 @@ static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, int noi
     lm_status st = plan_sample(d, split, i, &p, err);
     lm_cube c31 = {0}, c41 = {0}, t33 = {0};
     if (st == LM_OK) st = sample_cube(d, &p, split, &c31, err);
+    if (st == LM_OK) apply_tilt(&c31, p.info.illum_tilt);
     if (st == LM_OK) st = lm_cube_mirror41(&c31, &c41, err);
     const int ph = d->cfg.patch_h, pw = d->cfg.patch_w, two = d->cfg.buckets == 2;
     float *b0 = two ? raw + (size_t)ph * pw : NULL; /* raw bucket 0 until scaled below */
-    if (st == LM_OK) st = lm_forward_clean(d->cfg.sys, &c41, 0, 0, raw, b0, 1, err);
+    if (st == LM_OK) st = clean_frame(d->cfg.sys, &p.info, &c41, raw, b0, err);
     if (st == LM_OK && noisy && (p.info.noise_k > 0.0f || d->cfg.sensor_clip ||
                                  d->cfg.sensor_bits || d->cfg.photons > 0 ||
                                  d->cfg.read_noise > 0.0f)) {
@@ -605,7 +655,7 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
     else if (c->noise_min == c->noise_max)
         snprintf(noise, sizeof noise, "noise k = %g", c->noise_min);
     else snprintf(noise, sizeof noise, "noise k ~ U[%g, %g]", c->noise_min, c->noise_max);
-    char shot[128] = ""; /* shot and read noise, drawn before k */
+    char shot[256] = ""; /* shot and read noise, drawn before k; augmentation */
     if (c->photons > 0 && c->photons_min > 0)
         snprintf(shot, sizeof shot, "; shot noise %g..%g e- at full scale (log-uniform; "
                  "validation %g)", c->photons_min, c->photons, c->photons);
@@ -614,6 +664,12 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
     if (c->read_noise > 0)
         snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; read noise %g %s",
                  (double)c->read_noise, c->photons > 0 ? "e-" : "of full scale");
+    if (c->illum_jitter > 0)
+        snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; illumination tilt t ~ "
+                 "U[-%g, %g]", (double)c->illum_jitter, (double)c->illum_jitter);
+    if (c->gain_jitter > 0)
+        snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; LED gain error sd %g",
+                 (double)c->gain_jitter);
     fprintf(f, "dataset: %d scenes in %d groups; patch %d x %d; narrowband synthetic %.0f%%, "
             "procedural %.0f%%; %s%s; flips %s; seed %llu; %d "
             "workers; cache %d scenes%s\n", d->nscenes, d->ngroups, c->patch_h, c->patch_w,
@@ -676,6 +732,11 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
     if (!(c->photons >= 0 && c->photons <= 1e12) || !(c->read_noise >= 0 && c->read_noise <= 1e6))
         return lm_err_set(err, LM_ERR_ARG, "dataset: photons %g (0..1e12) or read noise %g "
                           "(0..1e6) out of range", c->photons, (double)c->read_noise);
+    if (!(c->illum_jitter >= 0.0f && c->illum_jitter <= 2.0f) ||
+        !(c->gain_jitter >= 0.0f && c->gain_jitter <= 0.5f))
+        return lm_err_set(err, LM_ERR_ARG, "dataset: illumination jitter %g (0..2) or LED gain "
+                          "jitter %g (0..0.5) out of range", (double)c->illum_jitter,
+                          (double)c->gain_jitter);
     if (c->buckets < 0 || c->buckets > 2)
         return lm_err_set(err, LM_ERR_ARG, "dataset: buckets %d (1: bucket 1 only, 2: both)",
                           c->buckets);

@@ -70,6 +70,13 @@ typedef struct lm_dataset_cfg {
                                  * independently: Gaussian k x that bucket's own clean maximum
                                  * (the same k), clipping / quantisation on its own full scale
                                  * (lm_forward_bucket0_noise) */
+    float illum_jitter;         /* > 0: each training sample's spectra multiplied by a smooth
+                                 * tilt exp(t (lambda - 550 nm) / 150 nm), t ~ U[-this, this],
+                                 * scaled so its largest band factor is 1 (an illuminant of
+                                 * another colour temperature; target and frame alike); 0 = off */
+    float gain_jitter;          /* > 0: each training sample's frame simulated with every LED's
+                                 * gain times max(0.1, 1 + this x N(0, 1)) (a calibration error:
+                                 * the target stays the scene's); 0 = off */
     const char *mat_key;        /* .mat cube variable (NULL or "": automatic, cube_io.h);
                                  * copied by lm_dataset_open */
 } lm_dataset_cfg;
@@ -179,6 +186,8 @@ typedef struct lm_dataset_sample_info {
     int y0, x0;           /* patch top-left in the scene (multiples of the tile), else 0 */
     int flip_h, flip_v;   /* columns / rows reversed (applied to the cube before simulation) */
     float noise_k;        /* Gaussian noise level k */
+    float illum_tilt;     /* t of the illumination tilt (0: none) */
+    float led_gain[LM_SYSTEM_MAX_LEDS]; /* each LED's gain factor (1: none) */
 } lm_dataset_sample_info;
 lm_status lm_dataset_sample_info_get(const lm_dataset *d, lm_data_split split, long i,
                                      lm_dataset_sample_info *info, lm_err *err);

@@ -9,7 +9,8 @@
 #     OUT      folder of the runs (default runs/recipes); a finished variant is not re-run
 #     PRESET   the network (default tn-96-nc)
 #     BASE     the floor it is a residual on (default models/zoo/lmmse)
-# Environment: LUMOSAIC (default build/lumosaic), DATA (default ../shared/data).
+# Environment: LUMOSAIC (default build/lumosaic), DATA (default ../shared/data), VARIANTS
+# (indices into the list below to run, e.g. "0 8 9"; default all).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 minutes=${1:-5}
@@ -31,16 +32,18 @@ variants=(
   "patch 132 x 128, batch 2 x 2|--patch 132x128 --batch 2"
   "synthetic 10 % + 10 %|--synth-fraction 0.1 --procedural-fraction 0.1"
   "no synthetic|--synth-fraction 0 --procedural-fraction 0"
+  "illumination tilt +-0.3|--illum-jitter 0.3"
+  "LED gain error 3 %|--gain-jitter 0.03"
 )
 
 noise=0,10,20
 printf '| recipe | updates | val 0 %% | val 10 %% | val 20 %% |\n|---|---:|---:|---:|---:|\n'
-i=0
-for v in "${variants[@]}"; do
+pick=${VARIANTS:-$(seq -s " " 0 $((${#variants[@]} - 1)))}
+for i in $pick; do
+  v=${variants[$i]}
   name=${v%%|*}
   opts=${v#*|}
   run="$out/v$i"
-  i=$((i + 1))
   if [ ! -f "$run/eval/eval.json" ]; then
     rm -rf "$run"
     # shellcheck disable=SC2086

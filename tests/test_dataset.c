@@ -1099,6 +1099,82 @@ static void test_photon_range(void)
     CHECK(lm_dataset_open(&c2, &e) == NULL && e.status == LM_ERR_ARG);
 }
 
+/* Spectral augmentation: with illum_jitter each training sample's target is the plain
+ * sample's times the tilt exp(t (lambda - 550) / 150) / its maximum, band by band (t from the
+ * sample's info, within [-A, A]); with gain_jitter the target is the plain one and each
+ * bucket-1 pixel is the plain one times its LED's gain factor (factors spread with sd ~ S);
+ * validation samples are unchanged; out-of-range settings are refused. */
+static void test_spectral_augmentation(void)
+{
+    const char *pa[1] = {g_pospath};
+    lm_dataset_cfg c0 = base_cfg(pa, 1), ci = c0, cg = c0;
+    ci.illum_jitter = 0.5f;
+    cg.gain_jitter = 0.1f;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *a = lm_dataset_open(&c0, &e), *di = lm_dataset_open(&ci, &e),
+               *dg = lm_dataset_open(&cg, &e);
+    CHECK_MSG(a && di && dg, "%s", e.msg);
+    enum { NB = 8 };
+    const size_t np = (size_t)PH * PW;
+    static float r0[NB * PH * PW], ri[NB * PH * PW], rg[NB * PH * PW];
+    static float t0[NB * 33 * PH * PW], ti[NB * 33 * PH * PW], tg[NB * 33 * PH * PW];
+    if (a && di && dg) {
+        CHECK(lm_dataset_batch(a, 0, NB, r0, t0, &e) == LM_OK);
+        CHECK(lm_dataset_batch(di, 0, NB, ri, ti, &e) == LM_OK);
+        CHECK(lm_dataset_batch(dg, 0, NB, rg, tg, &e) == LM_OK);
+        double worst_t = 0, worst_g = 0, tmax = 0, gsum = 0, gsq = 0;
+        int ng = 0;
+        for (int s = 0; s < NB; s++) {
+            lm_dataset_sample_info in, ig;
+            CHECK(lm_dataset_sample_info_get(di, LM_SPLIT_TRAIN, s, &in, &e) == LM_OK);
+            CHECK(lm_dataset_sample_info_get(dg, LM_SPLIT_TRAIN, s, &ig, &e) == LM_OK);
+            const double t = in.illum_tilt;
+            CHECK_MSG(fabs(t) <= 0.5, "tilt %g outside [-0.5, 0.5]", t);
+            tmax = fmax(tmax, fabs(t));
+            double f[31], fm = 0;
+            for (int b = 0; b < 31; b++) f[b] = exp(t * (400.0 + 10 * b - 550.0) / 150.0);
+            for (int b = 0; b < 31; b++) fm = fmax(fm, f[b]);
+            for (int b = 0; b < 31; b++)
+                for (size_t i = 0; i < np; i += 5) {
+                    const size_t k = ((size_t)s * 33 + b + 1) * np + i;
+                    worst_t = fmax(worst_t, fabs(ti[k] - t0[k] * f[b] / fm));
+                }
+            for (size_t k = (size_t)s * 33 * np; k < (size_t)(s + 1) * 33 * np; k++)
+                CHECK(tg[k] == t0[k]);
+            for (int l = 0; l < g_sys.nleds; l++) {
+                gsum += ig.led_gain[l], gsq += (double)ig.led_gain[l] * ig.led_gain[l];
+                ng++;
+            }
+            for (int y = 0; y < PH; y++)
+                for (int x = 0; x < PW; x++) {
+                    const size_t k = (size_t)s * np + (size_t)y * PW + x;
+                    const double want = r0[k] * ig.led_gain[lm_system_pixel_led(&g_sys, y, x)];
+                    worst_g = fmax(worst_g, fabs(rg[k] - want));
+                }
+        }
+        const double gm = gsum / ng, gsd = sqrt(fmax(gsq / ng - gm * gm, 0));
+        printf("     tilt |t| up to %.3f; target error %.2g; gain factors mean %.3f sd %.3f; "
+               "frame error %.2g\n", tmax, worst_t, gm, gsd, worst_g);
+        CHECK_MSG(tmax > 0.1, "tilts too small (%g): not drawn?", tmax);
+        CHECK_MSG(worst_t < 1e-5, "tilted target off by %g", worst_t);
+        CHECK_MSG(worst_g < 1e-5, "gain-jittered frame off by %g", worst_g);
+        CHECK_MSG(fabs(gm - 1) < 0.05 && gsd > 0.06 && gsd < 0.14, "gains mean %g sd %g", gm,
+                  gsd);
+        /* validation samples: no augmentation */
+        CHECK(lm_dataset_eval_sample(a, LM_SPLIT_VAL, 0, r0, t0, &e) == LM_OK);
+        CHECK(lm_dataset_eval_sample(di, LM_SPLIT_VAL, 0, ri, ti, &e) == LM_OK);
+        CHECK(lm_dataset_eval_sample(dg, LM_SPLIT_VAL, 0, rg, tg, &e) == LM_OK);
+        CHECK(memcmp(r0, ri, sizeof(float) * np) == 0 && memcmp(r0, rg, sizeof(float) * np) == 0);
+        CHECK(memcmp(t0, ti, sizeof(float) * 33 * np) == 0);
+    }
+    lm_dataset_close(a), lm_dataset_close(di), lm_dataset_close(dg);
+    ci.illum_jitter = 3.0f;
+    CHECK(lm_dataset_open(&ci, &e) == NULL && e.status == LM_ERR_ARG);
+    cg.gain_jitter = -0.1f;
+    CHECK(lm_dataset_open(&cg, &e) == NULL && e.status == LM_ERR_ARG);
+}
+
 static void test_scene_normalised(void)
 {
     char dark[1200];
@@ -1158,6 +1234,7 @@ int main(void)
     RUN(test_shot_and_read_noise);
     RUN(test_shot_noise_two_buckets);
     RUN(test_photon_range);
+    RUN(test_spectral_augmentation);
     RUN(test_bad_input);
     rm_tree(tmpdir);
     lm_system_free(&g_sys);

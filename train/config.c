@@ -105,6 +105,12 @@ static const field fields[] = {
         "(0 = every sample at photons; validation samples: photons)", 0, 1e12),
     FLD("read_noise", F_FLOAT, read_noise, "E", "read noise: electrons with photons, else a "
         "fraction of full scale (0 = off), as simulate --read-noise", 0, 1e6),
+    FLD("illum_jitter", F_FLOAT, illum_jitter, "A", "augmentation: each training sample's "
+        "spectra tilted by exp(t (wavelength - 550 nm) / 150 nm), t ~ U[-A, A] (an illuminant of "
+        "another colour; target and frame alike; 0 = off)", 0, 2),
+    FLD("gain_jitter", F_FLOAT, gain_jitter, "S", "augmentation: each training sample's frame "
+        "simulated with every LED's gain off by a factor 1 + S x N(0, 1) (a calibration error; "
+        "the target is the scene's; 0 = off)", 0, 0.5),
     FLD("sensor_bits", F_INT, sensor_bits, "N", "quantise samples to N bits (0 = off; 16 = PNG)",
         0, 24),
     FLD("buckets", F_INT, buckets, "1|2", "coded-frame buckets the model reads: 1 (bucket 1, the "
@@ -646,6 +652,8 @@ static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
     if (root) json_object_set_new(root, "photons", json_real(c->photons));
     if (root) json_object_set_new(root, "photons_min", json_real(c->photons_min));
     if (root) json_object_set_new(root, "read_noise", json_real(c->read_noise));
+    if (root) json_object_set_new(root, "illum_jitter", json_real(c->illum_jitter));
+    if (root) json_object_set_new(root, "gain_jitter", json_real(c->gain_jitter));
     if (root) json_object_set_new(root, "ema", json_real(c->ema));
     if (root) json_object_set_new(root, "precision", json_string(c->precision));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);

@@ -92,6 +92,9 @@ typedef struct lm_train_cfg {
                                      * [photons_min, photons] (0 = all at photons) */
     float read_noise;               /* read noise: electrons with photons, else a fraction of
                                      * full scale (0 = off) */
+    float illum_jitter;             /* training samples' illumination tilt range (data/dataset.h;
+                                     * 0 = off) */
+    float gain_jitter;              /* training samples' LED gain error sd (0 = off) */
     char snapshots[128];            /* "5,15,30": weights at these minutes of training time into
                                      * <output>/snapshots/<M>min/ ("" = none) */
     /* what "training time" (minutes, snapshots, the checkpoint's seconds) counts: "wall"

@@ -4,7 +4,8 @@
 # simulate a translating 3-frame video, infer every frame (the ends included; aligned and
 # --no-align give different cubes), eval with motion rows at two noise levels, info lists the
 # presets. Bad input, one line on stderr and exit 2, nothing written: a single frame for a
-# multi-frame model, a model without a multi-frame form, frames 3 with both buckets.
+# multi-frame model, a model without a multi-frame form, frames 3 with both buckets, spectral
+# augmentation of multi-frame samples or of a closed-form fit, a tilt out of range.
 # usage: multiframe.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 
@@ -42,4 +43,10 @@ expect_error "no multi-frame form" 2 "no multi-frame form" "$T/e2" -- \
   "$LM" train --model lmmse --frames 3 --data "$CAVE" --output "$T/e2"
 expect_error "frames 3 with both buckets" 2 "no two-bucket form" "$T/e3" -- \
   "$LM" train --model rt-8-mf3 --buckets 2 $TR --output "$T/e3"
+expect_error "augmentation of multi-frame samples" 2 "without augmentation" "$T/e4" -- \
+  "$LM" train --model rt-8-mf3 --illum-jitter 0.3 $TR --output "$T/e4"
+expect_error "augmentation for a closed-form fit" 2 "reads the scenes as they are" "$T/e5" -- \
+  "$LM" train --model lmmse --gain-jitter 0.05 --data "$CAVE" --output "$T/e5"
+expect_error "illumination tilt out of range" 2 "illum-jitter" "$T/e6" -- \
+  "$LM" train --model rt-8 --illum-jitter 5 --data "$CAVE" --output "$T/e6"
 finish
