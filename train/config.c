@@ -90,6 +90,10 @@ static const field fields[] = {
     FLD("fit_patches", F_LONG, fit_patches, "N", "closed form: training patches (4096)", 1, 1e6),
     FLD("fit_synth", F_FLOAT, fit_synth, "F", "closed form: synthetic share of the statistics, "
         "0..1 (-1: chosen on the validation split)", -1, 1),
+    FLD("fit_b0_noise", F_FLOAT, fit_b0_noise, "R", "closed form, two buckets: bucket 0's "
+        "noise sd as a fraction of bucket 1's in the fit (0 = the same, the relative-Gaussian "
+        "convention; about 0.3 for shot noise, where bucket 0 collects eleven LEDs' light)", 0,
+        10),
     FLD("base", F_STR, base, "RUN", "train as a residual on this run's model (e.g. an lmmse "
         "fit)", 0, 0),
     FLD("base_trainable", F_INT, base_trainable, "0|1", "fine-tune the base with the net (0)", 0,
@@ -652,6 +656,7 @@ static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
     if (root) json_object_set_new(root, "photons", json_real(c->photons));
     if (root) json_object_set_new(root, "photons_min", json_real(c->photons_min));
     if (root) json_object_set_new(root, "read_noise", json_real(c->read_noise));
+    if (root) json_object_set_new(root, "fit_b0_noise", json_real(c->fit_b0_noise));
     if (root) json_object_set_new(root, "illum_jitter", json_real(c->illum_jitter));
     if (root) json_object_set_new(root, "gain_jitter", json_real(c->gain_jitter));
     if (root) json_object_set_new(root, "ema", json_real(c->ema));

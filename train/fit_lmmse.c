@@ -52,6 +52,7 @@ typedef struct stats {     /* one phase */
 typedef struct fitter {
     int K, D, F1, P, ty, tx, ph, pw;
     int C;                  /* input planes: 1, or 2 (both buckets) */
+    double b0_ratio;        /* bucket 0's noise sd over bucket 1's in the analytic term */
     stats *tr, *ts, *va;    /* training (real scenes), training (synthetic), validation */
     stats mix;              /* scratch: a mixture of tr and ts for one phase */
     lm_dataset *d;          /* the training patches' kinds */
@@ -237,26 +238,34 @@ static lm_status accumulate_train(fitter *f, long first, const float *raw, const
 /* Solve (A + add D) W = B by Cholesky, D = identity except its last diagonal entry (the bias
  * row is not regularised). A: n x n, upper triangle read (row-major); B, W: n x m; L: n x n
  * scratch. Returns 0 when the matrix is not positive definite. */
-static int ridge_solve(const double *A, const double *B, int n, int m, double add, double *W,
-                       double *L)
+/* (A + diag) W = B, diag: `add` on the window entries below `split`, add0 on those from
+ * split to n - 2 (bucket 0's window), nothing on the bias (the last). */
+static int ridge_solve(const double *A, const double *B, int n, int m, double add, double add0,
+                       int split, double *W, double *L)
 {
     for (int a = 0; a < n; a++)
-        for (int b = a; b < n; b++) L[b * n + a] = A[a * n + b] + (a == b && a < n - 1 ? add : 0);
+        for (int b = a; b < n; b++)
+            L[b * n + a] = A[a * n + b] + (a == b && a < n - 1 ? a < split ? add : add0 : 0);
     if (lm_cholesky(L, n)) return 0;
     memcpy(W, B, sizeof(double) * n * m);
     lm_cholesky_solve(L, n, W, m);
     return 1;
 }
 
-static int solve(const fitter *f, const stats *s, double add, double *W, double *L)
+/* The normal equations of one phase at noise sd s (bucket 0's window: b0_ratio x s) with
+ * ridge term r (already scaled by the rows). */
+static int solve(const fitter *f, const stats *t, double s, double r, double *W, double *L)
 {
-    return ridge_solve(s->A, s->B, f->F1, O, add, W, L);
+    const double n = (double)t->n, s0 = f->b0_ratio * s;
+    const int split = f->C == 2 && f->D == 0 ? f->K * f->K : f->F1;
+    return ridge_solve(t->A, t->B, f->F1, O, s * s * n + r, s0 * s0 * n + r, split, W, L);
 }
 
 /* Squared error of W on the validation statistics at noise sd s, channels 1..31. */
 static double val_sse(const fitter *f, const stats *v, const double *W, double s)
 {
-    const int n = f->F1;
+    const int n = f->F1, split = f->C == 2 && f->D == 0 ? f->K * f->K : n;
+    const double r2 = f->b0_ratio * f->b0_ratio;
     double e = 0;
     for (int c = 1; c <= 31; c++) {
         double wb = 0, waw = 0, ww = 0;
@@ -268,7 +277,7 @@ static double val_sse(const fitter *f, const stats *v, const double *W, double s
                 row += aab * W[b * O + c];
             }
             waw += wa * row;
-            if (a < n - 1) ww += wa * wa;
+            if (a < n - 1) ww += (a < split ? 1.0 : r2) * wa * wa;
         }
         e += v->yy[c] - 2 * wb + waw + s * s * (double)v->n * ww;
     }
@@ -306,8 +315,8 @@ static double level_sse(fitter *f, double s, double lam, double w, double *W, do
     double sse = 0;
     for (int p = 0; p < f->P && isfinite(sse); p++) {
         const stats *t = mixture(f, p, w);
-        double add = (s * s + lam * window_scale(f, t)) * (double)t->n;
-        sse = solve(f, t, add, W, L) ? sse + val_sse(f, &f->va[p], W, s) : INFINITY;
+        const double r = lam * window_scale(f, t) * (double)t->n;
+        sse = solve(f, t, s, r, W, L) ? sse + val_sse(f, &f->va[p], W, s) : INFINITY;
     }
     return sse;
 }
@@ -354,8 +363,8 @@ static lm_status fit_levels(fitter *f, lm_model *m, int have_val, int level, dou
                                               : NAN;
         for (int p = 0; p < f->P && !st; p++) {
             const stats *t = mixture(f, p, w);
-            double add = (s * s + lam * window_scale(f, t)) * (double)t->n;
-            if (!solve(f, t, add, W, L))
+            const double r = lam * window_scale(f, t) * (double)t->n;
+            if (!solve(f, t, s, r, W, L))
                 st = lm_err_set(err, LM_ERR_NUMERIC, "lmmse fit: phase %d, noise %g: normal "
                                 "equations not positive definite (too few samples?)", p, s);
             else st = lm_lmmse_set_filter(m, l, p, W, err);
@@ -533,6 +542,12 @@ lm_status lm_lmmse_fit_ctl_run(lm_model *m, lm_dataset *d, int ph, int pw, long 
     f.d = d;
     f.synth = synth;
     f.ctl = ctl ? ctl : &none;
+    f.b0_ratio = f.ctl->b0_noise_ratio > 0 ? f.ctl->b0_noise_ratio : 1.0;
+    if (!st && f.b0_ratio != 1.0 && (f.C != 2 || f.D > 0 || f.clip || f.bits))
+        st = lm_err_set(err, LM_ERR_ARG, "lmmse fit: a bucket-0 noise ratio is for the "
+                        "analytic noise of a two-bucket floor without features or sensor "
+                        "model (lmmse-b2, lmmse-K-b2), not %s%s", m->preset,
+                        f.clip || f.bits ? " with clipping or quantisation" : "");
     f.rep = rep;
     f.t0 = now(), f.c0 = budget_clock(&f);
     f.pass = f.passes = 1;

@@ -41,6 +41,11 @@ typedef struct lm_lmmse_fit_ctl {
     double budget_s;             /* > 0: stop reading training patches once this many
                                   * seconds have passed, and solve from those read */
     int cpu_clock;               /* the budget counts the process's CPU time, not the wall */
+    double b0_noise_ratio;       /* > 0: two buckets, the analytic noise of bucket 0's window
+                                  * is this times bucket 1's sd (shot noise: about
+                                  * 1 / sqrt(LEDs - 1), bucket 0 collecting the other LEDs'
+                                  * light); 0 = the same sd on both (the relative-Gaussian
+                                  * convention's conservative filter) */
 } lm_lmmse_fit_ctl;
 
 typedef struct lm_dataset lm_dataset;

@@ -188,7 +188,8 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
     char made[LM_TRAIN_PATH_LEN] = ""; /* the run folder is made once the fit has worked */
     lm_lmmse_fit_ctl ctl = {.progress = opts->progress ? out : NULL, .name = cfg->model,
                             .interrupt = opts->interrupt, .budget_s = cfg->minutes * 60.0,
-                            .cpu_clock = !strcmp(cfg->clock, "cpu")};
+                            .cpu_clock = !strcmp(cfg->clock, "cpu"),
+                            .b0_noise_ratio = cfg->fit_b0_noise};
     lm_status st = lm_lmmse_fit_ctl_run(m, d, cfg->patch_h, cfg->patch_w, cfg->fit_patches,
                                         cfg->batch, cfg->fit_synth, &sensor, &ctl, &r, err);
     if (!st) st = lm_train_make_dir_top(cfg->output, made, sizeof made, err);

@@ -92,6 +92,8 @@ typedef struct lm_train_cfg {
                                      * [photons_min, photons] (0 = all at photons) */
     float read_noise;               /* read noise: electrons with photons, else a fraction of
                                      * full scale (0 = off) */
+    float fit_b0_noise;             /* closed form, two buckets: bucket 0's noise sd over bucket
+                                     * 1's in the fit (0 = the same) */
     float illum_jitter;             /* training samples' illumination tilt range (data/dataset.h;
                                      * 0 = off) */
     float gain_jitter;              /* training samples' LED gain error sd (0 = off) */
