@@ -38,6 +38,17 @@
  * form as lmmse-rf is (noise sampled at six levels). The features are computed on the host
  * (no device path) and hold no parameters. (The share against a 3 x 3 mean of g instead: 1.0 dB
  * lower validation PSNR clean, the same from noise sd 0.02 up; docs/results.md.)
+ * Guided interpolation ("lmmse-gri-b2": K 11, N 15; "lmmse-K-riN-b2", odd N 3..31): lmmse-b2
+ * plus D = P + 1 fixed features: for each LED l, its plane estimated at every pixel by a guided
+ * filter on g. Every N x N window (radius R = N / 2) regresses LED l's samples s (bucket 1 at
+ * its phase) on their g, a = cov(s, g) / (var(g) + 1e-4), b = mean s - a mean g; each pixel
+ * averages the (a, b) of the windows covering it (as the guided filter does: smooth across
+ * window edges) and gives a g(p) + b; the last feature is g(p). Box sums in double (running
+ * sums), O(P H W) whatever N; frame borders padded by 2R with phases reflected by whole tiles,
+ * so strips need 2R rows of context (conv_rows). The regularisation is a fixed constant in
+ * white^2 units: the features do not depend on the noise level (the per-level readout adapts
+ * to it). Read out per phase and level (the spectral map from the P interpolated LED values
+ * and g), fitted in closed form as the guide is; host features, CPU only.
  * What it is not: the fit (train/fit_lmmse.c) or the noise estimator. */
 #include "models/model.h"
 #include "models/lmmse_direct.h"

@@ -32,7 +32,7 @@ static lm_status build_lmmse_guide(lm_model *m, const preset *ps, lm_err *err)
 }
 static lm_status build_lmmse_gri(lm_model *m, const preset *ps, lm_err *err)
 {
-    return lm_lmmse_gri_build(m, 11, ps->width, err);
+    return lm_lmmse_gri_build(m, 11, ps->width, err); /* 15: ~19 samples of each LED */
 }
 static lm_status build_han(lm_model *m, const preset *ps, lm_err *err)
 {
@@ -98,7 +98,7 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     /* lmmse-b2 plus the panchromatic guide's ratio features (host features: no OpenCL) */
     {"lmmse-guide-b2", build_lmmse_guide, FIT | B2, {0, 0, 0, 0, 0}, 7},
     /* lmmse-b2 plus each LED's plane interpolated by a guided filter on g (host features) */
-    {"lmmse-gri-b2", build_lmmse_gri, FIT | B2, {0, 0, 0, 0, 0}, 11},
+    {"lmmse-gri-b2", build_lmmse_gri, FIT | B2, {0, 0, 0, 0, 0}, 15},
     {"rt-8-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 8},
     {"rt-16-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 16},
     /* multi-frame: the current frame and its two neighbours aligned to it (3 input planes) */
@@ -171,7 +171,7 @@ static const struct { const char *name, *purpose; } purposes[] = {
     {"lmmse-b2", "closed-form floor reading both buckets (bucket 1 and bucket 0)"},
     {"lmmse-guide-b2", "lmmse-b2 plus each LED's share of the panchromatic image (closed form)"},
     {"lmmse-gri-b2", "lmmse-b2 plus each LED's plane guided-filtered on the panchromatic image, "
-                     "11 x 11 (closed form)"},
+                     "15 x 15 (closed form)"},
     {"rt-8-b2", "rt-8 reading both buckets"},
     {"rt-16-b2", "rt-16 reading both buckets"},
     {"rt-8-mf3", "rt-8 reading three aligned frames (video)"},

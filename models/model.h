@@ -167,7 +167,7 @@ lm_status lm_lmmse_guide_build(lm_model *m, int K, int G, lm_err *err);
 /* G of an lmmse model with the guide, 0 for any other model. */
 int lm_lmmse_guide(const lm_model *m);
 /* lmmse-b2 plus each LED's plane interpolated by a guided filter (models/lmmse.c; preset
- * "lmmse-gri-b2"): both buckets, K x K windows, and for each of the P LEDs the local linear
+ * "lmmse-gri-b2": K 11, RI 15): both buckets, K x K windows, and for each of the P LEDs the local linear
  * regression of its samples on the panchromatic image over RI x RI windows (odd,
  * LM_LMMSE_GRI_MIN..LM_LMMSE_GRI_MAX), averaged over the windows covering the pixel and
  * evaluated at its panchromatic value; those P planes and the panchromatic image: D = P + 1

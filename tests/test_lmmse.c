@@ -309,7 +309,7 @@ static void test_guide_presets(void)
     CHECK(strlen(lm_model_preset_purpose("lmmse-guide-b2")) > 0);
 }
 
-/* Guided-interpolation names: "lmmse-gri-b2" (K 11, N 11) and "lmmse-K-riN-b2" with odd N in
+/* Guided-interpolation names: "lmmse-gri-b2" (K 11, N 15) and "lmmse-K-riN-b2" with odd N in
  * 3..31, both buckets only; a bad window is refused with its reason. D = P + 1, no OpenCL. */
 static void test_gri_presets(void)
 {
@@ -326,7 +326,7 @@ static void test_gri_presets(void)
         lm_model_free(m);
     }
     const char *good[] = {"lmmse-gri-b2", "lmmse-5-ri7-b2", "lmmse-3-ri31-b2"};
-    const int N[3] = {11, 7, 31}, K[3] = {11, 5, 3};
+    const int N[3] = {15, 7, 31}, K[3] = {11, 5, 3};
     for (int i = 0; i < 3; i++) {
         lm_err e = {0};
         lm_model *m = lm_model_create(good[i], NULL, 1, &e);
