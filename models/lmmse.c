@@ -38,6 +38,17 @@
  * form as lmmse-rf is (noise sampled at six levels). The features are computed on the host
  * (no device path) and hold no parameters. (The share against a 3 x 3 mean of g instead: 1.0 dB
  * lower validation PSNR clean, the same from noise sd 0.02 up; docs/results.md.)
+ * Guided interpolation ("lmmse-gri-b2": K 11, N 15; "lmmse-K-riN-b2", odd N 3..31): lmmse-b2
+ * plus D = P + 1 fixed features: for each LED l, its plane estimated at every pixel by a guided
+ * filter on g. Every N x N window (radius R = N / 2) regresses LED l's samples s (bucket 1 at
+ * its phase) on their g, a = cov(s, g) / (var(g) + 1e-4), b = mean s - a mean g; each pixel
+ * averages the (a, b) of the windows covering it (as the guided filter does: smooth across
+ * window edges) and gives a g(p) + b; the last feature is g(p). Box sums in double (running
+ * sums), O(P H W) whatever N; frame borders padded by 2R with phases reflected by whole tiles,
+ * so strips need 2R rows of context (conv_rows). The regularisation is a fixed constant in
+ * white^2 units: the features do not depend on the noise level (the per-level readout adapts
+ * to it). Read out per phase and level (the spectral map from the P interpolated LED values
+ * and g), fitted in closed form as the guide is; host features, CPU only.
  * What it is not: the fit (train/fit_lmmse.c) or the noise estimator. */
 #include "models/model.h"
 #include "models/lmmse_direct.h"
@@ -52,6 +63,15 @@
 const float lm_lmmse_sigmas[LM_LMMSE_LEVELS] = {0.0f,  0.0025f, 0.005f, 0.01f, 0.02f, 0.035f,
                                                 0.05f, 0.075f,  0.1f,   0.15f, 0.2f,  0.3f};
 
+/* The readout features (D > 0): random ReLU features of the raw window (a conv, parameters of
+ * the model), or fixed features computed on the host from both buckets (no parameters). */
+typedef enum lmmse_feat {
+    LMMSE_FEAT_NONE,
+    LMMSE_FEAT_RANDOM, /* lmmse-rf */
+    LMMSE_FEAT_GUIDE,  /* lmmse-guide-b2: the share of the panchromatic image */
+    LMMSE_FEAT_GRI     /* lmmse-gri-b2: each LED's plane interpolated guided by g */
+} lmmse_feat;
+
 typedef struct lmmse_net {
     lm_tensor *w;              /* L x P x 33 x K x K */
     lm_tensor *w0;             /* two buckets: the bucket-0 plane's filters, same shape */
@@ -59,8 +79,9 @@ typedef struct lmmse_net {
     lm_conv feat;              /* D > 0: features 1 -> D, K x K (random at init) */
     lm_tensor *rw;             /* D > 0: readout L x P x 33 x D */
     int K, P, D, C;            /* C: input planes (1, or 2 = both buckets) */
-    int G;                     /* > 0: the panchromatic-guide features' window (D = G^2 + 1,
-                                * no random-feature conv) */
+    lmmse_feat kind;           /* what the D readout features are */
+    int G;                     /* LMMSE_FEAT_GUIDE: the share's window (D = G^2 + 1) */
+    int RI;                    /* LMMSE_FEAT_GRI: the interpolation window (D = P + 1) */
     int lo_y, hi_y, lo_x, hi_x; /* tile offsets the windows reach (lo <= 0 <= hi) */
     float sig[LM_LMMSE_LEVELS]; /* the levels' noise sd: lm_lmmse_sigmas unless a measurement
                                  * set others (lm_lmmse_set_sigmas) */
@@ -278,6 +299,129 @@ static lm_tensor *guide_maps(lm_ctx *c, const lm_model *m, const lmmse_net *n, l
     return h;
 }
 
+/* ---- guided-filter interpolation of each LED's plane (RI > 0) ----------------------------- */
+/* The regularisation of the local regressions' slope, in white^2 units of g: a fixed constant
+ * (the features do not depend on the noise level; the per-level readout adapts to it). */
+#define GRI_EPS 1e-4
+
+/* Box sums of radius r: in (h x w) -> out ((h - 2r) x (w - 2r)); running sums in double along
+ * the rows into tmp ((h x (w - 2r)), then down the columns. */
+static void box_sum(const double *in, int h, int w, int r, double *tmp, double *out)
+{
+    const int ow = w - 2 * r, oh = h - 2 * r;
+    for (int y = 0; y < h; y++) {
+        const double *s = in + (size_t)y * w;
+        double *t = tmp + (size_t)y * ow, acc = 0;
+        for (int x = 0; x <= 2 * r; x++) acc += s[x];
+        t[0] = acc;
+        for (int x = 1; x < ow; x++) t[x] = acc += s[x + 2 * r] - s[x - 1];
+    }
+    memset(out, 0, sizeof(double) * (size_t)ow);
+    for (int y = 0; y <= 2 * r; y++)
+        for (int x = 0; x < ow; x++) out[x] += tmp[(size_t)y * ow + x];
+    for (int y = 1; y < oh; y++) {
+        const double *add = tmp + (size_t)(y + 2 * r) * ow, *sub = tmp + (size_t)(y - 1) * ow;
+        double *o = out + (size_t)y * ow, *prev = o - ow;
+        for (int x = 0; x < ow; x++) o[x] = prev[x] + add[x] - sub[x];
+    }
+}
+
+/* Scratch doubles of gri_frame for an H x W frame (window radius R: the frame padded by 2R). */
+static size_t gri_scratch(int H, int W, int R)
+{
+    const size_t PH = (size_t)H + 4 * R, PW = (size_t)W + 4 * R, CW = (size_t)W + 2 * R;
+    return PH * PW + PH * CW + 5 * (H + 2 * (size_t)R) * CW + 2 * (size_t)H * W + PH + PW;
+}
+
+/* LED l's guided-filter plane of one frame (b1: bucket 1, g: panchromatic, H x W) into o. On
+ * the frame padded by 2R (phases reflected by whole tiles; zero weight where a plane is too
+ * small to reflect), every window of radius R regresses LED l's samples s on their g,
+ * s ~ a g + b; each pixel averages the (a, b) of the (2R + 1)^2 windows covering it and gives
+ * a(p) g(p) + b(p). iy / ix: the padded rows' / columns' frame index (-1: none). */
+static void gri_plane(const lm_model *m, int R, int l, const float *b1, const float *g, int H,
+                      int W, const int *iy, const int *ix, double *sc, float *o)
+{
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, PH = H + 4 * R, PW = W + 4 * R;
+    const int CH = H + 2 * R, CW = W + 2 * R, pi = l / tx, pj = l % tx;
+    const size_t cn = (size_t)CH * CW;
+    double *pad = sc, *tmp = pad + (size_t)PH * PW, *sum = tmp + (size_t)PH * CW;
+    double *ab = sum + 5 * cn; /* a, b averaged: 2 x H x W */
+    for (int q = 0; q < 5; q++) { /* n, s, g, g g, s g over each window */
+        memset(pad, 0, sizeof(double) * (size_t)PH * PW);
+        for (int y = (pi + 2 * R) % ty; y < PH; y += ty) {
+            if (iy[y] < 0) continue;
+            for (int x = (pj + 2 * R) % tx; x < PW; x += tx) {
+                if (ix[x] < 0) continue;
+                const size_t k = (size_t)iy[y] * W + ix[x];
+                const double sv = b1[k], gv = g[k];
+                pad[(size_t)y * PW + x] = q == 0 ? 1 : q == 1 ? sv : q == 2 ? gv
+                                          : q == 3 ? gv * gv : sv * gv;
+            }
+        }
+        box_sum(pad, PH, PW, R, tmp, sum + q * cn);
+    }
+    for (size_t k = 0; k < cn; k++) { /* the regression of each window, a and b in place */
+        const double n = sum[k];
+        double a = 0, b = 0;
+        if (n > 0) {
+            const double ms = sum[cn + k] / n, mg = sum[2 * cn + k] / n;
+            const double vg = sum[3 * cn + k] / n - mg * mg, cv = sum[4 * cn + k] / n - ms * mg;
+            a = cv / ((vg > 0 ? vg : 0) + GRI_EPS);
+            b = ms - a * mg;
+        }
+        sum[k] = a, sum[cn + k] = b;
+    }
+    const double inv = 1.0 / ((2.0 * R + 1) * (2.0 * R + 1));
+    box_sum(sum, CH, CW, R, tmp, ab);
+    box_sum(sum + cn, CH, CW, R, tmp, ab + (size_t)H * W);
+    for (size_t k = 0; k < (size_t)H * W; k++)
+        o[k] = (float)(inv * (ab[k] * g[k] + ab[(size_t)H * W + k]));
+}
+
+/* The D = P + 1 feature planes of one frame (b1, b0: bucket 1 and bucket 0 / (LEDs - 1)) into
+ * out (D x H x W): LED l's guided-filter plane for l = 0..P-1 (tile position order), then g. */
+static void gri_frame(const lm_model *m, const lmmse_net *n, const float *b1, const float *b0,
+                      int H, int W, double *sc, float *out)
+{
+    const int ty = m->mosaic.ty, tx = m->mosaic.tx, P = n->P, R = n->RI / 2;
+    const int PH = H + 4 * R, PW = W + 4 * R;
+    const size_t plane = (size_t)H * W;
+    float *g = out + (size_t)P * plane;
+    for (size_t k = 0; k < plane; k++) g[k] = (b1[k] + (float)(P - 1) * b0[k]) / (float)P;
+    const int reflect = H / ty > (2 * R + ty - 1) / ty && W / tx > (2 * R + tx - 1) / tx;
+    int *iy = (int *)(sc + gri_scratch(H, W, R) - PH - PW), *ix = iy + PH;
+    for (int y = 0; y < PH; y++) iy[y] = pad_index(y - 2 * R, ty, H, reflect);
+    for (int x = 0; x < PW; x++) ix[x] = pad_index(x - 2 * R, tx, W, reflect);
+    for (int l = 0; l < P; l++) gri_plane(m, R, l, b1, g, H, W, iy, ix, sc, out + l * plane);
+}
+
+/* The host features' maps of raw (B x 2 x H x W, host): B x D x H x W, no gradient. */
+static lm_tensor *host_maps(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm_tensor *raw)
+{
+    if (n->kind == LMMSE_FEAT_GUIDE) return guide_maps(c, m, n, raw);
+    if (c->backend && c->backend != lm_backend_cpu()) {
+        lm_ctx_fail(c, LM_ERR_ARG, "%s: the guided interpolation runs on the CPU only",
+                    m->preset);
+        return NULL;
+    }
+    if (!raw || raw->ndim != 4 || raw->shape[1] != 2) {
+        lm_ctx_fail(c, LM_ERR_SHAPE, "%s: the guided interpolation needs both buckets "
+                    "(B x 2 x H x W)", m->preset);
+        return NULL;
+    }
+    const int B = raw->shape[0], H = raw->shape[2], W = raw->shape[3];
+    const size_t plane = (size_t)H * W;
+    lm_tensor *x = lm_contiguous(c, raw);
+    lm_tensor *h = x ? lm_tensor_new4(c, B, n->D, H, W) : NULL;
+    double *sc = h ? lm_ctx_alloc(c, sizeof(double) * gri_scratch(H, W, n->RI / 2)) : NULL;
+    if (!sc) return NULL; /* the ctx has the error */
+    for (int b = 0; b < B; b++) {
+        const float *in = x->data + (size_t)b * 2 * plane;
+        gri_frame(m, n, in, in + plane, H, W, sc, h->data + (size_t)b * n->D * plane);
+    }
+    return h;
+}
+
 /* Packed filters of one phase: K x K taps of `lanes` floats (channels, zero beyond nch) for
  * each of the C input planes (bucket 1's, then bucket 0's), then the bias. */
 static size_t packed_floats(int C, int K, int lanes) { return (size_t)(C * K * K + 1) * lanes; }
@@ -364,7 +508,7 @@ static void direct_frame(const lm_model *m, const lmmse_net *n, float s, const f
 /* Can the direct path run? (no gradients needed, no device, no features, host parameters) */
 static int direct_ok(const lm_ctx *c, const lmmse_net *n, const lm_tensor *raw)
 {
-    return (!n->D || n->G) &&
+    return (!n->D || n->kind != LMMSE_FEAT_RANDOM) &&
            !(c->grad_enabled && ((raw && lm_requires_grad(raw)) || lm_requires_grad(n->w) ||
                                  lm_requires_grad(n->b) || (n->w0 && lm_requires_grad(n->w0)))) &&
            !(c->backend && c->backend != lm_backend_cpu()) && (!raw || raw->data) && n->w->data;
@@ -416,7 +560,8 @@ static lm_tensor *run_group(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw
 {
     const int ty = m->mosaic.ty, tx = m->mosaic.tx;
     lm_tensor *d = run_direct(c, m, n, raw, s);
-    if (d && n->G) return lm_add(c, d, readout(c, m, n, guide_maps(c, m, n, raw), s));
+    const int host = n->kind == LMMSE_FEAT_GUIDE || n->kind == LMMSE_FEAT_GRI;
+    if (d && host) return lm_add(c, d, readout(c, m, n, host_maps(c, m, n, raw), s));
     if (d || lm_ctx_status(c)) return d;
     lm_tensor *w, *b, *w0, *cw, *cb;
     blend(c, n, s, &w, &b, &w0);
@@ -438,7 +583,7 @@ static lm_tensor *run_group(lm_ctx *c, lm_model *m, lmmse_net *n, lm_tensor *raw
     if (cw) cw->name = "filters.weight";
     lm_tensor *y = lm_pixel_shuffle(c, lm_conv_forward(c, &tk, u), ty, tx);
     if (n->D == 0) return y;
-    if (n->G) return lm_add(c, y, readout(c, m, n, guide_maps(c, m, n, raw), s));
+    if (host) return lm_add(c, y, readout(c, m, n, host_maps(c, m, n, raw), s));
     return lm_add(c, y, feature_branch(c, m, n, u, s, raw->shape[2], raw->shape[3]));
 }
 
@@ -479,7 +624,7 @@ static void lmmse_init(lm_model *m, lm_rng *r)
     lm_init_uniform(n->b, r, bound);
     if (n->C == 2) lm_init_uniform(n->w0, r, bound);
     if (n->D == 0) return;
-    if (n->G) {
+    if (n->kind != LMMSE_FEAT_RANDOM) {
         lm_init_uniform(n->rw, r, 1.0f / sqrtf((float)n->D));
         return;
     }
@@ -498,7 +643,33 @@ static void lmmse_free(lm_model *m)
     m->impl = NULL;
 }
 
-static lm_status build(lm_model *m, int K, int D, int G, lm_err *err)
+/* The host features' kind and window (win: G for the guide, RI for the interpolation). */
+static lm_status build_features(lmmse_net *n, lmmse_feat kind, int win, lm_err *err)
+{
+    n->kind = kind;
+    if (kind == LMMSE_FEAT_GUIDE) {
+        if (n->C != 2 || win < 1 || win % 2 == 0 || win > n->K)
+            return lm_err_set(err, LM_ERR_ARG, "lmmse: the panchromatic guide reads both "
+                              "buckets, with an odd window of at most K = %d (got %d)", n->K, win);
+        n->G = win;
+        n->D = win * win + 1;
+    } else if (kind == LMMSE_FEAT_GRI) {
+        if (n->C != 2 || win < LM_LMMSE_GRI_MIN || win > LM_LMMSE_GRI_MAX || win % 2 == 0)
+            return lm_err_set(err, LM_ERR_ARG, "lmmse: the guided interpolation reads both "
+                              "buckets, with an odd window of %d..%d (got %d)", LM_LMMSE_GRI_MIN,
+                              LM_LMMSE_GRI_MAX, win);
+        n->RI = win;
+        n->D = n->P + 1;
+    } else if (n->D > 0) {
+        n->kind = LMMSE_FEAT_RANDOM;
+        if (n->C == 2)
+            return lm_err_set(err, LM_ERR_ARG, "lmmse: random features read one plane: no "
+                              "two-bucket lmmse-rf");
+    }
+    return LM_OK;
+}
+
+static lm_status build(lm_model *m, int K, int D, lmmse_feat kind, int win, lm_err *err)
 {
     lmmse_net *n = calloc(1, sizeof *n);
     m->impl = n;
@@ -512,17 +683,11 @@ static lm_status build(lm_model *m, int K, int D, int G, lm_err *err)
     n->P = ty * tx;
     memcpy(n->sig, lm_lmmse_sigmas, sizeof n->sig);
     n->C = m->in_channels == 2 ? 2 : 1;
-    n->G = G;
-    if (G > 0 && (n->C != 2 || G % 2 == 0 || G > K))
-        return lm_err_set(err, LM_ERR_ARG, "lmmse: the panchromatic guide reads both buckets, "
-                          "with an odd window of at most K = %d (got %d)", K, G);
-    if (G > 0) D = n->D = G * G + 1;
-    if (D > 0 && n->C == 2 && !G)
-        return lm_err_set(err, LM_ERR_ARG, "lmmse: random features read one plane: no "
-                          "two-bucket lmmse-rf");
-    if (D < 0 || D > 4096) return lm_err_set(err, LM_ERR_ARG, "lmmse: %d features (0..4096)", D);
     if (n->P > LM_MOSAIC_MAX_CH)
         return lm_err_set(err, LM_ERR_ARG, "lmmse: %d x %d tile has too many phases", ty, tx);
+    if (build_features(n, kind, win, err)) return err->status;
+    D = n->D;
+    if (D < 0 || D > 4096) return lm_err_set(err, LM_ERR_ARG, "lmmse: %d features (0..4096)", D);
     n->lo_y = floor_div(-r, ty);
     n->hi_y = floor_div(ty - 1 + r, ty);
     n->lo_x = floor_div(-r, tx);
@@ -535,7 +700,8 @@ static lm_status build(lm_model *m, int K, int D, int G, lm_err *err)
         return err->status;
     int rws[4] = {LM_LMMSE_LEVELS, n->P, LM_MODEL_OUT_CHANNELS, D};
     lm_conv_spec fs = {1, D, K, K, 1, 0, 0, 1, 1};
-    if (D > 0 && ((!G && lm_conv_declare(&m->params, &n->feat, "features", fs, 1, err)) ||
+    if (D > 0 && ((n->kind == LMMSE_FEAT_RANDOM &&
+                   lm_conv_declare(&m->params, &n->feat, "features", fs, 1, err)) ||
                   !(n->rw = lm_params_add(&m->params, "readout.weight", 4, rws, 1, err))))
         return err->status;
     m->forward = lmmse_forward;
@@ -543,6 +709,8 @@ static lm_status build(lm_model *m, int K, int D, int G, lm_err *err)
     m->frame_forward = D || n->C == 2 ? NULL : lmmse_frame_forward;
     m->init = lmmse_init;
     m->conv_rows = ty * (n->hi_y > -n->lo_y ? n->hi_y : -n->lo_y);
+    if (n->RI && m->conv_rows < 2 * (n->RI / 2)) /* windows of windows: 2R rows each side */
+        m->conv_rows = 2 * (n->RI / 2);
     m->noise_input = 1;
     snprintf(m->family, sizeof m->family, "lmmse");
     return LM_OK;
@@ -550,17 +718,27 @@ static lm_status build(lm_model *m, int K, int D, int G, lm_err *err)
 
 lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err)
 {
-    return build(m, K, D, 0, err);
+    return build(m, K, D, LMMSE_FEAT_NONE, 0, err);
 }
 
 lm_status lm_lmmse_guide_build(lm_model *m, int K, int G, lm_err *err)
 {
-    return build(m, K, 0, G, err);
+    return build(m, K, 0, LMMSE_FEAT_GUIDE, G, err);
+}
+
+lm_status lm_lmmse_gri_build(lm_model *m, int K, int RI, lm_err *err)
+{
+    return build(m, K, 0, LMMSE_FEAT_GRI, RI, err);
 }
 
 int lm_lmmse_guide(const lm_model *m)
 {
     return lm_lmmse_window(m) ? ((const lmmse_net *)m->impl)->G : 0;
+}
+
+int lm_lmmse_gri(const lm_model *m)
+{
+    return lm_lmmse_window(m) ? ((const lmmse_net *)m->impl)->RI : 0;
 }
 
 int lm_lmmse_window(const lm_model *m)
@@ -608,7 +786,7 @@ lm_tensor *lm_lmmse_feature_maps(lm_ctx *c, const lm_model *m, lm_tensor *raw)
         lm_ctx_fail(c, LM_ERR_ARG, "lmmse: model has no random features");
         return NULL;
     }
-    if (n->G) return guide_maps(c, m, n, raw);
+    if (n->kind != LMMSE_FEAT_RANDOM) return host_maps(c, m, n, raw);
     lm_conv2d_opts o = {1, 1, n->K / 2, n->K / 2, 1, 1, 1};
     return lm_relu(c, lm_conv2d(c, raw, n->feat.w, n->feat.b, &o));
 }

@@ -13,7 +13,7 @@ struct preset {
     unsigned caps;   /* lm_model_cap flags, copied to lm_model.caps */
     lm_han_cfg han;  /* han */
     int width;       /* mcan: feats; srnet: dim; rt: width; mst: stages; lmmse: features;
-                      * lmmse-guide: the guide's window */
+                      * lmmse-guide: the guide's window; lmmse-gri: the interpolation's */
 };
 
 /* The families' builders, called with their preset row. */
@@ -29,6 +29,10 @@ static lm_status build_lmmse(lm_model *m, const preset *ps, lm_err *err)
 static lm_status build_lmmse_guide(lm_model *m, const preset *ps, lm_err *err)
 {
     return lm_lmmse_guide_build(m, 11, ps->width, err);
+}
+static lm_status build_lmmse_gri(lm_model *m, const preset *ps, lm_err *err)
+{
+    return lm_lmmse_gri_build(m, 11, ps->width, err); /* 15: ~19 samples of each LED */
 }
 static lm_status build_han(lm_model *m, const preset *ps, lm_err *err)
 {
@@ -93,6 +97,8 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     {"lmmse-b2", build_lmmse, CL | FIT | B2, {0, 0, 0, 0, 0}, 0},
     /* lmmse-b2 plus the panchromatic guide's ratio features (host features: no OpenCL) */
     {"lmmse-guide-b2", build_lmmse_guide, FIT | B2, {0, 0, 0, 0, 0}, 7},
+    /* lmmse-b2 plus each LED's plane interpolated by a guided filter on g (host features) */
+    {"lmmse-gri-b2", build_lmmse_gri, FIT | B2, {0, 0, 0, 0, 0}, 15},
     {"rt-8-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 8},
     {"rt-16-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 16},
     /* multi-frame: the current frame and its two neighbours aligned to it (3 input planes) */
@@ -164,6 +170,8 @@ static const struct { const char *name, *purpose; } purposes[] = {
     {"rt-16", "real-time residual network, 16 channels"},
     {"lmmse-b2", "closed-form floor reading both buckets (bucket 1 and bucket 0)"},
     {"lmmse-guide-b2", "lmmse-b2 plus each LED's share of the panchromatic image (closed form)"},
+    {"lmmse-gri-b2", "lmmse-b2 plus each LED's plane guided-filtered on the panchromatic image, "
+                     "15 x 15 (closed form)"},
     {"rt-8-b2", "rt-8 reading both buckets"},
     {"rt-16-b2", "rt-16 reading both buckets"},
     {"rt-8-mf3", "rt-8 reading three aligned frames (video)"},
@@ -207,17 +215,6 @@ static const preset *find_preset(const char *name)
     return NULL;
 }
 
-static void unknown_preset(const char *name, lm_err *err)
-{
-    char list[512] = "";
-    for (int i = 0; i < NPRESETS; i++) {
-        strncat(list, presets[i].name, sizeof list - strlen(list) - 3);
-        if (i + 1 < NPRESETS) strcat(list, ", ");
-    }
-    lm_err_set(err, LM_ERR_ARG, "unknown model '%s' (presets: %s, lmmse-K, lmmse-K-rfD, "
-               "lmmse-K-b2, lmmse-K-gG-b2)", name, list);
-}
-
 /* "lmmse-K" or "lmmse-K-rfD": the lmmse window K (odd, 1..31), else 0; *D the random
  * features (0..4096). */
 static int lmmse_k_plain(const char *name, int *D)
@@ -236,58 +233,93 @@ static int lmmse_k_plain(const char *name, int *D)
     return *end || end == name + 6 || k < 1 || k > 31 || k % 2 == 0 ? 0 : (int)k;
 }
 
-/* The same, or "lmmse-K-b2" (*b2 = 1: the two-bucket form, no random features), or
- * "lmmse-K-gG-b2" (*G: the panchromatic guide's window, odd, at most K). */
-static int lmmse_k2(const char *name, int *D, int *b2, int *G)
+/* The lmmse name forms beyond lmmse_k_plain's: "lmmse-K-b2" (two buckets), "lmmse-K-gG-b2"
+ * (the panchromatic guide's window G, odd, at most K), "lmmse-K-riN-b2" (the guided
+ * interpolation's window N, odd, LM_LMMSE_GRI_MIN..LM_LMMSE_GRI_MAX). */
+typedef struct lmmse_name {
+    int K, D, b2, G, RI;
+    const char *why; /* the reason an "lmmse-K-..." name is refused, else NULL */
+} lmmse_name;
+
+static int lmmse_parse(const char *name, lmmse_name *o)
 {
-    *b2 = 0;
-    *D = 0;
-    *G = 0;
+    memset(o, 0, sizeof *o);
     if (strncmp(name, "lmmse-", 6)) return 0;
-    char *end;
-    long k = strtol(name + 6, &end, 10);
-    if (end != name + 6 && !strncmp(end, "-g", 2)) {
-        char *e2;
-        long g = strtol(end + 2, &e2, 10);
-        if (e2 == end + 2 || strcmp(e2, "-b2") || g < 1 || g % 2 == 0 || g > k) return 0;
-        *G = (int)g;
+    char *end, *e2;
+    long k = strtol(name + 6, &end, 10), w = 0;
+    if (end == name + 6) return 0;
+    const int ri = !strncmp(end, "-ri", 3), g = !ri && !strncmp(end, "-g", 2);
+    if (ri || g) {
+        const char *p = end + (ri ? 3 : 2);
+        w = strtol(p, &e2, 10);
+        if (e2 == p || strcmp(e2, "-b2")) return 0;
+        if (w % 2 == 0 || (g && (w < 1 || w > k)) ||
+            (ri && (w < LM_LMMSE_GRI_MIN || w > LM_LMMSE_GRI_MAX))) {
+            o->why = ri ? "the guided interpolation's window N must be odd, 3..31"
+                        : "the guide's window G must be odd and at most K";
+            return 0;
+        }
         end = e2;
     }
-    if (end != name + 6 && !strcmp(end, "-b2")) {
-        *b2 = 1;
-        return k < 1 || k > 31 || k % 2 == 0 ? 0 : (int)k;
+    if (!strcmp(end, "-b2")) {
+        if (k < 1 || k > 31 || k % 2 == 0) {
+            o->why = "the window K must be odd, 1..31";
+            return 0;
+        }
+        o->b2 = 1, o->G = g ? (int)w : 0, o->RI = ri ? (int)w : 0;
+        return o->K = (int)k;
     }
-    return lmmse_k_plain(name, D);
+    return o->K = lmmse_k_plain(name, &o->D);
 }
 
-static int lmmse_k(const char *name, int *D)
+static void unknown_preset(const char *name, lm_err *err)
 {
-    int b2, G;
-    return lmmse_k2(name, D, &b2, &G);
+    lmmse_name ln;
+    lmmse_parse(name, &ln);
+    if (ln.why) {
+        lm_err_set(err, LM_ERR_ARG, "unknown model '%s': %s", name, ln.why);
+        return;
+    }
+    char list[512] = "";
+    for (int i = 0; i < NPRESETS; i++) {
+        strncat(list, presets[i].name, sizeof list - strlen(list) - 3);
+        if (i + 1 < NPRESETS) strcat(list, ", ");
+    }
+    lm_err_set(err, LM_ERR_ARG, "unknown model '%s' (presets: %s, lmmse-K, lmmse-K-rfD, "
+               "lmmse-K-b2, lmmse-K-gG-b2, lmmse-K-riN-b2)", name, list);
+}
+
+const char *lm_model_preset_why(const char *name)
+{
+    lmmse_name ln;
+    return find_preset(name) || lmmse_parse(name, &ln) ? NULL : ln.why;
 }
 
 int lm_model_preset_known(const char *name)
 {
-    int D;
-    return find_preset(name) || lmmse_k(name, &D);
+    lmmse_name ln;
+    return find_preset(name) || lmmse_parse(name, &ln);
 }
 
 /* Declare the preset's parameters into m (not finalized, not initialised). */
 static lm_status build(lm_model *m, const char *name, lm_err *err)
 {
     const preset *ps = find_preset(name);
-    int D = 0, b2 = 0, G = 0, K = ps ? 0 : lmmse_k2(name, &D, &b2, &G);
-    if (!ps && !K) return unknown_preset(name, err), err->status;
+    lmmse_name ln = {0};
+    if (!ps && !lmmse_parse(name, &ln)) return unknown_preset(name, err), err->status;
     snprintf(m->preset, sizeof m->preset, "%s", name);
     m->out_channels = LM_MODEL_OUT_CHANNELS;
     m->in_channels = 1;
     m->conv_rows = -1;
     m->noise_sigma = -1.0f;
     m->noise_given = -1.0f;
-    if (K) {
-        m->caps = find_preset(G ? "lmmse-guide-b2" : b2 ? "lmmse-b2" : "lmmse")->caps;
+    if (!ps) {
+        m->caps = find_preset(ln.G ? "lmmse-guide-b2" : ln.RI ? "lmmse-gri-b2"
+                              : ln.b2 ? "lmmse-b2" : "lmmse")->caps;
         m->in_channels = lm_model_buckets(m);
-        return G ? lm_lmmse_guide_build(m, K, G, err) : lm_lmmse_build(m, K, D, err);
+        return ln.G ? lm_lmmse_guide_build(m, ln.K, ln.G, err)
+               : ln.RI ? lm_lmmse_gri_build(m, ln.K, ln.RI, err)
+               : lm_lmmse_build(m, ln.K, ln.D, err);
     }
     m->caps = ps->caps;
     if (m->caps & LM_CAP_TWO_BUCKETS) m->in_channels = 2; /* builders may set it otherwise */

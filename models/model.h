@@ -118,6 +118,8 @@ static inline int lm_model_coded_planes(const lm_model *m)
 }
 /* Is name a preset (a listed name, lmmse-K, or either with "-b2")? */
 int lm_model_preset_known(const char *name);
+/* Why an "lmmse-K-..." name is refused (a window out of range or even), else NULL. */
+const char *lm_model_preset_why(const char *name);
 /* NULL-terminated list of preset names. */
 const char *const *lm_model_presets(void);
 /* One line on what a preset is for ("" for a name that is not a preset). */
@@ -164,6 +166,17 @@ lm_status lm_lmmse_build(lm_model *m, int K, int D, lm_err *err);
 lm_status lm_lmmse_guide_build(lm_model *m, int K, int G, lm_err *err);
 /* G of an lmmse model with the guide, 0 for any other model. */
 int lm_lmmse_guide(const lm_model *m);
+/* lmmse-b2 plus each LED's plane interpolated by a guided filter (models/lmmse.c; preset
+ * "lmmse-gri-b2": K 11, RI 15): both buckets, K x K windows, and for each of the P LEDs the local linear
+ * regression of its samples on the panchromatic image over RI x RI windows (odd,
+ * LM_LMMSE_GRI_MIN..LM_LMMSE_GRI_MAX), averaged over the windows covering the pixel and
+ * evaluated at its panchromatic value; those P planes and the panchromatic image: D = P + 1
+ * features read out per phase and level, fitted in closed form as lmmse-rf's. */
+#define LM_LMMSE_GRI_MIN 3
+#define LM_LMMSE_GRI_MAX 31
+lm_status lm_lmmse_gri_build(lm_model *m, int K, int RI, lm_err *err);
+/* RI of an lmmse model with the guided interpolation, 0 for any other model. */
+int lm_lmmse_gri(const lm_model *m);
 /* K of an lmmse model, 0 for any other model. */
 int lm_lmmse_window(const lm_model *m);
 /* The noise sd of each level of an lmmse model (lm_lmmse_sigmas for any other model). */

@@ -4,6 +4,8 @@
  * fit's optimality on the very samples it was fitted on, and a residual that starts at its base;
  * the same for the two-bucket form ("-b2": a second K x K window on the bucket-0 plane) and the
  * panchromatic guide ("-gG-b2": bucket 1's share of the local panchromatic mean, read out);
+ * the guided interpolation ("-riN-b2": each LED's plane by a guided filter on g, read out:
+ * its features against a double-precision loop written from the definition);
  * the guide's fit is deterministic and beats a constant spectrum on held-out patches. */
 #include "data/dataset.h"
 #include "data/system.h"
@@ -54,6 +56,46 @@ static double ref_guide(const lm_model *m, const float *raw, int H, int W, int Y
     return g * rho;
 }
 
+/* Guided-interpolation feature d at (Y, X), from the definition: on the frame padded by
+ * whole tiles (phases reflected; where a frame is too small to reflect 2R, samples beyond it
+ * are absent), for each window centre c within R of the pixel, LED d's samples s (bucket 1)
+ * within R of c regressed on their g: a_c = cov(s, g) / (var(g) + 1e-4), b_c = mean s -
+ * a_c mean g; the feature is mean_c(a_c) g(Y, X) + mean_c(b_c). The last feature is g. */
+static double ref_gri(const lm_model *m, const float *raw, int H, int W, int Y, int X, int d)
+{
+    const int R = lm_lmmse_gri(m) / 2, ty = m->mosaic.ty, tx = m->mosaic.tx, P = ty * tx;
+    const double g = ref_gs(m, raw, H, W, Y, X);
+    if (d == P) return g;
+    const int reflect = H / ty > (2 * R + ty - 1) / ty && W / tx > (2 * R + tx - 1) / tx;
+    double sa = 0, sb = 0;
+    for (int cy = Y - R; cy <= Y + R; cy++)
+        for (int cx = X - R; cx <= X + R; cx++) {
+            double n = 0, ss = 0, sg = 0, sgg = 0, ssg = 0;
+            for (int qy = cy - R; qy <= cy + R; qy++)
+                for (int qx = cx - R; qx <= cx + R; qx++) {
+                    if (((qy % ty + ty) % ty) * tx + (qx % tx + tx) % tx != d) continue;
+                    const int in = qy >= 0 && qy < H && qx >= 0 && qx < W;
+                    if (!in && !reflect) continue;
+                    const int sy = reflect_raw(qy, H, ty), sx = reflect_raw(qx, W, tx);
+                    const double sv = raw[sy * W + sx], gv = ref_gs(m, raw, H, W, sy, sx);
+                    n += 1, ss += sv, sg += gv, sgg += gv * gv, ssg += sv * gv;
+                }
+            if (n == 0) continue; /* a = b = 0 */
+            const double ms = ss / n, mg = sg / n, vg = sgg / n - mg * mg;
+            const double a = (ssg / n - ms * mg) / ((vg > 0 ? vg : 0) + 1e-4);
+            sa += a, sb += ms - a * mg;
+        }
+    return (sa * g + sb) / ((2.0 * R + 1) * (2.0 * R + 1));
+}
+
+/* Pixels the guided interpolation's reference is checked at (it is slow): every other pixel of
+ * the two outer rows and columns, and a scatter inside. */
+static int gri_chosen(int H, int W, int Y, int X)
+{
+    if (Y < 2 || Y >= H - 2 || X < 2 || X >= W - 2) return (Y + X) % 2 == 0;
+    return (Y * 7 + X * 3) % 17 == 0;
+}
+
 /* y[c] at (Y, X) for level weights (level l, blend t with l + 1), in double. */
 static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y, int X, int c,
                         int l, double t)
@@ -63,8 +105,9 @@ static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y
     const int K = lm_lmmse_window(m), r = K / 2, ty = m->mosaic.ty, tx = m->mosaic.tx;
     const int P = ty * tx, p = (Y % ty) * tx + X % tx;
     const int D = lm_lmmse_features(m), G = lm_lmmse_guide(m);
-    const lm_param *fw = D && !G ? lm_params_find(&m->params, "features.weight") : NULL;
-    const lm_param *fb = D && !G ? lm_params_find(&m->params, "features.bias") : NULL;
+    const int host = G || lm_lmmse_gri(m);
+    const lm_param *fw = D && !host ? lm_params_find(&m->params, "features.weight") : NULL;
+    const lm_param *fb = D && !host ? lm_params_find(&m->params, "features.bias") : NULL;
     const lm_param *rw = D ? lm_params_find(&m->params, "readout.weight") : NULL;
     /* two buckets: plane 1 (bucket 0) through its own filters */
     const lm_param *w0p = lm_params_find(&m->params, "filters.bucket0");
@@ -84,6 +127,11 @@ static double ref_pixel(const lm_model *m, const float *raw, int H, int W, int Y
                 s += w0[u * K + v] *
                      raw0[reflect_raw(Y - r + u, H, ty) * W + reflect_raw(X - r + v, W, tx)];
         for (int d = 0; d < D; d++) { /* random or guide feature d at (Y, X), read out */
+            if (lm_lmmse_gri(m)) {
+                s += ref_gri(m, raw, H, W, Y, X, d) *
+                     rw->t.data[(((size_t)lv * P + p) * O + c) * D + d];
+                continue;
+            }
             if (G) {
                 s += ref_guide(m, raw, H, W, Y, X, d) *
                      rw->t.data[(((size_t)lv * P + p) * O + c) * D + d];
@@ -127,6 +175,7 @@ static void check_forward_mode(const char *preset, int H, int W, float sigma, in
     for (int ch = 0; y && ch < O; ch += 4)
         for (int Y = 0; Y < H; Y++)
             for (int X = 0; X < W; X++) {
+                if (lm_lmmse_gri(m) && !gri_chosen(H, W, Y, X)) continue;
                 double d = fabs(ref_pixel(m, x->data, H, W, Y, X, ch, l, t) -
                                 y->data[((size_t)ch * H + Y) * W + X]);
                 worst = d > worst ? d : worst;
@@ -224,6 +273,11 @@ static void test_forward_matches_direct_loop(void)
     /* the panchromatic guide: its features read out beside both buckets' windows */
     check_forward("lmmse-5-g3-b2", 12, 16, 0.0f, 0, 0.0);
     check_forward("lmmse-7-g5-b2", 18, 24, s, 4, 0.5);
+    /* the guided interpolation: each LED's plane and g read out beside both buckets' windows
+     * (reflected borders; and a frame too small to reflect the windows' reach) */
+    check_forward("lmmse-5-ri7-b2", 18, 24, 0.0f, 0, 0.0);
+    check_forward("lmmse-3-ri11-b2", 24, 32, s, 4, 0.5);
+    check_forward("lmmse-3-ri11-b2", 12, 16, lm_lmmse_sigmas[3], 3, 0.0);
 }
 
 /* Guide preset names: odd windows of at most K, both buckets only; no OpenCL (host
@@ -253,6 +307,149 @@ static void test_guide_presets(void)
         lm_model_free(m);
     }
     CHECK(strlen(lm_model_preset_purpose("lmmse-guide-b2")) > 0);
+}
+
+/* Guided-interpolation names: "lmmse-gri-b2" (K 11, N 15) and "lmmse-K-riN-b2" with odd N in
+ * 3..31, both buckets only; a bad window is refused with its reason. D = P + 1, no OpenCL. */
+static void test_gri_presets(void)
+{
+    const char *bad[] = {"lmmse-5-ri12-b2", "lmmse-5-ri33-b2", "lmmse-5-ri1-b2", "lmmse-5-ri7",
+                         "lmmse-5-rix-b2", "lmmse-4-ri7-b2", "lmmse-5-ri7-b3"};
+    const int odd[7] = {1, 1, 1, 0, 0, 1, 0}; /* refused with the window's reason */
+    for (int i = 0; i < 7; i++) {
+        lm_err e = {0};
+        CHECK_MSG(!lm_model_preset_known(bad[i]), "%s", bad[i]);
+        lm_model *m = lm_model_create(bad[i], NULL, 1, &e);
+        CHECK_MSG(m == NULL && e.status == LM_ERR_ARG && !strchr(e.msg, '\n'), "%s", bad[i]);
+        CHECK_MSG(!odd[i] || (strstr(e.msg, "must be odd") && lm_model_preset_why(bad[i])),
+                  "%s: %s", bad[i], e.msg);
+        lm_model_free(m);
+    }
+    const char *good[] = {"lmmse-gri-b2", "lmmse-5-ri7-b2", "lmmse-3-ri31-b2"};
+    const int N[3] = {15, 7, 31}, K[3] = {11, 5, 3};
+    for (int i = 0; i < 3; i++) {
+        lm_err e = {0};
+        lm_model *m = lm_model_create(good[i], NULL, 1, &e);
+        CHECK_MSG(m != NULL && lm_model_preset_why(good[i]) == NULL, "%s: %s", good[i], e.msg);
+        if (!m) continue;
+        CHECK(lm_lmmse_gri(m) == N[i] && lm_lmmse_window(m) == K[i] && !lm_lmmse_guide(m) &&
+              lm_lmmse_features(m) == 13);
+        CHECK(lm_model_buckets(m) == 2 && m->in_channels == 2 && m->noise_input);
+        CHECK(lm_model_has(m, LM_CAP_CLOSED_FORM) && !lm_model_has(m, LM_CAP_OPENCL));
+        CHECK(lm_params_find(&m->params, "features.weight") == NULL &&
+              lm_params_find(&m->params, "readout.weight") != NULL);
+        CHECK(m->conv_rows >= 2 * (N[i] / 2)); /* strips keep the windows of windows */
+        lm_model_free(m);
+    }
+    CHECK(strlen(lm_model_preset_purpose("lmmse-gri-b2")) > 0);
+}
+
+/* The model's feature maps (lm_lmmse_feature_maps) against the definition at chosen pixels,
+ * borders included, on random frames (reflected, and too small to reflect); and on a frame
+ * where each LED's response is a constant times g (c_l g), the features give c_l g at every
+ * pixel: the regressions are exact but for the slope's regularisation (a wrong phase would be
+ * off by 0.1 g, 0.02 at least). */
+static void test_gri_features(void)
+{
+    const int sizes[3][2] = {{24, 32}, {12, 16}, {27, 28}};
+    const char *names[3] = {"lmmse-5-ri11-b2", "lmmse-3-ri11-b2", "lmmse-5-ri7-b2"};
+    for (int k = 0; k < 4; k++) {
+        const int H = sizes[k % 3][0], W = sizes[k % 3][1];
+        lm_err e = {0};
+        lm_model *m = lm_model_create(names[k % 3], NULL, 3, &e);
+        CHECK_MSG(m != NULL, "%s", e.msg);
+        if (!m) return;
+        const int P = 12, D = lm_lmmse_features(m);
+        lm_ctx c;
+        lm_ctx_init(&c, 1);
+        lm_rng r;
+        lm_rng_seed(&r, 21 + k);
+        lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){2, 2, H, W}, &r, 0.0f, 1.0f);
+        if (k == 3) /* bucket 1 = c_l g, bucket 0 what makes g the panchromatic image */
+            for (int b = 0; b < 2; b++)
+                for (int Y = 0; Y < H; Y++)
+                    for (int X = 0; X < W; X++) {
+                        float *b1 = x->data + (size_t)b * 2 * H * W + Y * W + X;
+                        const float g = 0.2f + 0.8f * b1[(size_t)H * W];
+                        const float cl = 0.3f + 0.1f * (float)((Y % 3) * 4 + X % 4);
+                        b1[0] = cl * g;
+                        b1[(size_t)H * W] = (P * g - b1[0]) / (P - 1);
+                    }
+        lm_tensor *h = lm_lmmse_feature_maps(&c, m, x);
+        CHECK_MSG(h && h->shape[0] == 2 && h->shape[1] == D && h->shape[2] == H &&
+                  h->shape[3] == W, "%s", c.msg);
+        double worst = 0, worst_prop = 0, sum_prop = 0;
+        long n = 0, n_prop = 0;
+        for (int b = 0; h && b < 2; b++)
+            for (int Y = 0; Y < H; Y++)
+                for (int X = 0; X < W; X++) {
+                    const float *raw = x->data + (size_t)b * 2 * H * W;
+                    const double g = ref_gs(m, raw, H, W, Y, X);
+                    for (int d = 0; d < D; d++) {
+                        const double v = h->data[(((size_t)b * D + d) * H + Y) * W + X];
+                        if (k == 3 && d < P) { /* LED d's plane: c_d g */
+                            const double want = (0.3 + 0.1 * d) * g;
+                            double err = fabs(v - want);
+                            worst_prop = err > worst_prop ? err : worst_prop;
+                            sum_prop += err, n_prop++;
+                        }
+                        if (!gri_chosen(H, W, Y, X) || (b && d % 3)) continue;
+                        const double want = ref_gri(m, raw, H, W, Y, X, d);
+                        double err = fabs(v - want) / (1 + fabs(want));
+                        worst = err > worst ? err : worst;
+                        n++;
+                    }
+                }
+        CHECK_MSG(n > 100 && worst < 1e-5, "%s %dx%d: features differ from the definition by "
+                  "%g (%ld checked)", names[k % 3], H, W, worst, n);
+        if (k == 3) /* the slope's regularisation: ~0.1 % off on average, 1 % at worst */
+            CHECK_MSG(worst_prop < 1.5e-2 && sum_prop < 1.5e-3 * n_prop, "c_l g world: features "
+                      "off by %g at worst, %g on average", worst_prop, sum_prop / n_prop);
+        lm_ctx_free(&c);
+        lm_model_free(m);
+    }
+}
+
+/* Whole frames in strips (lm_whole_forward, the halo from conv_rows) equal one forward over
+ * the frame: the windows of windows reach 2R rows, beyond K's; a halo short of that differs. */
+static void test_gri_strips(void)
+{
+    const int H = 60, W = 64;
+    lm_err e = {0};
+    lm_model *m = lm_model_create("lmmse-3-ri11-b2", NULL, 5, &e);
+    CHECK_MSG(m != NULL, "%s", e.msg);
+    if (!m) return;
+    lm_ctx c;
+    lm_ctx_init(&c, 1);
+    lm_rng r;
+    lm_rng_seed(&r, 31);
+    lm_tensor *x = lm_tensor_uniform(&c, 4, (int[]){1, 2, H, W}, &r, 0.0f, 1.0f);
+    float *frame = malloc(sizeof(float) * 2 * H * W), *one = malloc(sizeof(float) * O * H * W);
+    float *strips = malloc(sizeof(float) * O * H * W);
+    memcpy(frame, x->data, sizeof(float) * 2 * H * W);
+    float mx = 0.0f; /* the whole path's level: noise_given x the frame's maximum */
+    for (int k = 0; k < H * W; k++) mx = frame[k] > mx ? frame[k] : mx;
+    m->noise_given = 0.01f;
+    m->noise_sigma = 0.01f * mx;
+    lm_ctx_set_grad(&c, 0);
+    lm_tensor *y = lm_model_forward(&c, m, x);
+    CHECK_MSG(y != NULL, "%s", c.msg);
+    if (y) memcpy(one, y->data, sizeof(float) * O * H * W);
+    lm_ctx_reset(&c);
+    lm_whole_opts o;
+    lm_whole_default_opts(&o);
+    o.strip_rows = 12;
+    CHECK_MSG(lm_whole_forward(&c, m, frame, H, W, &o, 0, O, strips, &e) == LM_OK, "%s", e.msg);
+    CHECK_ARRAY_CLOSE(strips, one, (long)O * H * W, 1e-5, 1e-5);
+    o.halo = 6; /* two tile rows: short of the 10 rows the windows of windows read */
+    CHECK_MSG(lm_whole_forward(&c, m, frame, H, W, &o, 0, O, strips, &e) == LM_OK, "%s", e.msg);
+    double worst = 0;
+    for (long k = 0; k < (long)O * H * W; k++)
+        worst = fabs(strips[k] - one[k]) > worst ? fabs(strips[k] - one[k]) : worst;
+    CHECK_MSG(worst > 1e-4, "a short halo changed nothing (%g)", worst);
+    free(frame), free(one), free(strips);
+    lm_ctx_free(&c);
+    lm_model_free(m);
 }
 
 static void test_counts_and_capabilities(void)
@@ -529,6 +726,7 @@ static void test_fit_is_least_squares(void)
     fit_least_squares("lmmse-5-rf6"); /* random features: the readout is still least squares */
     fit_least_squares("lmmse-5-b2");  /* both buckets: two windows per pixel */
     fit_least_squares("lmmse-5-g3-b2"); /* the guide: its readout fitted with the windows */
+    fit_least_squares("lmmse-5-ri7-b2"); /* the guided interpolation's readout, likewise */
 }
 
 /* The guide's fit: the same parameters twice (deterministic), and on held-out training
@@ -661,6 +859,9 @@ int main(void)
     RUN(test_gradients);
     RUN(test_residual_starts_at_base);
     RUN(test_guide_presets);
+    RUN(test_gri_presets);
+    RUN(test_gri_features);
+    RUN(test_gri_strips);
     RUN(test_fit_is_least_squares);
     RUN(test_guide_fit);
     RUN(test_custom_levels);

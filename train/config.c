@@ -515,6 +515,8 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     if (lm_model_name_split(c->model, net, base, sizeof net))
         BAD("'model': %s is %s trained as a residual on a fitted %s: train %s first, then "
             "--model %s --base RUN (RUN: that %s run)", c->model, net, base, base, net, base);
+    if (!lm_model_preset_known(c->model) && lm_model_preset_why(c->model))
+        BAD("'model': unknown preset '%s': %s", c->model, lm_model_preset_why(c->model));
     if (!lm_model_preset_known(c->model)) BAD("'model': unknown preset '%s' (see lumosaic info --list)", c->model);
     for (int i = 0; i < NFIELDS; i++) { /* every number in its field's range (NaN is not) */
         double v[2];
