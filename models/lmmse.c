@@ -273,32 +273,6 @@ static void guide_frame(const lm_model *m, const lmmse_net *n, const float *b1, 
     memcpy(out + (size_t)(G * G) * plane, g, sizeof(float) * plane);
 }
 
-/* The guide's feature maps of raw (B x 2 x H x W, host): B x D x H x W, no gradient. */
-static lm_tensor *guide_maps(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm_tensor *raw)
-{
-    if (c->backend && c->backend != lm_backend_cpu()) {
-        lm_ctx_fail(c, LM_ERR_ARG, "%s: the panchromatic guide runs on the CPU only", m->preset);
-        return NULL;
-    }
-    if (!raw || raw->ndim != 4 || raw->shape[1] != 2) {
-        lm_ctx_fail(c, LM_ERR_SHAPE, "%s: the guide needs both buckets (B x 2 x H x W)",
-                    m->preset);
-        return NULL;
-    }
-    const int B = raw->shape[0], H = raw->shape[2], W = raw->shape[3];
-    const size_t plane = (size_t)H * W;
-    lm_tensor *x = lm_contiguous(c, raw);
-    lm_tensor *h = x ? lm_tensor_new4(c, B, n->D, H, W) : NULL;
-    float *scratch = h ? lm_ctx_alloc(c, sizeof(float) * 2 * plane) : NULL;
-    if (!scratch) return NULL; /* the ctx has the error */
-    for (int b = 0; b < B; b++) {
-        const float *in = x->data + (size_t)b * 2 * plane;
-        guide_frame(m, n, in, in + plane, H, W, scratch, scratch + plane,
-                    h->data + (size_t)b * n->D * plane);
-    }
-    return h;
-}
-
 /* ---- guided-filter interpolation of each LED's plane (RI > 0) ----------------------------- */
 /* The regularisation of the local regressions' slope, in white^2 units of g: a fixed constant
  * (the features do not depend on the noise level; the per-level readout adapts to it). */
@@ -395,29 +369,34 @@ static void gri_frame(const lm_model *m, const lmmse_net *n, const float *b1, co
     for (int l = 0; l < P; l++) gri_plane(m, R, l, b1, g, H, W, iy, ix, sc, out + l * plane);
 }
 
-/* The host features' maps of raw (B x 2 x H x W, host): B x D x H x W, no gradient. */
+/* The host features' maps of raw (B x 2 x H x W, host): B x D x H x W, no gradient; the
+ * guide's (guide_frame) or the guided interpolation's (gri_frame), frame by frame. */
 static lm_tensor *host_maps(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm_tensor *raw)
 {
-    if (n->kind == LMMSE_FEAT_GUIDE) return guide_maps(c, m, n, raw);
+    const int gri = n->kind == LMMSE_FEAT_GRI;
+    const char *what = gri ? "the guided interpolation" : "the panchromatic guide";
     if (c->backend && c->backend != lm_backend_cpu()) {
-        lm_ctx_fail(c, LM_ERR_ARG, "%s: the guided interpolation runs on the CPU only",
-                    m->preset);
+        lm_ctx_fail(c, LM_ERR_ARG, "%s: %s runs on the CPU only", m->preset, what);
         return NULL;
     }
     if (!raw || raw->ndim != 4 || raw->shape[1] != 2) {
-        lm_ctx_fail(c, LM_ERR_SHAPE, "%s: the guided interpolation needs both buckets "
-                    "(B x 2 x H x W)", m->preset);
+        lm_ctx_fail(c, LM_ERR_SHAPE, "%s: %s needs both buckets (B x 2 x H x W)", m->preset,
+                    what);
         return NULL;
     }
     const int B = raw->shape[0], H = raw->shape[2], W = raw->shape[3];
     const size_t plane = (size_t)H * W;
+    const size_t bytes = gri ? sizeof(double) * gri_scratch(H, W, n->RI / 2)
+                             : sizeof(float) * 2 * plane;
     lm_tensor *x = lm_contiguous(c, raw);
     lm_tensor *h = x ? lm_tensor_new4(c, B, n->D, H, W) : NULL;
-    double *sc = h ? lm_ctx_alloc(c, sizeof(double) * gri_scratch(H, W, n->RI / 2)) : NULL;
+    void *sc = h ? lm_ctx_alloc(c, bytes) : NULL;
     if (!sc) return NULL; /* the ctx has the error */
     for (int b = 0; b < B; b++) {
         const float *in = x->data + (size_t)b * 2 * plane;
-        gri_frame(m, n, in, in + plane, H, W, sc, h->data + (size_t)b * n->D * plane);
+        float *out = h->data + (size_t)b * n->D * plane;
+        if (gri) gri_frame(m, n, in, in + plane, H, W, sc, out);
+        else guide_frame(m, n, in, in + plane, H, W, sc, (float *)sc + plane, out);
     }
     return h;
 }
