@@ -385,9 +385,10 @@ static lm_status plan_sample(const lm_dataset *d, lm_data_split split, long i, s
     lm_rng ra = lm_rng_split(&r, 3);
     const float tilt = lm_rng_uniform_range(&ra, -1.0f, 1.0f);
     in->illum_tilt = train ? tilt * c->illum_jitter : 0.0f;
+    const int jitter = train && c->gain_jitter > 0.0f;
     for (int l = 0; l < c->sys->nleds && l < LM_SYSTEM_MAX_LEDS; l++) {
-        const float g = 1.0f + c->gain_jitter * lm_rng_normal(&ra);
-        in->led_gain[l] = train && c->gain_jitter > 0.0f ? (g > 0.1f ? g : 0.1f) : 1.0f;
+        const float g = jitter ? 1.0f + c->gain_jitter * lm_rng_normal(&ra) : 1.0f;
+        in->led_gain[l] = g > 0.1f ? g : 0.1f;
     }
     return LM_OK;
 }

@@ -267,6 +267,14 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         st = lm_err_set(err, LM_ERR_ARG, "config: 'illum_jitter' / 'gain_jitter': augmentation "
                         "of SGD training; the closed-form fit of %s reads the scenes as they are "
                         "(use --fit sgd, or a network on it as a base)", cfg->model);
+    if (!st && closed && cfg->fit_b0_noise > 0.0f &&
+        (lm_model_buckets(m) != 2 || lm_lmmse_features(m) > 0))
+        st = lm_err_set(err, LM_ERR_ARG, "config: 'fit_b0_noise': a bucket-0 noise ratio is for "
+                        "the analytic noise of a two-bucket floor without features (lmmse-b2, "
+                        "lmmse-K-b2), not %s", cfg->model);
+    if (!st && !closed && cfg->fit_b0_noise > 0.0f)
+        st = lm_err_set(err, LM_ERR_ARG, "config: 'fit_b0_noise' is an option of the two-bucket "
+                        "floor's closed-form fit, not of SGD training (%s)", cfg->model);
     if (!st && closed && opts.resume)
         st = lm_err_set(err, LM_ERR_ARG, "resume: %s is fitted in closed form, nothing to resume "
                         "(use --fit sgd to fine-tune)", cfg->model);

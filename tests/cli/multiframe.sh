@@ -5,7 +5,8 @@
 # --no-align give different cubes), eval with motion rows at two noise levels, info lists the
 # presets. Bad input, one line on stderr and exit 2, nothing written: a single frame for a
 # multi-frame model, a model without a multi-frame form, frames 3 with both buckets, spectral
-# augmentation of multi-frame samples or of a closed-form fit, a tilt out of range.
+# augmentation of multi-frame samples or of a closed-form fit, a tilt out of range, a bucket-0
+# noise ratio for SGD training or a one-bucket floor.
 # usage: multiframe.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 
@@ -49,4 +50,8 @@ expect_error "augmentation for a closed-form fit" 2 "reads the scenes as they ar
   "$LM" train --model lmmse --gain-jitter 0.05 --data "$CAVE" --output "$T/e5"
 expect_error "illumination tilt out of range" 2 "illum-jitter" "$T/e6" -- \
   "$LM" train --model rt-8 --illum-jitter 5 --data "$CAVE" --output "$T/e6"
+expect_error "bucket-0 noise ratio for SGD training" 2 "not of SGD training" "$T/e7" -- \
+  "$LM" train --model rt-8 --fit-b0-noise 0.3 --data "$CAVE" --output "$T/e7"
+expect_error "bucket-0 noise ratio for a one-bucket floor" 2 "bucket-0 noise ratio" "$T/e8" -- \
+  "$LM" train --model lmmse --fit-b0-noise 0.3 --data "$CAVE" --fit-patches 16 --output "$T/e8"
 finish
