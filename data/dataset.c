@@ -390,6 +390,97 @@ static lm_status plan_sample(const lm_dataset *d, lm_data_split split, long i, s
         const float g = jitter ? 1.0f + c->gain_jitter * lm_rng_normal(&ra) : 1.0f;
         in->led_gain[l] = g > 0.1f ? g : 0.1f;
     }
+    /* geometric augmentation, from a stream of its own too */
+    lm_rng rg = lm_rng_split(&r, 4);
+    const float uz = lm_rng_uniform_range(&rg, -1.0f, 1.0f), uy = lm_rng_uniform(&rg),
+                ux = lm_rng_uniform(&rg);
+    const int turn = (int)lm_rng_below(&rg, 2);
+    in->zoom = 1.0f, in->transpose = 0;
+    in->sy0 = (float)in->y0, in->sx0 = (float)in->x0;
+    if (train && in->kind == LM_SAMPLE_SCENE && (c->scale_jitter > 0.0f || c->transpose)) {
+        const scene *s = &d->scenes[d->list[split][in->scene]];
+        int t = c->transpose && turn && s->height >= c->patch_w && s->width >= c->patch_h;
+        const int rh = t ? c->patch_w : c->patch_h, rw = t ? c->patch_h : c->patch_w;
+        float z = c->scale_jitter > 0.0f ? powf(1.0f + c->scale_jitter, uz) : 1.0f;
+        z = fminf(z, fminf((float)s->height / (float)rh, (float)s->width / (float)rw));
+        in->zoom = z, in->transpose = t;
+        if (z == 1.0f && t) { /* whole pixels */
+            in->sy0 = fminf(floorf(uy * (float)(s->height - rh + 1)), (float)(s->height - rh));
+            in->sx0 = fminf(floorf(ux * (float)(s->width - rw + 1)), (float)(s->width - rw));
+        } else if (z != 1.0f) {
+            in->sy0 = uy * fmaxf((float)s->height - (float)rh * z, 0.0f);
+            in->sx0 = ux * fmaxf((float)s->width - (float)rw * z, 0.0f);
+        } /* else the plain patch, on the tile grid */
+    }
+    return LM_OK;
+}
+
+/* The source pixels and weights of n patch pixels along one axis of a region starting at s0,
+ * z source pixels per patch pixel, in a source of len pixels: taps per pixel (idx, w: n x
+ * taps). z >= 1: the area average over [s0 + i z, s0 + (i + 1) z); z < 1: linear
+ * interpolation at the pixel's centre s0 + (i + 0.5) z - 0.5. Indices clamped to the source. */
+static void axis_taps(int n, float s0, float z, int len, int taps, int *idx, float *w)
+{
+    for (int i = 0; i < n; i++) {
+        int *ix = idx + (size_t)i * taps;
+        float *wi = w + (size_t)i * taps;
+        for (int k = 0; k < taps; k++) ix[k] = 0, wi[k] = 0.0f;
+        if (z >= 1.0f) {
+            const double a = (double)s0 + (double)i * z, b = a + z;
+            int k = 0;
+            for (long p = (long)floor(a); p < (long)ceil(b) && k < taps; p++) {
+                const double lo = fmax(a, (double)p), hi = fmin(b, (double)(p + 1));
+                if (hi <= lo) continue;
+                ix[k] = (int)(p < 0 ? 0 : p >= len ? len - 1 : p);
+                wi[k++] = (float)((hi - lo) / z);
+            }
+        } else {
+            const double c = (double)s0 + (i + 0.5) * z - 0.5;
+            const long p = (long)floor(c);
+            const float f = (float)(c - (double)p);
+            ix[0] = (int)(p < 0 ? 0 : p >= len ? len - 1 : p);
+            ix[1] = (int)(p + 1 < 0 ? 0 : p + 1 >= len ? len - 1 : p + 1);
+            wi[0] = 1.0f - f, wi[1] = f;
+        }
+    }
+}
+
+/* The 31-band patch of a zoomed or transposed sample (flips applied to the patch). */
+static lm_status resample_patch(const lm_cube *src, const lm_dataset_sample_info *in, int ph,
+                                int pw, lm_cube *out, lm_err *err)
+{
+    const int rh = in->transpose ? pw : ph, rw = in->transpose ? ph : pw;
+    const int taps = (int)ceilf(in->zoom) + 2;
+    int *iy = malloc(sizeof(int) * (size_t)rh * taps), *ix = malloc(sizeof(int) * (size_t)rw * taps);
+    float *wy = malloc(sizeof(float) * (size_t)rh * taps);
+    float *wx = malloc(sizeof(float) * (size_t)rw * taps);
+    if (!iy || !ix || !wy || !wx) {
+        free(iy), free(ix), free(wy), free(wx);
+        return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory resampling a patch");
+    }
+    axis_taps(rh, in->sy0, in->zoom, src->height, taps, iy, wy);
+    axis_taps(rw, in->sx0, in->zoom, src->width, taps, ix, wx);
+    for (int b = 0; b < LM_GRID31_COUNT; b++) {
+        const float *sb = lm_cube_band(src, b);
+        float *db = lm_cube_band(out, b);
+        for (int y = 0; y < ph; y++)
+            for (int x = 0; x < pw; x++) {
+                const int yy = in->flip_v ? ph - 1 - y : y, xx = in->flip_h ? pw - 1 - x : x;
+                const int ra = in->transpose ? xx : yy, rb = in->transpose ? yy : xx;
+                const int *py = iy + (size_t)ra * taps, *px = ix + (size_t)rb * taps;
+                const float *qy = wy + (size_t)ra * taps, *qx = wx + (size_t)rb * taps;
+                float acc = 0.0f;
+                for (int i = 0; i < taps; i++) {
+                    if (qy[i] == 0.0f) continue;
+                    const float *row = sb + (size_t)py[i] * src->width;
+                    float racc = 0.0f;
+                    for (int j = 0; j < taps; j++) racc += qx[j] * row[px[j]];
+                    acc += qy[i] * racc;
+                }
+                db[(size_t)y * pw + x] = acc;
+            }
+    }
+    free(iy), free(ix), free(wy), free(wx);
     return LM_OK;
 }
 
@@ -404,7 +495,7 @@ lm_status lm_dataset_sample_info_get(const lm_dataset *d, lm_data_split split, l
     return st;
 }
 
-/* The 31-band patch of a sample, flips applied. */
+/* The 31-band patch of a sample, flips, zoom and transposition applied. */
 static lm_status sample_cube(lm_dataset *d, sample_plan *p, lm_data_split split, lm_cube *out,
                              lm_err *err)
 {
@@ -422,7 +513,9 @@ static lm_status sample_cube(lm_dataset *d, sample_plan *p, lm_data_split split,
         if (st == LM_OK) src = *ref.cube;
     }
     if (st == LM_OK) st = lm_cube_alloc(out, LM_GRID31_COUNT, ph, pw, LM_GRID31_START, 10.0f);
-    if (st == LM_OK) {
+    if (st == LM_OK && (in->zoom != 1.0f || in->transpose)) {
+        st = resample_patch(&src, in, ph, pw, out, err);
+    } else if (st == LM_OK) {
         int y0 = in->y0, x0 = in->x0; /* 0, 0 for synthetic patches */
         for (int b = 0; b < LM_GRID31_COUNT; b++)
             for (int y = 0; y < ph; y++) {
@@ -671,6 +764,11 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
     if (c->gain_jitter > 0)
         snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; LED gain error sd %g",
                  (double)c->gain_jitter);
+    if (c->scale_jitter > 0)
+        snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; zoom %.3g..%.3g",
+                 1.0 / (1.0 + c->scale_jitter), 1.0 + c->scale_jitter);
+    if (c->transpose)
+        snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; transposes");
     fprintf(f, "dataset: %d scenes in %d groups; patch %d x %d; narrowband synthetic %.0f%%, "
             "procedural %.0f%%; %s%s; flips %s; seed %llu; %d "
             "workers; cache %d scenes%s\n", d->nscenes, d->ngroups, c->patch_h, c->patch_w,
@@ -738,6 +836,10 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
         return lm_err_set(err, LM_ERR_ARG, "dataset: illumination jitter %g (0..2) or LED gain "
                           "jitter %g (0..0.5) out of range", (double)c->illum_jitter,
                           (double)c->gain_jitter);
+    if (!(c->scale_jitter >= 0.0f && c->scale_jitter <= 1.0f) || c->transpose < 0 ||
+        c->transpose > 1)
+        return lm_err_set(err, LM_ERR_ARG, "dataset: scale jitter %g (0..1) or transpose %d "
+                          "(0|1) out of range", (double)c->scale_jitter, c->transpose);
     if (c->buckets < 0 || c->buckets > 2)
         return lm_err_set(err, LM_ERR_ARG, "dataset: buckets %d (1: bucket 1 only, 2: both)",
                           c->buckets);

@@ -77,6 +77,15 @@ typedef struct lm_dataset_cfg {
     float gain_jitter;          /* > 0: each training sample's frame simulated with every LED's
                                  * gain times max(0.1, 1 + this x N(0, 1)) (a calibration error:
                                  * the target stays the scene's); 0 = off */
+    float scale_jitter;         /* > 0: each training scene sample resampled from a region z
+                                 * times the patch, z = (1 + this)^u, u ~ U[-1, 1] (at most
+                                 * 1): an area average where z > 1 (finer detail per pixel), a
+                                 * bilinear one where z < 1; z capped so the region fits the
+                                 * scene; its place anywhere in the scene (not on the tile grid:
+                                 * the mosaic is applied after); 0 = off */
+    int transpose;              /* 1: each training scene sample transposed with probability
+                                 * 1/2 (when the scene holds the turned region); with flips,
+                                 * every quarter turn and mirror */
     const char *mat_key;        /* .mat cube variable (NULL or "": automatic, cube_io.h);
                                  * copied by lm_dataset_open */
 } lm_dataset_cfg;
@@ -188,6 +197,11 @@ typedef struct lm_dataset_sample_info {
     float noise_k;        /* Gaussian noise level k */
     float illum_tilt;     /* t of the illumination tilt (0: none) */
     float led_gain[LM_SYSTEM_MAX_LEDS]; /* each LED's gain factor (1: none) */
+    float zoom;           /* scene pixels per patch pixel along each axis (1: none) */
+    int transpose;        /* patch row y, column x read from the region's row x, column y */
+    float sy0, sx0;       /* the region's top-left in scene pixels (y0, x0 without zoom or
+                           * transpose); region pixel (a, b) covers [sy0 + a zoom, sy0 +
+                           * (a + 1) zoom) x [sx0 + b zoom, ...). Flips apply to the patch. */
 } lm_dataset_sample_info;
 lm_status lm_dataset_sample_info_get(const lm_dataset *d, lm_data_split split, long i,
                                      lm_dataset_sample_info *info, lm_err *err);

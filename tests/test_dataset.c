@@ -1175,6 +1175,132 @@ static void test_spectral_augmentation(void)
     CHECK(lm_dataset_open(&cg, &e) == NULL && e.status == LM_ERR_ARG);
 }
 
+/* The patch of a zoomed / transposed sample written out from the fixture, independently of the
+ * dataset's taps: z >= 1 integrates the piecewise-constant scene exactly over each patch
+ * pixel's box (a summed-area table, bilinear between its corners); z < 1 interpolates
+ * bilinearly at the pixel's centre (clamped to the scene). */
+static double sat_at(const double *S, double y, double x)
+{
+    y = fmin(fmax(y, 0.0), (double)POS_H), x = fmin(fmax(x, 0.0), (double)POS_W);
+    int i = (int)floor(y), j = (int)floor(x);
+    if (i >= POS_H) i = POS_H - 1;
+    if (j >= POS_W) j = POS_W - 1;
+    const double fy = y - i, fx = x - j, W1 = POS_W + 1;
+    return (1 - fy) * ((1 - fx) * S[i * (int)W1 + j] + fx * S[i * (int)W1 + j + 1]) +
+           fy * ((1 - fx) * S[(i + 1) * (int)W1 + j] + fx * S[(i + 1) * (int)W1 + j + 1]);
+}
+
+static void resampled_crop(lm_cube *out, const lm_dataset_sample_info *in)
+{
+    CHECK(lm_cube_alloc(out, 31, PH, PW, 400, 10) == LM_OK);
+    static double S[(POS_H + 1) * (POS_W + 1)];
+    const double z = in->zoom;
+    for (int b = 0; b < 31; b++) {
+        for (int y = 0; y <= POS_H; y++)
+            for (int x = 0; x <= POS_W; x++)
+                S[y * (POS_W + 1) + x] = y == 0 || x == 0 ? 0.0
+                    : pos_value(b, y - 1, x - 1) + S[(y - 1) * (POS_W + 1) + x] +
+                      S[y * (POS_W + 1) + x - 1] - S[(y - 1) * (POS_W + 1) + x - 1];
+        for (int y = 0; y < PH; y++)
+            for (int x = 0; x < PW; x++) {
+                const int yy = in->flip_v ? PH - 1 - y : y, xx = in->flip_h ? PW - 1 - x : x;
+                const int a = in->transpose ? xx : yy, c = in->transpose ? yy : xx;
+                double v;
+                if (z >= 1.0) {
+                    const double y0 = in->sy0 + a * z, y1 = y0 + z, x0 = in->sx0 + c * z,
+                                 x1 = x0 + z;
+                    CHECK_MSG(y1 <= POS_H + 1e-3 && x1 <= POS_W + 1e-3, "region (%g, %g) past "
+                              "the scene", y1, x1);
+                    v = (sat_at(S, y1, x1) - sat_at(S, y0, x1) - sat_at(S, y1, x0) +
+                         sat_at(S, y0, x0)) / (z * z);
+                } else {
+                    double cy = in->sy0 + (a + 0.5) * z - 0.5, cx = in->sx0 + (c + 0.5) * z - 0.5;
+                    cy = fmin(fmax(cy, 0.0), POS_H - 1.0), cx = fmin(fmax(cx, 0.0), POS_W - 1.0);
+                    const int i = (int)fmin(floor(cy), POS_H - 2.0),
+                              j = (int)fmin(floor(cx), POS_W - 2.0);
+                    const double fy = cy - i, fx = cx - j;
+                    v = (1 - fy) * ((1 - fx) * pos_value(b, i, j) + fx * pos_value(b, i, j + 1)) +
+                        fy * ((1 - fx) * pos_value(b, i + 1, j) + fx * pos_value(b, i + 1, j + 1));
+                }
+                lm_cube_band(out, b)[y * PW + x] = (float)v;
+            }
+    }
+}
+
+/* Geometric augmentation: with scale_jitter and transpose each training sample's target is the
+ * scene resampled over its region (zoom within [1 / (1 + S), 1 + S], both sides drawn;
+ * transposed about half of the time) and its frame is that patch through the forward model;
+ * with both off the samples are the plain ones, bit for bit; validation samples are unchanged;
+ * out-of-range settings are refused. */
+static void test_geometric_augmentation(void)
+{
+    const char *pa[1] = {g_pospath};
+    lm_dataset_cfg c0 = base_cfg(pa, 1), cz = c0, c1 = c0;
+    c0.flips = cz.flips = c1.flips = 1;
+    cz.scale_jitter = 0.5f, cz.transpose = 1;
+    c1.transpose = 1; /* whole pixels */
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *a = lm_dataset_open(&c0, &e), *dz = lm_dataset_open(&cz, &e),
+               *d1 = lm_dataset_open(&c1, &e);
+    CHECK_MSG(a && dz && d1, "%s", e.msg);
+    const size_t np = (size_t)PH * PW;
+    static float raw[PH * PW], tgt[33 * PH * PW], rr[PH * PW], rt[33 * PH * PW];
+    if (a && dz && d1) {
+        int up = 0, down = 0, turned = 0, n = 40;
+        double zmin = 9, zmax = 0, worst_t = 0, worst_r = 0;
+        for (long i = 0; i < n; i++) {
+            for (int k = 0; k < 2; k++) {
+                lm_dataset *d = k ? d1 : dz;
+                lm_dataset_sample_info in;
+                CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &in, &e) == LM_OK);
+                CHECK(lm_dataset_batch(d, i, 1, raw, tgt, &e) == LM_OK);
+                if (k) CHECK(in.zoom == 1.0f && in.sy0 == floorf(in.sy0) &&
+                             in.sx0 == floorf(in.sx0));
+                if (!k) {
+                    zmin = fmin(zmin, in.zoom), zmax = fmax(zmax, in.zoom);
+                    up += in.zoom < 0.95f, down += in.zoom > 1.05f, turned += in.transpose;
+                }
+                lm_cube c;
+                resampled_crop(&c, &in);
+                ref_raw(&c, rr);
+                ref_target(&c, rt);
+                for (size_t q = 0; q < 33 * np; q++) worst_t = fmax(worst_t, fabs(tgt[q] - rt[q]));
+                for (size_t q = 0; q < np; q++) worst_r = fmax(worst_r, fabs(raw[q] - rr[q]));
+                lm_cube_free(&c);
+            }
+        }
+        printf("     zoom %.3f..%.3f (%d below 0.95, %d above 1.05), %d of %d transposed; "
+               "target error %.2g, frame error %.2g\n", zmin, zmax, up, down, turned, n, worst_t,
+               worst_r);
+        CHECK_MSG(zmin >= 1 / 1.5 - 1e-6 && zmax <= 1.5 + 1e-6, "zoom %g..%g", zmin, zmax);
+        CHECK_MSG(up >= 5 && down >= 5, "zoom not drawn on both sides (%d, %d)", up, down);
+        CHECK_MSG(turned >= 8 && turned <= 32, "%d of %d transposed", turned, n);
+        CHECK_MSG(worst_t < 2e-5, "resampled target off by %g", worst_t);
+        CHECK_MSG(worst_r < 2e-5, "frame of the resampled patch off by %g", worst_r);
+        /* off: the plain samples, bit for bit; validation: never augmented */
+        lm_dataset_cfg cf = c0;
+        cf.scale_jitter = 0.0f, cf.transpose = 0;
+        lm_dataset *f = lm_dataset_open(&cf, &e);
+        CHECK(f != NULL);
+        static float r2[PH * PW], t2[33 * PH * PW];
+        for (long i = 0; f && i < 6; i++) {
+            CHECK(lm_dataset_batch(a, i, 1, raw, tgt, &e) == LM_OK);
+            CHECK(lm_dataset_batch(f, i, 1, r2, t2, &e) == LM_OK);
+            CHECK(memcmp(raw, r2, sizeof raw) == 0 && memcmp(tgt, t2, sizeof tgt) == 0);
+        }
+        lm_dataset_close(f);
+        CHECK(lm_dataset_eval_sample(a, LM_SPLIT_VAL, 1, raw, tgt, &e) == LM_OK);
+        CHECK(lm_dataset_eval_sample(dz, LM_SPLIT_VAL, 1, r2, t2, &e) == LM_OK);
+        CHECK(memcmp(raw, r2, sizeof raw) == 0 && memcmp(tgt, t2, sizeof tgt) == 0);
+    }
+    lm_dataset_close(a), lm_dataset_close(dz), lm_dataset_close(d1);
+    cz.scale_jitter = 1.5f;
+    CHECK(lm_dataset_open(&cz, &e) == NULL && e.status == LM_ERR_ARG);
+    cz.scale_jitter = 0.5f, cz.transpose = 2;
+    CHECK(lm_dataset_open(&cz, &e) == NULL && e.status == LM_ERR_ARG);
+}
+
 static void test_scene_normalised(void)
 {
     char dark[1200];
@@ -1235,6 +1361,7 @@ int main(void)
     RUN(test_shot_noise_two_buckets);
     RUN(test_photon_range);
     RUN(test_spectral_augmentation);
+    RUN(test_geometric_augmentation);
     RUN(test_bad_input);
     rm_tree(tmpdir);
     lm_system_free(&g_sys);

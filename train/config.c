@@ -115,6 +115,11 @@ static const field fields[] = {
     FLD("gain_jitter", F_FLOAT, gain_jitter, "S", "augmentation: each training sample's frame "
         "simulated with every LED's gain off by a factor 1 + S x N(0, 1) (a calibration error; "
         "the target is the scene's; 0 = off)", 0, 0.5),
+    FLD("scale_jitter", F_FLOAT, scale_jitter, "S", "augmentation: each training scene patch "
+        "resampled from a region z times its size, z = (1 + S)^u, u ~ U[-1, 1] (area average "
+        "where z > 1, bilinear where z < 1; scenes seen at other scales; 0 = off)", 0, 1),
+    FLD("transpose", F_INT, transpose, "0|1", "augmentation: training scene patches transposed "
+        "half of the time (with the flips: every quarter turn and mirror; 0 = off)", 0, 1),
     FLD("sensor_bits", F_INT, sensor_bits, "N", "quantise samples to N bits (0 = off; 16 = PNG)",
         0, 24),
     FLD("buckets", F_INT, buckets, "1|2", "coded-frame buckets the model reads: 1 (bucket 1, the "
@@ -661,6 +666,8 @@ static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
     if (root) json_object_set_new(root, "fit_b0_noise", json_real(c->fit_b0_noise));
     if (root) json_object_set_new(root, "illum_jitter", json_real(c->illum_jitter));
     if (root) json_object_set_new(root, "gain_jitter", json_real(c->gain_jitter));
+    if (root) json_object_set_new(root, "scale_jitter", json_real(c->scale_jitter));
+    if (root) json_object_set_new(root, "transpose", json_integer(c->transpose));
     if (root) json_object_set_new(root, "ema", json_real(c->ema));
     if (root) json_object_set_new(root, "precision", json_string(c->precision));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);

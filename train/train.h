@@ -97,6 +97,9 @@ typedef struct lm_train_cfg {
     float illum_jitter;             /* training samples' illumination tilt range (data/dataset.h;
                                      * 0 = off) */
     float gain_jitter;              /* training samples' LED gain error sd (0 = off) */
+    float scale_jitter;             /* training scene samples' zoom range: (1 + this)^U[-1, 1]
+                                     * (data/dataset.h; 0 = off) */
+    int transpose;                  /* 1: training scene samples transposed half of the time */
     char snapshots[128];            /* "5,15,30": weights at these minutes of training time into
                                      * <output>/snapshots/<M>min/ ("" = none) */
     /* what "training time" (minutes, snapshots, the checkpoint's seconds) counts: "wall"

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# multiframe.sh — the multi-frame input end to end (issue 18, item 2): train a "-mf3" model a
+# multiframe.sh — the multi-frame input end to end: train a "-mf3" model a
 # few iterations (train --frames 3 picks rt-8-mf3; the run and its weights record 3 frames),
 # simulate a translating 3-frame video, infer every frame (the ends included; aligned and
 # --no-align give different cubes), eval with motion rows at two noise levels, info lists the
@@ -54,4 +54,10 @@ expect_error "bucket-0 noise ratio for SGD training" 2 "not of SGD training" "$T
   "$LM" train --model rt-8 --fit-b0-noise 0.3 --data "$CAVE" --output "$T/e7"
 expect_error "bucket-0 noise ratio for a one-bucket floor" 2 "bucket-0 noise ratio" "$T/e8" -- \
   "$LM" train --model lmmse --fit-b0-noise 0.3 --data "$CAVE" --fit-patches 16 --output "$T/e8"
+expect_error "zoom of multi-frame samples" 2 "without zoom or transposition" "$T/e9" -- \
+  "$LM" train --model rt-8-mf3 --scale-jitter 0.3 $TR --output "$T/e9"
+expect_error "transposition of moving samples" 2 "without zoom or transposition" "$T/e10" -- \
+  "$LM" train --model rt-8 --motion-fraction 0.5 --transpose 1 --data "$CAVE" --output "$T/e10"
+expect_error "zoom out of range" 2 "scale-jitter" "$T/e11" -- \
+  "$LM" train --model rt-8 --scale-jitter 2 --data "$CAVE" --output "$T/e11"
 finish
