@@ -34,6 +34,8 @@ variants=(
   "no synthetic|--synth-fraction 0 --procedural-fraction 0"
   "illumination tilt +-0.3|--illum-jitter 0.3"
   "LED gain error 3 %|--gain-jitter 0.03"
+  "zoom 0.67..1.5 + transposes|--scale-jitter 0.5 --transpose 1"
+  "transposes|--transpose 1"
 )
 
 noise=0,10,20
