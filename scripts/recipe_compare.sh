@@ -36,6 +36,7 @@ variants=(
   "LED gain error 3 %|--gain-jitter 0.03"
   "zoom 0.67..1.5 + transposes|--scale-jitter 0.5 --transpose 1"
   "transposes|--transpose 1"
+  "clean samples only|--noise 0,0"
 )
 
 noise=0,10,20
