@@ -434,6 +434,7 @@ static void axis_taps(int n, float s0, float z, int len, int taps, int *idx, flo
                 ix[k] = (int)(p < 0 ? 0 : p >= len ? len - 1 : p);
                 wi[k++] = (float)((hi - lo) / z);
             }
+            for (; k < taps; k++) ix[k] = ix[0]; /* unused: weight 0, inside the span */
         } else {
             const double c = (double)s0 + (i + 0.5) * z - 0.5;
             const long p = (long)floor(c);
@@ -441,11 +442,14 @@ static void axis_taps(int n, float s0, float z, int len, int taps, int *idx, flo
             ix[0] = (int)(p < 0 ? 0 : p >= len ? len - 1 : p);
             ix[1] = (int)(p + 1 < 0 ? 0 : p + 1 >= len ? len - 1 : p + 1);
             wi[0] = 1.0f - f, wi[1] = f;
+            for (int k = 2; k < taps; k++) ix[k] = ix[0];
         }
     }
 }
 
-/* The 31-band patch of a zoomed or transposed sample (flips applied to the patch). */
+/* The 31-band patch of a zoomed or transposed sample (flips applied to the patch), in two
+ * passes: the region's rows from the scene's (over the columns the taps reach), then each
+ * patch pixel from its region row. */
 static lm_status resample_patch(const lm_cube *src, const lm_dataset_sample_info *in, int ph,
                                 int pw, lm_cube *out, lm_err *err)
 {
@@ -454,33 +458,47 @@ static lm_status resample_patch(const lm_cube *src, const lm_dataset_sample_info
     int *iy = malloc(sizeof(int) * (size_t)rh * taps), *ix = malloc(sizeof(int) * (size_t)rw * taps);
     float *wy = malloc(sizeof(float) * (size_t)rh * taps);
     float *wx = malloc(sizeof(float) * (size_t)rw * taps);
-    if (!iy || !ix || !wy || !wx) {
+    float *rows = NULL;
+    int c0 = 0, span = 0;
+    if (iy && ix && wy && wx) {
+        axis_taps(rh, in->sy0, in->zoom, src->height, taps, iy, wy);
+        axis_taps(rw, in->sx0, in->zoom, src->width, taps, ix, wx);
+        int c1 = ix[0];
+        c0 = ix[0];
+        for (int k = 1; k < rw * taps; k++) c0 = ix[k] < c0 ? ix[k] : c0, c1 = ix[k] > c1 ? ix[k] : c1;
+        span = c1 - c0 + 1;
+        rows = malloc(sizeof(float) * (size_t)rh * span);
+    }
+    if (!rows) {
         free(iy), free(ix), free(wy), free(wx);
         return lm_err_set(err, LM_ERR_NOMEM, "dataset: out of memory resampling a patch");
     }
-    axis_taps(rh, in->sy0, in->zoom, src->height, taps, iy, wy);
-    axis_taps(rw, in->sx0, in->zoom, src->width, taps, ix, wx);
     for (int b = 0; b < LM_GRID31_COUNT; b++) {
-        const float *sb = lm_cube_band(src, b);
+        const float *sb = lm_cube_band(src, b) + c0;
         float *db = lm_cube_band(out, b);
+        for (int a = 0; a < rh; a++) { /* region row a over the columns c0 .. c0 + span - 1 */
+            float *r = rows + (size_t)a * span;
+            for (int c = 0; c < span; c++) r[c] = 0.0f;
+            for (int i = 0; i < taps; i++) {
+                const float w = wy[(size_t)a * taps + i];
+                if (w == 0.0f) continue;
+                const float *srow = sb + (size_t)iy[(size_t)a * taps + i] * src->width;
+                for (int c = 0; c < span; c++) r[c] += w * srow[c];
+            }
+        }
         for (int y = 0; y < ph; y++)
             for (int x = 0; x < pw; x++) {
                 const int yy = in->flip_v ? ph - 1 - y : y, xx = in->flip_h ? pw - 1 - x : x;
                 const int ra = in->transpose ? xx : yy, rb = in->transpose ? yy : xx;
-                const int *py = iy + (size_t)ra * taps, *px = ix + (size_t)rb * taps;
-                const float *qy = wy + (size_t)ra * taps, *qx = wx + (size_t)rb * taps;
+                const float *r = rows + (size_t)ra * span;
+                const int *px = ix + (size_t)rb * taps;
+                const float *qx = wx + (size_t)rb * taps;
                 float acc = 0.0f;
-                for (int i = 0; i < taps; i++) {
-                    if (qy[i] == 0.0f) continue;
-                    const float *row = sb + (size_t)py[i] * src->width;
-                    float racc = 0.0f;
-                    for (int j = 0; j < taps; j++) racc += qx[j] * row[px[j]];
-                    acc += qy[i] * racc;
-                }
+                for (int j = 0; j < taps; j++) acc += qx[j] * r[px[j] - c0];
                 db[(size_t)y * pw + x] = acc;
             }
     }
-    free(iy), free(ix), free(wy), free(wx);
+    free(iy), free(ix), free(wy), free(wx), free(rows);
     return LM_OK;
 }
 
