@@ -15,6 +15,7 @@ typedef struct lm_command {
 
 int lm_cmd_version(int argc, char **argv);
 /* Declarations of the other commands go here, one line each (alphabetical). */
+int lm_cmd_average(int argc, char **argv);
 int lm_cmd_bound(int argc, char **argv);
 int lm_cmd_calibrate(int argc, char **argv);
 int lm_cmd_coding(int argc, char **argv);

@@ -10,6 +10,7 @@
 static const lm_command commands[] = {
     {"version", lm_cmd_version, "print the version and build configuration"},
     /* one line per command (keep alphabetical after version) */
+    {"average", lm_cmd_average, "average the weights of trained models of one preset (a soup)"},
     {"bound", lm_cmd_bound, "the spectral bound: every LED at every pixel, no mosaic (oracle)"},
     {"calibrate", lm_cmd_calibrate, "LED gains from ColorChecker frames (NNLS): a new system file"},
     {"coding", lm_cmd_coding, "learn the LED allocation and tile map under shot/read noise"},
