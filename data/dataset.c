@@ -412,6 +412,54 @@ static lm_status plan_sample(const lm_dataset *d, lm_data_split split, long i, s
             in->sx0 = ux * fmaxf((float)s->width - (float)rw * z, 0.0f);
         } /* else the plain patch, on the tile grid */
     }
+    /* collage: a second scene patch across an edge, from a stream of its own as well */
+    lm_rng rc = lm_rng_split(&r, 5);
+    const float u_col = lm_rng_uniform(&rc);
+    const uint32_t pick2 = lm_rng_u32(&rc), py2 = lm_rng_u32(&rc), px2 = lm_rng_u32(&rc);
+    const int fh2 = (int)lm_rng_below(&rc, 2), fv2 = (int)lm_rng_below(&rc, 2);
+    const float th = lm_rng_uniform_range(&rc, 0.0f, 6.2831853f), ey = lm_rng_uniform(&rc),
+                ex = lm_rng_uniform(&rc);
+    in->mix_scene = -1;
+    if (train && in->kind == LM_SAMPLE_SCENE && u_col < c->collage) {
+        const int n = d->count[split];
+        const scene *s2 = &d->scenes[d->list[split][(int)(pick2 % (uint32_t)n)]];
+        in->collage = 1;
+        in->mix_scene = (int)(pick2 % (uint32_t)n);
+        in->mix_y0 = (int)(py2 % (uint32_t)(s2->height - c->patch_h + 1));
+        in->mix_x0 = (int)(px2 % (uint32_t)(s2->width - c->patch_w + 1));
+        in->mix_flip_h = c->flips ? fh2 : 0, in->mix_flip_v = c->flips ? fv2 : 0;
+        in->edge_nx = cosf(th), in->edge_ny = sinf(th);
+        const float cy = (float)c->patch_h * (0.25f + 0.5f * ey),
+                    cx = (float)c->patch_w * (0.25f + 0.5f * ex);
+        in->edge_c = in->edge_nx * cx + in->edge_ny * cy;
+    }
+    return LM_OK;
+}
+
+/* Blend the collage's second patch into out (the first), as lm_dataset_sample_info says. */
+static lm_status paste_collage(lm_dataset *d, const lm_dataset_sample_info *in,
+                               lm_data_split split, lm_cube *out, lm_err *err)
+{
+    scene_ref ref = {-1, {0}, NULL};
+    lm_status st = lm_ds_scene_acquire(d, d->list[split][in->mix_scene], &ref, err);
+    if (st) return st;
+    const lm_cube *src = ref.cube;
+    const int ph = out->height, pw = out->width;
+    for (int y = 0; y < ph; y++)
+        for (int x = 0; x < pw; x++) {
+            float w = 0.5f + in->edge_nx * ((float)x + 0.5f) + in->edge_ny * ((float)y + 0.5f) -
+                      in->edge_c;
+            w = w < 0.0f ? 0.0f : w > 1.0f ? 1.0f : w;
+            if (w == 0.0f) continue;
+            const int sy = in->mix_y0 + (in->mix_flip_v ? ph - 1 - y : y),
+                      sx = in->mix_x0 + (in->mix_flip_h ? pw - 1 - x : x);
+            for (int b = 0; b < LM_GRID31_COUNT; b++) {
+                float *o = lm_cube_band(out, b) + (size_t)y * pw + x;
+                const float v = lm_cube_band(src, b)[(size_t)sy * src->width + sx];
+                *o = w == 1.0f ? v : (1.0f - w) * *o + w * v;
+            }
+        }
+    lm_ds_scene_release(d, &ref);
     return LM_OK;
 }
 
@@ -545,6 +593,7 @@ static lm_status sample_cube(lm_dataset *d, sample_plan *p, lm_data_split split,
     }
     if (in->kind == LM_SAMPLE_PROCEDURAL) lm_cube_free(&src);
     else if (ref.cube) lm_ds_scene_release(d, &ref);
+    if (st == LM_OK && in->collage) st = paste_collage(d, in, split, out, err);
     return st;
 }
 
@@ -787,6 +836,9 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
                  1.0 / (1.0 + c->scale_jitter), 1.0 + c->scale_jitter);
     if (c->transpose)
         snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; transposes");
+    if (c->collage > 0)
+        snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; collage %.0f%%",
+                 100.0 * c->collage);
     fprintf(f, "dataset: %d scenes in %d groups; patch %d x %d; narrowband synthetic %.0f%%, "
             "procedural %.0f%%; %s%s; flips %s; seed %llu; %d "
             "workers; cache %d scenes%s\n", d->nscenes, d->ngroups, c->patch_h, c->patch_w,
@@ -858,6 +910,9 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
         c->transpose > 1)
         return lm_err_set(err, LM_ERR_ARG, "dataset: scale jitter %g (0..1) or transpose %d "
                           "(0|1) out of range", (double)c->scale_jitter, c->transpose);
+    if (!(c->collage >= 0.0f && c->collage <= 1.0f))
+        return lm_err_set(err, LM_ERR_ARG, "dataset: collage share %g out of range (0..1)",
+                          (double)c->collage);
     if (c->buckets < 0 || c->buckets > 2)
         return lm_err_set(err, LM_ERR_ARG, "dataset: buckets %d (1: bucket 1 only, 2: both)",
                           c->buckets);

@@ -86,6 +86,11 @@ typedef struct lm_dataset_cfg {
     int transpose;              /* 1: each training scene sample transposed with probability
                                  * 1/2 (when the scene holds the turned region); with flips,
                                  * every quarter turn and mirror */
+    float collage;              /* share of training scene samples with a patch of another
+                                 * training scene (any one, anywhere, its own flips) pasted in
+                                 * across a straight edge of random direction through the
+                                 * middle half of the patch (antialiased over one pixel): more
+                                 * edges between materials than 21 scenes hold; 0 = off */
     const char *mat_key;        /* .mat cube variable (NULL or "": automatic, cube_io.h);
                                  * copied by lm_dataset_open */
 } lm_dataset_cfg;
@@ -202,6 +207,12 @@ typedef struct lm_dataset_sample_info {
     float sy0, sx0;       /* the region's top-left in scene pixels (y0, x0 without zoom or
                            * transpose); region pixel (a, b) covers [sy0 + a zoom, sy0 +
                            * (a + 1) zoom) x [sx0 + b zoom, ...). Flips apply to the patch. */
+    int collage;          /* 1: the patch above is blended with a second one (below) */
+    int mix_scene;        /* the second patch: its scene (index in the split's list), */
+    int mix_y0, mix_x0;   /* its top-left there (any pixel) and flips */
+    int mix_flip_h, mix_flip_v;
+    float edge_nx, edge_ny, edge_c; /* patch pixel (y, x) takes the second patch with weight
+                                     * clamp(0.5 + nx (x + 0.5) + ny (y + 0.5) - c, 0, 1) */
 } lm_dataset_sample_info;
 lm_status lm_dataset_sample_info_get(const lm_dataset *d, lm_data_split split, long i,
                                      lm_dataset_sample_info *info, lm_err *err);

@@ -37,6 +37,7 @@ variants=(
   "zoom 0.67..1.5 + transposes|--scale-jitter 0.5 --transpose 1"
   "transposes|--transpose 1"
   "clean samples only|--noise 0,0"
+  "collage 50 %|--collage 0.5"
 )
 
 noise=0,10,20

@@ -1301,6 +1301,77 @@ static void test_geometric_augmentation(void)
     CHECK(lm_dataset_open(&cz, &e) == NULL && e.status == LM_ERR_ARG);
 }
 
+/* Collage: a share of the training samples blends a second patch of a training scene (here
+ * the fixture's own, elsewhere) across an edge; the target is that blend, pixel by pixel from the
+ * scene, and the frame is the blend through the forward model; samples left alone are the plain
+ * ones bit for bit (the collage draws come from a stream of their own); validation is never
+ * pasted into; an out-of-range share is refused. */
+static void test_collage(void)
+{
+    const char *pa[1] = {g_pospath};
+    lm_dataset_cfg c0 = base_cfg(pa, 1), cc = c0;
+    c0.flips = cc.flips = 1;
+    cc.collage = 0.5f;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *a = lm_dataset_open(&c0, &e), *d = lm_dataset_open(&cc, &e);
+    CHECK_MSG(a && d, "%s", e.msg);
+    const size_t np = (size_t)PH * PW;
+    static float raw[PH * PW], tgt[33 * PH * PW], rr[PH * PW], rt[33 * PH * PW],
+        r2[PH * PW], t2[33 * PH * PW];
+    if (a && d) {
+        int mixed = 0, split_ok = 0, n = 40;
+        double worst_t = 0, worst_r = 0;
+        for (long i = 0; i < n; i++) {
+            lm_dataset_sample_info in;
+            CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &in, &e) == LM_OK);
+            CHECK(lm_dataset_batch(d, i, 1, raw, tgt, &e) == LM_OK);
+            if (!in.collage) {
+                CHECK(lm_dataset_batch(a, i, 1, r2, t2, &e) == LM_OK);
+                CHECK(memcmp(raw, r2, sizeof raw) == 0 && memcmp(tgt, t2, sizeof tgt) == 0);
+                continue;
+            }
+            mixed++;
+            lm_cube c;
+            CHECK(lm_cube_alloc(&c, 31, PH, PW, 400, 10) == LM_OK);
+            int first = 0, second = 0;
+            for (int b = 0; b < 31; b++)
+                for (int y = 0; y < PH; y++)
+                    for (int x = 0; x < PW; x++) {
+                        double w = 0.5 + in.edge_nx * (x + 0.5) + in.edge_ny * (y + 0.5) -
+                                   in.edge_c;
+                        w = fmin(fmax(w, 0.0), 1.0);
+                        first += b == 0 && w == 0.0, second += b == 0 && w == 1.0;
+                        const double v1 = pos_value(b, in.y0 + (in.flip_v ? PH - 1 - y : y),
+                                                    in.x0 + (in.flip_h ? PW - 1 - x : x));
+                        const double v2 = pos_value(b, in.mix_y0 + (in.mix_flip_v ? PH - 1 - y : y),
+                                                    in.mix_x0 + (in.mix_flip_h ? PW - 1 - x : x));
+                        lm_cube_band(&c, b)[y * PW + x] = (float)((1 - w) * v1 + w * v2);
+                    }
+            split_ok += first > 0 && second > 0; /* the edge runs through the patch */
+            CHECK(in.mix_y0 >= 0 && in.mix_y0 + PH <= POS_H && in.mix_x0 >= 0 &&
+                  in.mix_x0 + PW <= POS_W);
+            ref_raw(&c, rr);
+            ref_target(&c, rt);
+            for (size_t q = 0; q < 33 * np; q++) worst_t = fmax(worst_t, fabs(tgt[q] - rt[q]));
+            for (size_t q = 0; q < np; q++) worst_r = fmax(worst_r, fabs(raw[q] - rr[q]));
+            lm_cube_free(&c);
+        }
+        printf("     %d of %d samples pasted (%d with both patches visible); target error %.2g, "
+               "frame error %.2g\n", mixed, n, split_ok, worst_t, worst_r);
+        CHECK_MSG(mixed >= 10 && mixed <= 30, "%d of %d pasted at a share of 0.5", mixed, n);
+        CHECK_MSG(split_ok == mixed, "an edge outside the patch (%d of %d)", split_ok, mixed);
+        CHECK_MSG(worst_t < 2e-5, "collage target off by %g", worst_t);
+        CHECK_MSG(worst_r < 2e-5, "frame of the collage off by %g", worst_r);
+        CHECK(lm_dataset_eval_sample(a, LM_SPLIT_VAL, 1, raw, tgt, &e) == LM_OK);
+        CHECK(lm_dataset_eval_sample(d, LM_SPLIT_VAL, 1, r2, t2, &e) == LM_OK);
+        CHECK(memcmp(raw, r2, sizeof raw) == 0 && memcmp(tgt, t2, sizeof tgt) == 0);
+    }
+    lm_dataset_close(a), lm_dataset_close(d);
+    cc.collage = 1.5f;
+    CHECK(lm_dataset_open(&cc, &e) == NULL && e.status == LM_ERR_ARG);
+}
+
 static void test_scene_normalised(void)
 {
     char dark[1200];
@@ -1362,6 +1433,7 @@ int main(void)
     RUN(test_photon_range);
     RUN(test_spectral_augmentation);
     RUN(test_geometric_augmentation);
+    RUN(test_collage);
     RUN(test_bad_input);
     rm_tree(tmpdir);
     lm_system_free(&g_sys);

@@ -120,6 +120,9 @@ static const field fields[] = {
         "where z > 1, bilinear where z < 1; scenes seen at other scales; 0 = off)", 0, 1),
     FLD("transpose", F_INT, transpose, "0|1", "augmentation: training scene patches transposed "
         "half of the time (with the flips: every quarter turn and mirror; 0 = off)", 0, 1),
+    FLD("collage", F_FLOAT, collage, "F", "augmentation: share of training scene patches with "
+        "a patch of another training scene pasted in across a straight edge of random direction "
+        "(more material boundaries than the scenes hold; 0 = off)", 0, 1),
     FLD("sensor_bits", F_INT, sensor_bits, "N", "quantise samples to N bits (0 = off; 16 = PNG)",
         0, 24),
     FLD("buckets", F_INT, buckets, "1|2", "coded-frame buckets the model reads: 1 (bucket 1, the "
@@ -668,6 +671,7 @@ static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
     if (root) json_object_set_new(root, "gain_jitter", json_real(c->gain_jitter));
     if (root) json_object_set_new(root, "scale_jitter", json_real(c->scale_jitter));
     if (root) json_object_set_new(root, "transpose", json_integer(c->transpose));
+    if (root) json_object_set_new(root, "collage", json_real(c->collage));
     if (root) json_object_set_new(root, "ema", json_real(c->ema));
     if (root) json_object_set_new(root, "precision", json_string(c->precision));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);

@@ -61,6 +61,7 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.photons_min = cfg->photons_min;
     dc.illum_jitter = cfg->illum_jitter, dc.gain_jitter = cfg->gain_jitter;
     dc.scale_jitter = cfg->scale_jitter, dc.transpose = cfg->transpose;
+    dc.collage = cfg->collage;
     if (clean) { /* the fit adds noise, clipping and quantisation itself */
         dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
         dc.sensor_clip = dc.sensor_bits = 0;
@@ -265,10 +266,11 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
                         "%s models Gaussian noise only (use --fit sgd, or a network on it as a "
                         "base)", cfg->model);
     if (!st && (cfg->motion_fraction > 0.0f || cfg->frames == 3) &&
-        (cfg->scale_jitter > 0.0f || cfg->transpose))
-        st = lm_err_set(err, LM_ERR_ARG, "config: 'scale_jitter' / 'transpose' with "
+        (cfg->scale_jitter > 0.0f || cfg->transpose || cfg->collage > 0.0f))
+        st = lm_err_set(err, LM_ERR_ARG, "config: 'scale_jitter' / 'transpose' / 'collage' with "
                         "'motion_fraction' or 'frames' 3: moving and multi-frame samples are "
-                        "cut from the scene on the tile grid, without zoom or transposition");
+                        "cut from one scene on the tile grid, without zoom, transposition or "
+                        "collage");
     if (!st && closed && (cfg->illum_jitter > 0.0f || cfg->gain_jitter > 0.0f))
         st = lm_err_set(err, LM_ERR_ARG, "config: 'illum_jitter' / 'gain_jitter': augmentation "
                         "of SGD training; the closed-form fit of %s reads the scenes as they are "

@@ -100,6 +100,8 @@ typedef struct lm_train_cfg {
     float scale_jitter;             /* training scene samples' zoom range: (1 + this)^U[-1, 1]
                                      * (data/dataset.h; 0 = off) */
     int transpose;                  /* 1: training scene samples transposed half of the time */
+    float collage;                  /* share of training scene samples with another scene's
+                                     * patch pasted across an edge (data/dataset.h; 0 = off) */
     char snapshots[128];            /* "5,15,30": weights at these minutes of training time into
                                      * <output>/snapshots/<M>min/ ("" = none) */
     /* what "training time" (minutes, snapshots, the checkpoint's seconds) counts: "wall"

@@ -54,10 +54,14 @@ expect_error "bucket-0 noise ratio for SGD training" 2 "not of SGD training" "$T
   "$LM" train --model rt-8 --fit-b0-noise 0.3 --data "$CAVE" --output "$T/e7"
 expect_error "bucket-0 noise ratio for a one-bucket floor" 2 "bucket-0 noise ratio" "$T/e8" -- \
   "$LM" train --model lmmse --fit-b0-noise 0.3 --data "$CAVE" --fit-patches 16 --output "$T/e8"
-expect_error "zoom of multi-frame samples" 2 "without zoom or transposition" "$T/e9" -- \
+expect_error "zoom of multi-frame samples" 2 "without zoom, transposition or collage" "$T/e9" -- \
   "$LM" train --model rt-8-mf3 --scale-jitter 0.3 $TR --output "$T/e9"
-expect_error "transposition of moving samples" 2 "without zoom or transposition" "$T/e10" -- \
+expect_error "transposition of moving samples" 2 "without zoom, transposition or collage" "$T/e10" -- \
   "$LM" train --model rt-8 --motion-fraction 0.5 --transpose 1 --data "$CAVE" --output "$T/e10"
 expect_error "zoom out of range" 2 "scale-jitter" "$T/e11" -- \
   "$LM" train --model rt-8 --scale-jitter 2 --data "$CAVE" --output "$T/e11"
+expect_error "collage of multi-frame samples" 2 "without zoom, transposition or collage" "$T/e12" -- \
+  "$LM" train --model rt-8-mf3 --collage 0.3 $TR --output "$T/e12"
+expect_error "collage share out of range" 2 "collage" "$T/e13" -- \
+  "$LM" train --model rt-8 --collage 1.5 --data "$CAVE" --output "$T/e13"
 finish
