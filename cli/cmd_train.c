@@ -1,9 +1,14 @@
 /* cmd_train.c — `lumosaic train`: train a reconstruction network from a JSON run config and/or
  * flags (every config field is also a flag), with checkpoints, validation, a CSV log and
  * `--resume DIR` to continue a run exactly. What it is not: the loop (train/train.c). */
+#include <dirent.h>
+#include <errno.h>
+#include <limits.h>
 #include <malloc.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include "cli/cli_util.h"
 #include "cli/commands.h"
@@ -12,7 +17,8 @@
 
 static void help(void)
 {
-    printf("usage: lumosaic train [--config RUN.json] [--resume DIR] [options]\n\n"
+    printf("usage: lumosaic train [--config RUN.json] [--resume DIR] [--fork DIR --output NEW]\n"
+           "                      [options]\n\n"
            "Train a network (Adam, L1 on the 33-channel target, gradient accumulation) on scenes\n"
            "simulated through the system description, mixed with synthetic spectra. Values come\n"
            "from the defaults (the paper's), then --config, then the flags below. The run folder\n"
@@ -21,7 +27,13 @@ static void help(void)
            "                                 with '_' for '-'; data/system paths are relative to it)\n"
            "  --resume DIR                   continue the run in DIR from its last checkpoint (its\n"
            "                                 config.json; flags override, e.g. --iterations); a\n"
-           "                                 folder without one starts again from its config\n"
+           "                                 folder without one starts again from its config; the\n"
+           "                                 flags given are written to its config.json\n"
+           "  --fork DIR                     continue the run in DIR in a new run folder (--output):\n"
+           "                                 its checkpoint, optimizer state and log copied, its\n"
+           "                                 config with the flags given (e.g. another augmentation\n"
+           "                                 or --iterations for a shorter schedule); DIR is left as\n"
+           "                                 it is, so both can go on and be compared\n"
            "  --stop-after N                 stop after N iterations of this invocation\n"
            "  --quiet                        no progress output\n");
     lm_train_cfg_print_help(stdout);
@@ -34,7 +46,7 @@ static void help(void)
 }
 
 typedef struct train_args {
-    const char *config, *resume;
+    const char *config, *resume, *fork;
     long long stop_after;
     lm_cli_common com; /* --quiet (threads, device and seed are run-config fields) */
 } train_args;
@@ -49,7 +61,8 @@ static int first_pass(lm_cli *c, train_args *a)
             return 0;
         }
         if ((r = lm_cli_value(c, "--config", &a->config)) ||
-            (r = lm_cli_value(c, "--resume", &a->resume))) {
+            (r = lm_cli_value(c, "--resume", &a->resume)) ||
+            (r = lm_cli_value(c, "--fork", &a->fork))) {
             if (r < 0) return 2;
             continue;
         }
@@ -65,7 +78,7 @@ static int second_pass(lm_cli *c, train_args *a, lm_train_cfg *cfg)
         int r;
         const char *v;
         if ((r = lm_cli_value(c, "--config", &v)) || (r = lm_cli_value(c, "--resume", &v)) ||
-            (r = lm_cli_int(c, "--stop-after", 1, 1000000000000LL, &a->stop_after)) ||
+            (r = lm_cli_value(c, "--fork", &v)) || (r = lm_cli_int(c, "--stop-after", 1, 1000000000000LL, &a->stop_after)) ||
             (r = lm_cli_common_opt(c, LM_CLI_QUIET, 0, &a->com))) {
             if (r < 0) return 2;
             continue;
@@ -115,14 +128,81 @@ static int load_base(lm_cli *c, const train_args *a, lm_train_cfg *cfg)
 {
     lm_err e = {0};
     lm_train_cfg_default(cfg);
-    if (a->resume) {
+    if (a->resume && a->fork)
+        return lm_cli_error(c, "--resume and --fork: give one (--fork DIR --output NEW continues "
+                            "DIR in NEW)");
+    if (a->fork && a->config)
+        return lm_cli_error(c, "--fork and --config: the fork starts from DIR's config; give "
+                            "the fields to change as flags");
+    const char *from = a->resume ? a->resume : a->fork;
+    if (from) {
         char path[LM_TRAIN_PATH_LEN + 16];
-        snprintf(path, sizeof path, "%s/config.json", a->resume);
+        snprintf(path, sizeof path, "%s/config.json", from);
         if (lm_train_cfg_load(cfg, path, &e)) return lm_cli_error(c, "%s", e.msg);
-        snprintf(cfg->output, sizeof cfg->output, "%s", a->resume);
+        snprintf(cfg->output, sizeof cfg->output, "%s", from);
     }
     if (a->config && lm_train_cfg_load(cfg, a->config, &e)) return lm_cli_error(c, "%s", e.msg);
     return 1;
+}
+
+/* Copy the file src to dst (n: what to call it in an error). 0, or 1 with the error printed. */
+static int copy_file(lm_cli *c, const char *src, const char *dst)
+{
+    FILE *in = fopen(src, "rb"), *out = in ? fopen(dst, "wb") : NULL;
+    int ok = in && out;
+    char buf[1 << 16];
+    size_t n;
+    while (ok && (n = fread(buf, 1, sizeof buf, in)) > 0) ok = fwrite(buf, 1, n, out) == n;
+    ok = ok && !ferror(in);
+    if (in) fclose(in);
+    if (out && fclose(out) != 0) ok = 0;
+    if (!ok) lm_cli_error(c, "--fork: cannot copy %s to %s: %s", src, dst, strerror(errno));
+    return !ok;
+}
+
+/* --fork SRC: the new run folder cfg->output (which must not hold a run) with SRC's checkpoint,
+ * optimizer state, log and any other top-level file (a QDO run's DOE state) copied, and cfg
+ * (SRC's config with the flags) as its config.json; staged, so nothing half-made is left.
+ * Returns 1 to go on and resume it, else the exit status (error printed). */
+static int make_fork(lm_cli *c, const char *src, const char *src_out, lm_train_cfg *cfg)
+{
+    char a[PATH_MAX], b[PATH_MAX], p[LM_TRAIN_PATH_LEN + 600], q[LM_TRAIN_PATH_LEN + 600];
+    if (!strcmp(cfg->output, src_out))
+        return lm_cli_error(c, "--fork %s: give the new run folder with --output", src);
+    if (realpath(src, a) && realpath(cfg->output, b) && !strcmp(a, b))
+        return lm_cli_error(c, "--fork %s: --output is the same folder", src);
+    snprintf(p, sizeof p, "%s/model.safetensors", src);
+    snprintf(q, sizeof q, "%s/optimizer.safetensors", src);
+    if (access(p, F_OK) != 0 || access(q, F_OK) != 0)
+        return lm_cli_error(c, "--fork %s: no checkpoint there (model.safetensors and "
+                            "optimizer.safetensors) to continue from", src);
+    char tmp[LM_TRAIN_PATH_LEN + 64];
+    int r = lm_cli_stage_dir(c, cfg->output, tmp, sizeof tmp);
+    if (r) return r;
+    DIR *dir = opendir(src);
+    int bad = !dir;
+    if (bad) lm_cli_error(c, "--fork %s: cannot read the folder: %s", src, strerror(errno));
+    for (struct dirent *e; !bad && (e = readdir(dir));) {
+        struct stat st;
+        snprintf(p, sizeof p, "%s/%s", src, e->d_name);
+        if (e->d_name[0] == '.' || !strcmp(e->d_name, "config.json") || stat(p, &st) != 0 ||
+            !S_ISREG(st.st_mode))
+            continue; /* folders (snapshots/, eval outputs) stay with the original */
+        snprintf(q, sizeof q, "%s/%s", tmp, e->d_name);
+        bad = copy_file(c, p, q);
+    }
+    if (dir) closedir(dir);
+    lm_err e = {0};
+    snprintf(q, sizeof q, "%s/config.json", tmp);
+    if (!bad && lm_train_cfg_save(cfg, q, &e)) {
+        lm_cli_error(c, "%s", e.msg);
+        bad = 1;
+    }
+    if (bad) {
+        lm_cli_remove_tree(tmp);
+        return LM_EXIT_FAILED;
+    }
+    return lm_cli_commit_dir(c, tmp, cfg->output) ? LM_EXIT_FAILED : 1;
 }
 
 int lm_cmd_train(int argc, char **argv)
@@ -135,11 +215,26 @@ int lm_cmd_train(int argc, char **argv)
     int rank = lm_dist_init(NULL, NULL) > 1 ? lm_dist_rank() : 0;
     int r = first_pass(&c, &a);
     if (r == 1) r = load_base(&c, &a, &cfg);
+    static char src_out[LM_TRAIN_PATH_LEN], fork_dir[LM_TRAIN_PATH_LEN];
+    snprintf(src_out, sizeof src_out, "%s", cfg.output);
     if (r == 1) {
         lm_cli_init(&c, "lumosaic train", argc, argv);
         r = second_pass(&c, &a, &cfg);
     }
     if (r != 1) return r;
+    if (a.fork && lm_dist_size() > 1)
+        return lm_cli_error(&c, "--fork under mpirun: make the fork in one process (--fork DIR "
+                            "--output NEW --stop-after 1), then --resume NEW under mpirun");
+    if (a.fork) {
+        lm_err e0 = {0};
+        if (lm_train_cfg_validate(&cfg, &e0)) return lm_cli_error(&c, "%s", e0.msg);
+        if (rank == 0 && (r = make_fork(&c, a.fork, src_out, &cfg)) != 1) return r;
+        snprintf(fork_dir, sizeof fork_dir, "%s", cfg.output);
+        a.resume = fork_dir; /* the fork is resumed like any run folder */
+        if (!a.com.quiet && rank == 0)
+            printf("train: %s continues %s (its checkpoint, optimizer state and log)\n",
+                   fork_dir, a.fork);
+    }
     if (a.resume) snprintf(cfg.output, sizeof cfg.output, "%s", a.resume);
     const lm_train_recipe *rec = lm_train_cfg_apply_recipe(&cfg);
     lm_err e = {0};

@@ -511,7 +511,15 @@ static lm_status begin(loop *L, long *start, lm_err *err)
                           "this run has %d; another count changes the global batch (processes x "
                           "batch) and the sample stream, so resume with %d (mpirun -np %d, or "
                           "no mpirun for 1)", L->opts->resume, ranks, L->nranks, ranks, ranks);
-    return L->rank ? LM_OK : open_log(L, 1, *start, err);
+    if (L->rank) return LM_OK;
+    /* the config this invocation runs with (its flags over the folder's) becomes the run's, so
+     * that a later --resume without them goes on the same way */
+    char path[LM_TRAIN_PATH_LEN + 16];
+    snprintf(path, sizeof path, "%s/config.json", cfg->output);
+    hold(L, 1);
+    lm_status st = lm_train_cfg_save(cfg, path, err);
+    hold(L, 0);
+    return st ? st : open_log(L, 1, *start, err);
 }
 
 

@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# fork.sh — end-to-end tests of `lumosaic train --fork DIR --output NEW`: a fork continues its
+# parent exactly (the same losses as the parent resumed, bit for bit), the flags given change
+# the fork's config.json and not the parent's, a later --resume keeps them (so does a --resume
+# given flags), and bad input: exit status, one-line message, nothing written.
+# usage: fork.sh LUMOSAIC MAKE_CUBE
+source "$(dirname "$0")/lib.sh"
+TR="--model rt-8 --data $CAVE --patch 24x32 --batch 2 --val-patches 2 --val-interval 3 --threads 1 --workers 0 --seed 3 --quiet"
+"$LM" train $TR --iterations 6 --stop-after 3 --output "$T/a" > "$T/log" 2>&1
+check "parent trained to iteration 3: $(cat "$T/log")" grep -q '^3,' "$T/a/log.csv"
+"$LM" train --fork "$T/a" --output "$T/b" --quiet > "$T/log" 2>&1
+check "fork runs: $(cat "$T/log")" [ $? -eq 0 ]
+"$LM" train --resume "$T/a" --quiet > /dev/null 2>&1
+check "fork finished" grep -q '^6,' "$T/b/log.csv"
+check "the fork's losses are its parent's, resumed" cmp -s "$T/a/log.csv" "$T/b/log.csv"
+check "the fork does not copy the parent's snapshots" [ ! -e "$T/b/snapshots" ]
+
+"$LM" train --fork "$T/a" --output "$T/c" --iterations 9 --collage 0.5 --stop-after 1 --quiet \
+  > /dev/null 2>&1
+check "the flags go into the fork's config" grep -q '"iterations": 9' "$T/c/config.json"
+check "the collage share too" grep -q '"collage": 0.5' "$T/c/config.json"
+check "the parent's config is unchanged" grep -q '"iterations": 6' "$T/a/config.json"
+check "paths of the fork's config are relative to it" grep -q '"data": \[' "$T/c/config.json"
+"$LM" train --resume "$T/c" --quiet > /dev/null 2>&1
+check "a resume without flags keeps the fork's schedule" grep -q '^9,' "$T/c/log.csv"
+"$LM" train --resume "$T/b" --iterations 8 --stop-after 1 --quiet > /dev/null 2>&1
+check "a resume with flags writes them to the config" grep -q '"iterations": 8' "$T/b/config.json"
+
+R="$LM train"
+expect_error "no output" 2 "give the new run folder with --output" "$T/a.tmp" -- $R --fork "$T/a"
+expect_error "same folder" 2 "--output is the same folder" "$T/x" -- $R --fork "$T/a" --output "$T/a/../a"
+expect_error "not a run" 2 "config.json" "$T/d" -- $R --fork "$T/nope" --output "$T/d"
+expect_error "into a run folder" 2 "$T/b" "$T/e" -- $R --fork "$T/a" --output "$T/b"
+expect_error "fork and resume" 2 "--resume and --fork" "$T/f" -- $R --fork "$T/a" --resume "$T/b" --output "$T/f"
+mkdir -p "$T/nock" && cp "$T/a/config.json" "$T/nock/"
+expect_error "no checkpoint" 2 "no checkpoint there" "$T/g" -- $R --fork "$T/nock" --output "$T/g"
+expect_error "bad flag" 2 "collage" "$T/h" -- $R --fork "$T/a" --output "$T/h" --collage 3
+finish
