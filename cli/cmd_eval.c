@@ -34,7 +34,8 @@ static void help(void)
            "around the largest band of the row's mean spectrum) against the true one.\n"
            "s/frame: the reconstruction's seconds per frame (simulation and scoring not\n"
            "counted). A scored scene that the model was trained on (its content hash is among\n"
-           "those the checkpoint records) gets a warning line: its score is not held out.\n\n"
+           "those the checkpoint records) gets a warning line: its score is not held out (one\n"
+           "line names them all when there are more than three).\n\n"
            "  --model RUN      a training run folder or a .safetensors written by 'lumosaic train'\n"
            "  DATA...          scenes (CAVE folders, .mat, spectral .exr) or folders of scenes;\n"
            "                   bands other than 31 at 400-700 nm are resampled (docs/system.md)\n"
@@ -216,13 +217,24 @@ static void log_line(void *user, const char *line)
     fprintf(stderr, "%s\n", line);
 }
 
-/* A warning line for each scored scene the model was trained on (by content); one note when
- * the model records no training scenes. */
+/* A warning line for each scored scene the model was trained on (by content), or one line
+ * naming them when there are more than three (e.g. --split train); one note when the model
+ * records no training scenes. */
 static void warn_overlap(const lm_eval_run *r)
 {
     if (r->overlap_unknown) {
         fprintf(stderr, "lumosaic eval: note: %s records no training scenes: overlap with "
                 "the scored scenes is not checked\n", r->im.weights);
+        return;
+    }
+    int n = 0;
+    for (int i = 0; i < r->nsc; i++) n += r->sc[i].trained > 0;
+    if (n > 3) {
+        fprintf(stderr, "lumosaic eval: warning: %d of the %d scored scenes were in the model's "
+                "training set (", n, r->nsc);
+        for (int i = 0, k = 0; i < r->nsc; i++)
+            if (r->sc[i].trained > 0) fprintf(stderr, "%s%s", k++ ? ", " : "", r->sc[i].name);
+        fprintf(stderr, "): their scores are not held-out scores\n");
         return;
     }
     for (int i = 0; i < r->nsc; i++)

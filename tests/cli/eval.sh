@@ -168,6 +168,14 @@ check "a renamed copy of a training scene is warned" \
 check "one warning only (not the other scene)" [ "$(grep -c 'warning: scene' "$T/serr")" -eq 1 ]
 "$LM" eval --model "$R" "$T/other" --split all --noise 0 --rainbow 0 > /dev/null 2> "$T/serr"
 check "no training scene scored: no warning ($(cat "$T/serr"))" bash -c "! grep -q warning '$T/serr'"
+# many training scenes scored (the bundled model on its own training split): one line names them
+BM=$(cd "$(dirname "$0")/../.." && pwd)/models/demo/tn96nc-lmmse.safetensors
+"$LM" eval --model "$BM" "$SHARED/data/cave" "$SHARED/data/cave-256" --split train --noise 0 \
+  --rainbow 0 > /dev/null 2> "$T/terr"
+check "--split train: one warning line ($(head -c 300 "$T/terr"))" \
+  [ "$(grep -c warning "$T/terr")" -eq 1 ]
+check "--split train: it counts and names the training scenes" \
+  grep -q "warning: 21 of the 21 scored scenes were in the model's training set (.*balloons" "$T/terr"
 expect_error "--scenes: unknown name" 2 "--scenes: no scene 'nope' among the 2 given" "$T/e14" -- \
   "$LM" eval --model "$R" "$T/copy" "$T/other" --scenes synthetic,nope --output "$T/e14"
 expect_error "--scenes with --split" 2 "not both" "$T/e15" -- \
