@@ -35,7 +35,7 @@ extern "C" {
 /* The version of this header. A library with the same major version and a minor version at
  * least this one runs programs built against it (lm_api_version gives the library's). */
 #define LM_API_VERSION_MAJOR 0
-#define LM_API_VERSION_MINOR 2
+#define LM_API_VERSION_MINOR 3
 #define LM_API_VERSION_PATCH 0
 
 #if defined(__GNUC__)
@@ -175,6 +175,14 @@ LM_API lm_api_status lm_api_model_load_auto(const char *calibration, double tol_
                                             const lm_api_system *sys, lm_api_model **out,
                                             lm_api_error *err);
 LM_API void lm_api_model_free(lm_api_model *model);
+/* Average the weights of n trained models of one preset (and base) into one model file, as
+ * `lumosaic average --output out_path PATHS...` does: paths are n (2..64) run folders or
+ * .safetensors files written by `lumosaic train`, all of one preset, base, system description,
+ * buckets and frames (else LM_API_ERR_ARG naming two of them); every parameter the inputs'
+ * mean (elements equal in all of them kept exactly); out_path (.safetensors) written
+ * atomically. Load it with lm_api_model_load. Since API 0.3. */
+LM_API lm_api_status lm_api_model_average(const char *const *paths, int n, const char *out_path,
+                                          lm_api_error *err);
 /* The model's preset name (e.g. "rt-16-nc+lmmse"; "auto" for a calibrated choice), the
  * buckets it reads (1 or 2) and its mosaic tile; any pointer may be NULL. */
 LM_API lm_api_status lm_api_model_info(const lm_api_model *model, const char **preset,

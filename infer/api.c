@@ -12,6 +12,7 @@
 #include <string.h>
 #include "data/api_internal.h"
 #include "data/limits.h"
+#include "infer/average.h"
 #include "infer/pipeline.h"
 #include "infer/recon.h"
 
@@ -55,6 +56,22 @@ lm_api_status lm_api_model_load(const char *path, const lm_api_system *sys,
     lm_pipe_default_opts(&po);
     po.model = path;
     return model_open(&po, sys, path, out, err);
+}
+
+lm_api_status lm_api_model_average(const char *const *paths, int n, const char *out_path,
+                                   lm_api_error *err)
+{
+    if (!paths || !out_path)
+        return lm_api_fail(err, LM_API_ERR_ARG, "lm_api_model_average: paths or out_path is "
+                           "NULL");
+    for (int i = 0; i < n && n <= LM_AVERAGE_MAX; i++)
+        if (!paths[i])
+            return lm_api_fail(err, LM_API_ERR_ARG, "lm_api_model_average: paths[%d] is NULL",
+                               i);
+    lm_err e;
+    lm_err_clear(&e);
+    if (lm_model_average(paths, n, out_path, &e)) return lm_api_from_err(&e, err);
+    return lm_api_ok(err);
 }
 
 lm_api_status lm_api_model_load_bundled(int buckets, const lm_api_system *sys,

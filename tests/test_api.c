@@ -11,6 +11,7 @@
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 #include <unistd.h>
 #include "include/lumosaic.h"
 #include "check.h"
@@ -360,6 +361,38 @@ static void test_u16_as_infer(void)
     lm_api_model_free(m);
 }
 
+/* lm_api_model_average: a model averaged with itself reconstructs as the model does, bit for
+ * bit; models of other presets and NULL arguments are refused. */
+static void test_average(void)
+{
+    char dir[] = "/tmp/lm_test_api_avg_XXXXXX", out[300];
+    CHECK(mkdtemp(dir) != NULL);
+    snprintf(out, sizeof out, "%s/self.safetensors", dir);
+    lm_api_error err;
+    const char *same[2] = {MODEL, MODEL},
+               *other[2] = {MODEL, "models/demo/tn96nc-lmmse.safetensors"};
+    CHECK_MSG(lm_api_model_average(same, 2, out, &err) == LM_API_OK, "%s", err.message);
+    CHECK(lm_api_model_average(other, 2, out, &err) == LM_API_ERR_ARG &&
+          strstr(err.message, "one preset"));
+    CHECK(lm_api_model_average(NULL, 2, out, &err) == LM_API_ERR_ARG);
+    CHECK(lm_api_model_average(same, 1, out, &err) == LM_API_ERR_ARG);
+    lm_api_model *a = NULL, *b = NULL;
+    CHECK(lm_api_model_load(MODEL, NULL, &a, &err) == LM_API_OK);
+    CHECK_MSG(lm_api_model_load(out, NULL, &b, &err) == LM_API_OK, "%s", err.message);
+    enum { H = 66, W = 64 };
+    static float frame[H * W], ca[31 * H * W], cb[31 * H * W];
+    for (int i = 0; i < H * W; i++) frame[i] = 0.3f + 0.2f * sinf(0.37f * (float)i);
+    lm_api_frame f = {H, W, LM_API_PIXEL_F32, frame, NULL};
+    if (a && b) {
+        CHECK(lm_api_reconstruct(a, &f, ca, sizeof ca / sizeof *ca, NULL, &err) == LM_API_OK);
+        CHECK(lm_api_reconstruct(b, &f, cb, sizeof cb / sizeof *cb, NULL, &err) == LM_API_OK);
+        CHECK(!memcmp(ca, cb, sizeof ca));
+    }
+    lm_api_model_free(a), lm_api_model_free(b);
+    unlink(out);
+    rmdir(dir);
+}
+
 int main(void)
 {
     snprintf(scene, sizeof scene, "%s/data/cave-256/cd_256", shared_dir());
@@ -373,6 +406,7 @@ int main(void)
     RUN(test_bad_files);
     RUN(test_against_eval);
     RUN(test_u16_as_infer);
+    RUN(test_average);
     char cmd[1200];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
     if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmpdir);

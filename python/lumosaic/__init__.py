@@ -43,7 +43,7 @@ from . import _capi
 from ._capi import Error, Status
 
 __all__ = ["Error", "Status", "Noise", "Metrics", "System", "Model", "simulate", "read_cube",
-           "write_cube", "srgb", "metrics", "__version__"]
+           "write_cube", "srgb", "metrics", "average", "__version__"]
 
 #: The library's API version ("MAJOR.MINOR.PATCH", from ``lm_api_version``).
 __version__: str = _capi.version()
@@ -284,6 +284,26 @@ def simulate(cube: np.ndarray, system: Union[System, PathLike, None] = None,
     finally:
         _capi.lib.lm_api_cube_free(handle)
     return (b1, b0) if bucket0 else b1
+
+
+def average(models: Sequence[PathLike], output: PathLike) -> None:
+    """Average the weights of trained models of one preset (and base) into one model file, as
+    ``lumosaic average --output OUTPUT MODELS...`` does: checkpoints of one run, or runs forked
+    from one checkpoint (a "model soup"). Every parameter becomes the models' mean; elements
+    equal in all of them (a frozen base) are kept exactly. Load the result with :class:`Model`
+    and score it against the models it came from.
+
+    Args:
+        models: 2 to 64 run folders or ``.safetensors`` files written by ``lumosaic train``, of
+            one preset, base, system description, buckets and frames.
+        output: the ``.safetensors`` file to write (atomically).
+
+    Raises:
+        Error: models of different presets or systems, unreadable files, an unwritable output.
+    """
+    paths = [_path(m) for m in models]
+    arr = (ctypes.c_char_p * max(len(paths), 1))(*paths)
+    _capi.call("model_average", arr, len(paths), _path(output))
 
 
 def _shape(handle) -> Tuple[int, int, int]:

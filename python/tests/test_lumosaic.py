@@ -243,6 +243,18 @@ def test_auto_and_bundled_models(tmp_path):
 
 
 @need_scene
+def test_average_of_a_model_with_itself_is_the_model(tmp_path, model, truth):
+    out = tmp_path / "self.safetensors"
+    lumosaic.average([MODEL, MODEL], out)
+    frame = lumosaic.simulate(truth, noise=0.0)
+    with lumosaic.Model(out, threads=THREADS) as soup:
+        np.testing.assert_array_equal(soup.reconstruct(frame), model.reconstruct(frame))
+    with pytest.raises(lumosaic.Error, match="one preset"):
+        lumosaic.average([MODEL, REPO / "models/demo/tn96nc-lmmse.safetensors"], out)
+    with pytest.raises(lumosaic.Error, match="2 to 64"):
+        lumosaic.average([MODEL], out)
+
+
 def test_metrics_as_defined(model, truth):
     """The library's metrics (the code `lumosaic eval` scores with) against their definitions
     in numpy: the binding hands over the bands in the right order, whatever the layout."""
