@@ -365,6 +365,8 @@ static lm_status plan_sample(const lm_dataset *d, lm_data_split split, long i, s
         in->kind = LM_SAMPLE_NARROWBAND;
     } else if (train && u_synth < c->synth_fraction + c->procedural_fraction) {
         in->kind = LM_SAMPLE_PROCEDURAL;
+    } else if (train && u_synth < c->synth_fraction + c->procedural_fraction + c->fine_fraction) {
+        in->kind = LM_SAMPLE_FINE;
     } else {
         int n = d->count[split];
         if (n == 0)
@@ -574,6 +576,8 @@ static lm_status sample_cube(lm_dataset *d, sample_plan *p, lm_data_split split,
     lm_status st;
     if (in->kind == LM_SAMPLE_PROCEDURAL) {
         st = lm_synth_scene(p->synth_seed, ph, pw, &d->pal, &src, err);
+    } else if (in->kind == LM_SAMPLE_FINE) {
+        st = lm_synth_fine(p->synth_seed, ph, pw, &d->pal, &src, err);
     } else {
         st = lm_ds_scene_acquire(d, d->list[split][in->scene], &ref, err);
         if (st == LM_OK) src = *ref.cube;
@@ -591,7 +595,7 @@ static lm_status sample_cube(lm_dataset *d, sample_plan *p, lm_data_split split,
                 for (int x = 0; x < pw; x++) drow[x] = srow[in->flip_h ? pw - 1 - x : x];
             }
     }
-    if (in->kind == LM_SAMPLE_PROCEDURAL) lm_cube_free(&src);
+    if (in->kind == LM_SAMPLE_PROCEDURAL || in->kind == LM_SAMPLE_FINE) lm_cube_free(&src);
     else if (ref.cube) lm_ds_scene_release(d, &ref);
     if (st == LM_OK && in->collage) st = paste_collage(d, in, split, out, err);
     return st;
@@ -839,6 +843,9 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
     if (c->collage > 0)
         snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; collage %.0f%%",
                  100.0 * c->collage);
+    if (c->fine_fraction > 0)
+        snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; fine narrowband synthetic "
+                 "%.0f%%", 100.0 * c->fine_fraction);
     fprintf(f, "dataset: %d scenes in %d groups; patch %d x %d; narrowband synthetic %.0f%%, "
             "procedural %.0f%%; %s%s; flips %s; seed %llu; %d "
             "workers; cache %d scenes%s\n", d->nscenes, d->ngroups, c->patch_h, c->patch_w,
@@ -879,10 +886,11 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
                           "of the %d x %d tile", c->patch_h, c->patch_w, s->tile_rows,
                           s->tile_cols);
     if (!(c->synth_fraction >= 0.0f && c->procedural_fraction >= 0.0f &&
-          c->synth_fraction + c->procedural_fraction <= 1.0f))
-        return lm_err_set(err, LM_ERR_ARG, "dataset: synth_fraction and procedural_fraction must "
-                          "be >= 0 with a sum <= 1 (got %g, %g)", c->synth_fraction,
-                          c->procedural_fraction);
+          c->fine_fraction >= 0.0f &&
+          c->synth_fraction + c->procedural_fraction + c->fine_fraction <= 1.0f))
+        return lm_err_set(err, LM_ERR_ARG, "dataset: synth_fraction, procedural_fraction and "
+                          "fine_fraction must be >= 0 with a sum <= 1 (got %g, %g, %g)",
+                          c->synth_fraction, c->procedural_fraction, c->fine_fraction);
     if (!(c->noise_min >= 0.0f && c->noise_max >= c->noise_min && isfinite(c->noise_max)) ||
         !(c->val_noise >= 0.0f && isfinite(c->val_noise)))
         return lm_err_set(err, LM_ERR_ARG, "dataset: need 0 <= noise_min <= noise_max and "
@@ -916,7 +924,7 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
     if (c->buckets < 0 || c->buckets > 2)
         return lm_err_set(err, LM_ERR_ARG, "dataset: buckets %d (1: bucket 1 only, 2: both)",
                           c->buckets);
-    if (c->npaths == 0 && c->synth_fraction + c->procedural_fraction < 1.0f)
+    if (c->npaths == 0 && c->synth_fraction + c->procedural_fraction + c->fine_fraction < 1.0f)
         return lm_err_set(err, LM_ERR_ARG, "dataset: no scene paths given (only a fully "
                           "synthetic dataset, synth_fraction + procedural_fraction = 1, needs "
                           "none)");
@@ -945,7 +953,7 @@ lm_dataset *lm_dataset_open(const lm_dataset_cfg *cfg, lm_err *err)
     pthread_cond_init(&d->done_cv, NULL);
     lm_status st = open_scenes(d, err);
     d->cfg.paths = NULL; /* the caller's list is only read during open */
-    if (st == LM_OK && cfg->synth_fraction + cfg->procedural_fraction > 0.0f)
+    if (st == LM_OK && cfg->synth_fraction + cfg->procedural_fraction + cfg->fine_fraction > 0.0f)
         st = lm_synth_palette_load(&d->pal, err);
     lm_rng base;
     lm_rng_seed(&base, cfg->seed);

@@ -86,6 +86,9 @@ typedef struct lm_dataset_cfg {
     int transpose;              /* 1: each training scene sample transposed with probability
                                  * 1/2 (when the scene holds the turned region); with flips,
                                  * every quarter turn and mirror */
+    float fine_fraction;        /* share of procedural scenes with fine narrowband detail
+                                 * (lm_synth_fine: strokes, iridescence), drawn after the
+                                 * procedural share (the three synthetic shares sum to <= 1) */
     float collage;              /* share of training scene samples with a patch of another
                                  * training scene (any one, anywhere, its own flips) pasted in
                                  * across a straight edge of random direction through the
@@ -189,7 +192,8 @@ char *lm_dataset_split_hashes(const lm_dataset *d, lm_data_split split);
 typedef enum lm_sample_kind {
     LM_SAMPLE_SCENE = 0,       /* a patch of a real scene */
     LM_SAMPLE_NARROWBAND = 1,  /* synthetic: textureless Gaussian spectrum */
-    LM_SAMPLE_PROCEDURAL = 2   /* synthetic: procedural scene */
+    LM_SAMPLE_PROCEDURAL = 2,  /* synthetic: procedural scene */
+    LM_SAMPLE_FINE = 3         /* synthetic: procedural scene with fine narrowband detail */
 } lm_sample_kind;
 
 /* What sample i of a split is made of (drawn exactly as lm_dataset_batch /

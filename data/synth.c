@@ -366,3 +366,100 @@ lm_status lm_synth_scene(uint64_t seed, int h, int w, const lm_synth_palette *pa
     free(p);
     return LM_OK;
 }
+
+/* ---- fine narrowband detail ------------------------------------------------------------ */
+/* Binned narrowband spectra of one FWHM for peaks at 400, 401, ..., 700 nm (301 x 31). */
+static lm_status narrow_table(double fwhm, float *tab, lm_err *err)
+{
+    for (int k = 0; k <= 300; k++) {
+        lm_synth_gauss g = {1, {400.0 + k, 0.0}, fwhm};
+        lm_status st = lm_synth_gauss_bins(&g, tab + (size_t)k * LM_SYNTH_BANDS, err);
+        if (st) return st;
+    }
+    return LM_OK;
+}
+
+static const float *narrow_at(const float *tab, double peak)
+{
+    int k = (int)lround(peak - 400.0);
+    return tab + (size_t)(k < 0 ? 0 : k > 300 ? 300 : k) * LM_SYNTH_BANDS;
+}
+
+/* Blend spectrum s (times a) into pixel (y, x) with weight al. */
+static void blend_px(lm_cube *c, int y, int x, float al, float a, const float *s)
+{
+    const size_t plane = (size_t)c->height * c->width, o = (size_t)y * c->width + x;
+    for (int b = 0; b < LM_SYNTH_BANDS; b++) {
+        float *v = c->data + b * plane + o;
+        *v = (1.0f - al) * *v + al * a * s[b];
+    }
+}
+
+lm_status lm_synth_fine(uint64_t seed, int h, int w, const lm_synth_palette *pal,
+                        lm_cube *cube, lm_err *err)
+{
+    lm_status st = lm_synth_scene(seed, h, w, pal, cube, err);
+    if (st) return st;
+    /* tables for FWHM 10, 15, ..., 40 nm, made when first drawn */
+    float *tabs = malloc(sizeof(float) * 7 * 301 * LM_SYNTH_BANDS), *tab = NULL;
+    unsigned char made[7] = {0};
+    if (!tabs) {
+        lm_cube_free(cube);
+        return lm_err_set(err, LM_ERR_NOMEM, "synth fine: out of memory");
+    }
+    lm_rng r;
+    lm_rng_seed(&r, seed ^ 0xF1E5EEDull);
+    if (lm_rng_below(&r, 2)) { /* the iridescent sheet */
+        const float th = lm_rng_uniform_range(&r, 0.0f, 6.2831853f), ny = sinf(th),
+                    nx = cosf(th), py = lm_rng_uniform(&r) * (float)h,
+                    px = lm_rng_uniform(&r) * (float)w;
+        const float period = lm_rng_uniform_range(&r, 4.0f, 32.0f),
+                    ph = lm_rng_uniform(&r), a = lm_rng_uniform_range(&r, 0.5f, 1.0f),
+                    cover = lm_rng_uniform_range(&r, 0.5f, 1.0f);
+        const float ga = lm_rng_uniform_range(&r, 0.0f, 6.2831853f); /* grating direction */
+        const int fi = 1 + (int)lm_rng_below(&r, 6);
+        tab = tabs + (size_t)fi * 301 * LM_SYNTH_BANDS;
+        st = made[fi]++ ? LM_OK : narrow_table(10.0 + 5.0 * fi, tab, err);
+        for (int y = 0; y < h && !st; y++)
+            for (int x = 0; x < w; x++) {
+                const float fy = (float)y + 0.5f, fx = (float)x + 0.5f;
+                float al = 0.5f + nx * (fx - px) + ny * (fy - py);
+                al = al < 0.0f ? 0.0f : al > 1.0f ? 1.0f : al;
+                if (al == 0.0f) continue;
+                float u = (cosf(ga) * fx + sinf(ga) * fy) / period + ph;
+                u -= floorf(u);
+                const double peak = 400.0 + 300.0 * (u < 0.5f ? 2.0f * u : 2.0f - 2.0f * u);
+                blend_px(cube, y, x, al * cover, a, narrow_at(tab, peak));
+            }
+    }
+    const int strokes = 4 + (int)lm_rng_below(&r, 21);
+    for (int k = 0; k < strokes && !st; k++) {
+        const float cy = lm_rng_uniform(&r) * (float)h, cx = lm_rng_uniform(&r) * (float)w,
+                    th = lm_rng_uniform_range(&r, 0.0f, 3.1415927f),
+                    len = lm_rng_uniform_range(&r, 4.0f, 64.0f),
+                    wd = lm_rng_uniform_range(&r, 0.6f, 2.5f),
+                    p0 = lm_rng_uniform_range(&r, 400.0f, 700.0f),
+                    drift = lm_rng_uniform_range(&r, -60.0f, 60.0f),
+                    a = lm_rng_uniform_range(&r, 0.4f, 1.0f);
+        const int fi = (int)lm_rng_below(&r, 7);
+        tab = tabs + (size_t)fi * 301 * LM_SYNTH_BANDS;
+        st = made[fi]++ ? LM_OK : narrow_table(10.0 + 5.0 * fi, tab, err);
+        const float dy = sinf(th), dx = cosf(th), reach = 0.5f * len + wd + 1.0f;
+        const int y0 = (int)floorf(cy - reach), y1 = (int)ceilf(cy + reach),
+                  x0 = (int)floorf(cx - reach), x1 = (int)ceilf(cx + reach);
+        for (int y = y0 < 0 ? 0 : y0; y <= y1 && y < h && !st; y++)
+            for (int x = x0 < 0 ? 0 : x0; x <= x1 && x < w; x++) {
+                const float ry = (float)y + 0.5f - cy, rx = (float)x + 0.5f - cx;
+                float t = rx * dx + ry * dy; /* along the stroke */
+                t = t < -0.5f * len ? -0.5f * len : t > 0.5f * len ? 0.5f * len : t;
+                const float ey = ry - t * dy, ex = rx - t * dx, d = sqrtf(ey * ey + ex * ex);
+                float al = 0.5f * wd + 0.5f - d;
+                al = al < 0.0f ? 0.0f : al > 1.0f ? 1.0f : al;
+                if (al == 0.0f) continue;
+                blend_px(cube, y, x, al, a, narrow_at(tab, p0 + drift * t / len));
+            }
+    }
+    free(tabs);
+    if (st) lm_cube_free(cube);
+    return st;
+}

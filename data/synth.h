@@ -82,4 +82,17 @@ lm_status lm_synth_palette_load(lm_synth_palette *p, lm_err *err);
 lm_status lm_synth_scene(uint64_t seed, int h, int w, const lm_synth_palette *pal,
                          lm_cube *cube, lm_err *err);
 
+/* ---- fine narrowband detail ------------------------------------------------------------ */
+/* The content where a mosaic aliases, which natural training scenes hold little of: the
+ * procedural scene of `seed` (lm_synth_scene) with fine, saturated, narrowband detail on top:
+ *   - 4..24 strokes (antialiased line segments 0.6..2.5 px wide, 4..64 px long: fibres,
+ *     threads), each a narrowband spectrum (one Gaussian, FWHM 10..40 nm, height 0.4..1)
+ *     whose peak drifts along the stroke by up to +-60 nm (FWHM in 5 nm steps);
+ *   - with probability 1/2, an iridescent sheet over a half-plane (a diffraction grating's
+ *     rainbow): a narrowband spectrum whose peak sweeps 400..700 nm and back with a period of
+ *     4..32 px across it, over 50..100 % of the light below.
+ * Deterministic given seed and size; values in [0, 1]. */
+lm_status lm_synth_fine(uint64_t seed, int h, int w, const lm_synth_palette *pal,
+                        lm_cube *cube, lm_err *err);
+
 #endif

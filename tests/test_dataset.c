@@ -780,7 +780,7 @@ static void test_synthetic_share(void)
     CHECK_MSG(d != NULL, "%s", e.msg);
     if (!d) return;
     const int N = 4000;
-    int n[3] = {0, 0, 0};
+    int n[4] = {0, 0, 0, 0};
     for (long i = 0; i < N; i++) {
         lm_dataset_sample_info info;
         CHECK(lm_dataset_sample_info_get(d, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
@@ -822,6 +822,38 @@ static void test_synthetic_share(void)
     }
     CHECK(checked[1] > 0 && checked[2] > 0);
     lm_dataset_close(d);
+    /* fine narrowband detail as a third share, drawn after the other two: those keep their
+     * samples */
+    lm_dataset_cfg cf = cfg;
+    cf.fine_fraction = 0.25f;
+    lm_dataset *f = lm_dataset_open(&cf, &e), *g = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(f && g, "%s", e.msg);
+    memset(n, 0, sizeof n);
+    int same_kind = 0, fine_checked = 0;
+    for (long i = 0; f && g && i < N; i++) {
+        lm_dataset_sample_info info, ref;
+        CHECK(lm_dataset_sample_info_get(f, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        CHECK(lm_dataset_sample_info_get(g, LM_SPLIT_TRAIN, i, &ref, &e) == LM_OK);
+        n[info.kind]++;
+        same_kind += info.kind == ref.kind || (info.kind == LM_SAMPLE_FINE &&
+                                               ref.kind == LM_SAMPLE_SCENE);
+        if (info.kind == LM_SAMPLE_FINE && fine_checked < 2) {
+            CHECK(lm_dataset_batch(f, i, 1, raw, t, &e) == LM_OK);
+            float mx = 0;
+            for (size_t q = 0; q < 33 * np; q++) mx = t[q] > mx ? t[q] : mx;
+            CHECK(mx <= 1.0f && mx > 0.0f);
+            fine_checked++;
+        }
+    }
+    CHECK_CLOSE(n[LM_SAMPLE_NARROWBAND] / (double)N, 0.2, 0.025, 0);
+    CHECK_CLOSE(n[LM_SAMPLE_PROCEDURAL] / (double)N, 0.3, 0.025, 0);
+    CHECK_CLOSE(n[LM_SAMPLE_FINE] / (double)N, 0.25, 0.025, 0);
+    CHECK(same_kind == N && fine_checked == 2);
+    lm_dataset_close(f), lm_dataset_close(g);
+    cf.fine_fraction = 0.6f; /* over 1 in all */
+    lm_err_clear(&e);
+    CHECK(lm_dataset_open(&cf, &e) == NULL && e.status == LM_ERR_ARG &&
+          strstr(e.msg, "fine_fraction"));
     cfg.synth_fraction = 0.5f; /* fully synthetic: no scene needed */
     cfg.procedural_fraction = 0.5f;
     cfg.npaths = 0;

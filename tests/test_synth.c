@@ -255,6 +255,71 @@ static void test_scene_properties(void)
     lm_cube_free(&a);
 }
 
+/* Largest share of a pixel's light in one 10 nm band: a FWHM <= 40 nm Gaussian puts over a
+ * fifth of it in its peak band, the procedural scenes' broad spectra (FWHM >= 60 nm, or
+ * ColorChecker patches, over a base) far less. */
+static double peak_share(const lm_cube *c, size_t i)
+{
+    const size_t plane = (size_t)c->height * c->width;
+    double mx = 0.0, sum = 0.0;
+    for (int k = 0; k < 31; k++) {
+        const double v = c->data[k * plane + i];
+        mx = v > mx ? v : mx, sum += v;
+    }
+    return sum > 1e-6 ? mx / sum : 0.0;
+}
+
+/* lm_synth_fine: deterministic, in [0, 1], the procedural scene of its seed where no detail
+ * lies on top, and narrowband detail that the procedural scenes lack, at many hues. */
+static void test_fine_detail(void)
+{
+    lm_synth_palette pal;
+    lm_err e;
+    lm_err_clear(&e);
+    if (lm_synth_palette_load(&pal, &e) != LM_OK) return;
+    const int H = 66, W = 64;
+    const size_t plane = (size_t)H * W;
+    int nseeds = 12, kept_ok = 0;
+    double narrow_proc = 0.0;
+    int narrow_fine = 0, hue_bins[31] = {0};
+    for (int s = 0; s < nseeds; s++) {
+        lm_cube a, b, p;
+        CHECK(lm_synth_fine(300 + s, H, W, &pal, &a, &e) == LM_OK);
+        CHECK(lm_synth_fine(300 + s, H, W, &pal, &b, &e) == LM_OK);
+        CHECK(memcmp(a.data, b.data, 31 * plane * sizeof(float)) == 0);
+        CHECK(lm_synth_scene(300 + s, H, W, &pal, &p, &e) == LM_OK);
+        int out = 0, same = 0, narrow = 0;
+        for (size_t i = 0; i < 31 * plane; i++) out += !(a.data[i] >= 0.0f && a.data[i] <= 1.0f);
+        for (size_t i = 0; i < plane; i++) {
+            int eq = 1;
+            for (int k = 0; k < 31 && eq; k++) eq = a.data[k * plane + i] == p.data[k * plane + i];
+            same += eq;
+            narrow_proc = fmax(narrow_proc, peak_share(&p, i));
+            if (peak_share(&a, i) > 0.25) {
+                narrow++;
+                int best = 0;
+                for (int k = 1; k < 31; k++)
+                    best = a.data[k * plane + i] > a.data[best * plane + i] ? k : best;
+                hue_bins[best]++;
+            }
+        }
+        CHECK(out == 0);
+        kept_ok += same > 0 && same < (int)plane; /* detail on top of the procedural scene */
+        narrow_fine += narrow > 10;
+        lm_cube_free(&a), lm_cube_free(&b), lm_cube_free(&p);
+    }
+    int hues = 0;
+    for (int k = 0; k < 31; k++) hues += hue_bins[k] > 0;
+    printf("     %d of %d seeds with narrowband detail (peak bands at %d of 31 wavelengths); "
+           "procedural scenes' largest peak share %.3f\n", narrow_fine, nseeds, hues,
+           narrow_proc);
+    CHECK_MSG(narrow_proc < 0.2, "a procedural scene is narrowband (%.3f)", narrow_proc);
+    CHECK_MSG(narrow_fine == nseeds, "%d of %d seeds with narrowband detail", narrow_fine, nseeds);
+    CHECK_MSG(kept_ok >= nseeds - 2, "%d of %d seeds keep the procedural scene under the detail",
+              kept_ok, nseeds);
+    CHECK_MSG(hues >= 20, "narrowband peaks at %d of 31 wavelengths", hues);
+}
+
 static void test_errors(void)
 {
     lm_err e;
@@ -282,6 +347,7 @@ int main(void)
     RUN(test_rainbow_rows);
     RUN(test_palette);
     RUN(test_scene_properties);
+    RUN(test_fine_detail);
     RUN(test_errors);
     return check_summary();
 }

@@ -49,6 +49,9 @@ static const field fields[] = {
     FLD("procedural_fraction", F_FLOAT, procedural_fraction, "F", "share of procedural scenes "
         "(textured, varied spectra; not in the paper; -1: 0.2, at most 1 - synth_fraction)", -1,
         1),
+    FLD("fine_fraction", F_FLOAT, fine_fraction, "F", "share of procedural scenes with fine, "
+        "saturated narrowband detail on top (thin strokes, iridescent sheets: where a mosaic "
+        "aliases; not in the paper; 0 = none)", 0, 1),
     FLD("motion_fraction", F_FLOAT, motion_fraction, "F", "share of real-scene samples seen "
         "moving during the exposure (0)", 0, 1),
     FLD("motion_speed", F_FLOAT, motion_speed, "PX_S", "moving samples: translation speed "
@@ -575,7 +578,11 @@ lm_status lm_train_cfg_validate(const lm_train_cfg *c, lm_err *err)
     if (c->procedural_fraction >= 0.0f && c->synth_fraction + c->procedural_fraction > 1.0f)
         BAD("'procedural_fraction': synth_fraction + procedural_fraction must be <= 1 (got %g)",
             (double)(c->synth_fraction + c->procedural_fraction));
-    if (c->ndata == 0 && c->synth_fraction + lm_train_procedural_share(c) < 1)
+    if (c->synth_fraction + lm_train_procedural_share(c) + c->fine_fraction > 1.0f)
+        BAD("'fine_fraction': synth_fraction + procedural_fraction + fine_fraction must be <= 1 "
+            "(got %g)", (double)(c->synth_fraction + lm_train_procedural_share(c) +
+                                 c->fine_fraction));
+    if (c->ndata == 0 && c->synth_fraction + lm_train_procedural_share(c) + c->fine_fraction < 1)
         BAD("'data': no scenes given (add --data PATH, or make synth_fraction + "
             "procedural_fraction 1)%s", "");
     return LM_OK;
@@ -672,6 +679,7 @@ static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
     if (root) json_object_set_new(root, "scale_jitter", json_real(c->scale_jitter));
     if (root) json_object_set_new(root, "transpose", json_integer(c->transpose));
     if (root) json_object_set_new(root, "collage", json_real(c->collage));
+    if (root) json_object_set_new(root, "fine_fraction", json_real(c->fine_fraction));
     if (root) json_object_set_new(root, "ema", json_real(c->ema));
     if (root) json_object_set_new(root, "precision", json_string(c->precision));
     if (!root) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build the config JSON", path);

@@ -61,7 +61,7 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.photons_min = cfg->photons_min;
     dc.illum_jitter = cfg->illum_jitter, dc.gain_jitter = cfg->gain_jitter;
     dc.scale_jitter = cfg->scale_jitter, dc.transpose = cfg->transpose;
-    dc.collage = cfg->collage;
+    dc.collage = cfg->collage, dc.fine_fraction = cfg->fine_fraction;
     if (clean) { /* the fit adds noise, clipping and quantisation itself */
         dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
         dc.sensor_clip = dc.sensor_bits = 0;

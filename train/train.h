@@ -100,6 +100,8 @@ typedef struct lm_train_cfg {
     float scale_jitter;             /* training scene samples' zoom range: (1 + this)^U[-1, 1]
                                      * (data/dataset.h; 0 = off) */
     int transpose;                  /* 1: training scene samples transposed half of the time */
+    float fine_fraction;            /* share of procedural scenes with fine narrowband detail
+                                     * (data/synth.h lm_synth_fine; 0 = none) */
     float collage;                  /* share of training scene samples with another scene's
                                      * patch pasted across an edge (data/dataset.h; 0 = off) */
     char snapshots[128];            /* "5,15,30": weights at these minutes of training time into

@@ -64,4 +64,7 @@ expect_error "collage of multi-frame samples" 2 "without zoom, transposition or 
   "$LM" train --model rt-8-mf3 --collage 0.3 $TR --output "$T/e12"
 expect_error "collage share out of range" 2 "collage" "$T/e13" -- \
   "$LM" train --model rt-8 --collage 1.5 --data "$CAVE" --output "$T/e13"
+expect_error "synthetic shares over 1" 2 "fine_fraction" "$T/e14" -- \
+  "$LM" train --model rt-8 --synth-fraction 0.5 --procedural-fraction 0.3 --fine-fraction 0.3 \
+  --data "$CAVE" --output "$T/e14"
 finish
