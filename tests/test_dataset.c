@@ -1259,6 +1259,19 @@ static void resampled_crop(lm_cube *out, const lm_dataset_sample_info *in)
     }
 }
 
+/* The largest errors of a sample's target and frame against the reference simulation of the
+ * patch c (freed here). */
+static void worst_against(lm_cube *c, const float *raw, const float *tgt, double *wt, double *wr)
+{
+    const size_t np = (size_t)PH * PW;
+    static float rr[PH * PW], rt[33 * PH * PW];
+    ref_raw(c, rr);
+    ref_target(c, rt);
+    for (size_t q = 0; q < 33 * np; q++) *wt = fmax(*wt, fabs(tgt[q] - rt[q]));
+    for (size_t q = 0; q < np; q++) *wr = fmax(*wr, fabs(raw[q] - rr[q]));
+    lm_cube_free(c);
+}
+
 /* Geometric augmentation: with scale_jitter and transpose each training sample's target is the
  * scene resampled over its region (zoom within [1 / (1 + S), 1 + S], both sides drawn;
  * transposed about half of the time) and its frame is that patch through the forward model;
@@ -1276,8 +1289,7 @@ static void test_geometric_augmentation(void)
     lm_dataset *a = lm_dataset_open(&c0, &e), *dz = lm_dataset_open(&cz, &e),
                *d1 = lm_dataset_open(&c1, &e);
     CHECK_MSG(a && dz && d1, "%s", e.msg);
-    const size_t np = (size_t)PH * PW;
-    static float raw[PH * PW], tgt[33 * PH * PW], rr[PH * PW], rt[33 * PH * PW];
+    static float raw[PH * PW], tgt[33 * PH * PW];
     if (a && dz && d1) {
         int up = 0, down = 0, turned = 0, n = 40;
         double zmin = 9, zmax = 0, worst_t = 0, worst_r = 0;
@@ -1295,11 +1307,7 @@ static void test_geometric_augmentation(void)
                 }
                 lm_cube c;
                 resampled_crop(&c, &in);
-                ref_raw(&c, rr);
-                ref_target(&c, rt);
-                for (size_t q = 0; q < 33 * np; q++) worst_t = fmax(worst_t, fabs(tgt[q] - rt[q]));
-                for (size_t q = 0; q < np; q++) worst_r = fmax(worst_r, fabs(raw[q] - rr[q]));
-                lm_cube_free(&c);
+                worst_against(&c, raw, tgt, &worst_t, &worst_r);
             }
         }
         printf("     zoom %.3f..%.3f (%d below 0.95, %d above 1.05), %d of %d transposed; "
@@ -1348,9 +1356,7 @@ static void test_collage(void)
     lm_err_clear(&e);
     lm_dataset *a = lm_dataset_open(&c0, &e), *d = lm_dataset_open(&cc, &e);
     CHECK_MSG(a && d, "%s", e.msg);
-    const size_t np = (size_t)PH * PW;
-    static float raw[PH * PW], tgt[33 * PH * PW], rr[PH * PW], rt[33 * PH * PW],
-        r2[PH * PW], t2[33 * PH * PW];
+    static float raw[PH * PW], tgt[33 * PH * PW], r2[PH * PW], t2[33 * PH * PW];
     if (a && d) {
         int mixed = 0, split_ok = 0, n = 40;
         double worst_t = 0, worst_r = 0;
@@ -1383,11 +1389,7 @@ static void test_collage(void)
             split_ok += first > 0 && second > 0; /* the edge runs through the patch */
             CHECK(in.mix_y0 >= 0 && in.mix_y0 + PH <= POS_H && in.mix_x0 >= 0 &&
                   in.mix_x0 + PW <= POS_W);
-            ref_raw(&c, rr);
-            ref_target(&c, rt);
-            for (size_t q = 0; q < 33 * np; q++) worst_t = fmax(worst_t, fabs(tgt[q] - rt[q]));
-            for (size_t q = 0; q < np; q++) worst_r = fmax(worst_r, fabs(raw[q] - rr[q]));
-            lm_cube_free(&c);
+            worst_against(&c, raw, tgt, &worst_t, &worst_r);
         }
         printf("     %d of %d samples pasted (%d with both patches visible); target error %.2g, "
                "frame error %.2g\n", mixed, n, split_ok, worst_t, worst_r);
