@@ -38,6 +38,7 @@ variants=(
   "transposes|--transpose 1"
   "clean samples only|--noise 0,0"
   "collage 50 %|--collage 0.5"
+  "fine narrowband synthetic 10 %|--fine-fraction 0.1"
 )
 
 noise=0,10,20
