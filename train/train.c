@@ -568,7 +568,9 @@ static void resolve_budget(loop *L, long done, double *next_mark, long *end)
 }
 
 /* Snapshots: the weights at each mark of cfg->snapshots (minutes of training time), into
- * <output>/snapshots/<M>min/ (written once; a resumed run skips those on disk). */
+ * <output>/snapshots/<M>min/ (written once; a resumed run skips those on disk, and marks its
+ * checkpoint had already passed: a fork, or a folder whose snapshots were removed, must not
+ * get the weights of now labelled as an earlier minute). */
 static lm_status snapshots(loop *L, long it, lm_err *err)
 {
     const lm_train_cfg *cfg = L->cfg;
@@ -579,6 +581,10 @@ static lm_status snapshots(loop *L, long it, lm_err *err)
     for (char *t = strtok_r(list, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
         double mark = strtod(t, NULL);
         if (!(el >= mark * 60.0) || mark <= L->snap_done) continue;
+        if (mark * 60.0 < L->seconds0) { /* passed before this invocation's checkpoint */
+            L->snap_done = mark;
+            continue;
+        }
         char dir[LM_TRAIN_PATH_LEN + 64];
         snprintf(dir, sizeof dir, "%s/snapshots/%gmin", cfg->output, mark);
         struct stat sb;

@@ -6,14 +6,20 @@
 # usage: fork.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 TR="--model rt-8 --data $CAVE --patch 24x32 --batch 2 --val-patches 2 --val-interval 3 --threads 1 --workers 0 --seed 3 --quiet"
-"$LM" train $TR --iterations 6 --stop-after 3 --output "$T/a" > "$T/log" 2>&1
+"$LM" train $TR --iterations 6 --stop-after 3 --snapshots 0.0001 --output "$T/a" > "$T/log" 2>&1
 check "parent trained to iteration 3: $(cat "$T/log")" grep -q '^3,' "$T/a/log.csv"
+check "parent wrote its snapshot" [ -f "$T/a/snapshots/0.0001min/model.safetensors" ]
 "$LM" train --fork "$T/a" --output "$T/b" --quiet > "$T/log" 2>&1
 check "fork runs: $(cat "$T/log")" [ $? -eq 0 ]
 "$LM" train --resume "$T/a" --quiet > /dev/null 2>&1
 check "fork finished" grep -q '^6,' "$T/b/log.csv"
 check "the fork's losses are its parent's, resumed" cmp -s "$T/a/log.csv" "$T/b/log.csv"
-check "the fork does not copy the parent's snapshots" [ ! -e "$T/b/snapshots" ]
+check "the fork neither copies nor rewrites the parent's snapshots" \
+  [ ! -e "$T/b/snapshots/0.0001min" ]
+cp -r "$T/a" "$T/a2" && rm -r "$T/a2/snapshots"
+"$LM" train --resume "$T/a2" --iterations 7 --quiet > /dev/null 2>&1
+check "the copy resumed" grep -q '^7,' "$T/a2/log.csv"
+check "a resume does not write a snapshot its checkpoint had passed" [ ! -e "$T/a2/snapshots/0.0001min" ]
 
 "$LM" train --fork "$T/a" --output "$T/c" --iterations 9 --collage 0.5 --stop-after 1 --quiet \
   > /dev/null 2>&1
