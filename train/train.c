@@ -548,7 +548,7 @@ static void resolve_budget(loop *L, long done, double *next_mark, long *end)
         per_it = (t - L->t_res) / (double)(done - L->it_res);
     long fit = done + (long)((budget - el) / per_it);
     if (fit > cfg->iterations) fit = cfg->iterations;
-    if (fit <= done) fit = done + 1;
+    if (fit <= done) fit = done + (done < cfg->iterations); /* at the cap: the run ends here */
     if (el >= *next_mark) *next_mark = el < 0.5 * budget ? 0.5 * budget : INFINITY;
     L->next_it = budget - el > 0.1 * budget ? done + (fit - done) / 2 : 0;
     L->it_res = done;

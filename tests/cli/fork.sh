@@ -2,7 +2,8 @@
 # fork.sh — end-to-end tests of `lumosaic train --fork DIR --output NEW`: a fork continues its
 # parent exactly (the same losses as the parent resumed, bit for bit), the flags given change
 # the fork's config.json and not the parent's, a later --resume keeps them (so does a --resume
-# given flags), and bad input: exit status, one-line message, nothing written.
+# given flags), a time budget stops at the iteration cap, and bad input: exit status, one-line
+# message, nothing written.
 # usage: fork.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 TR="--model rt-8 --data $CAVE --patch 24x32 --batch 2 --val-patches 2 --val-interval 3 --threads 1 --workers 0 --seed 3 --quiet"
@@ -31,6 +32,15 @@ check "paths of the fork's config are relative to it" grep -q '"data": \[' "$T/c
 check "a resume without flags keeps the fork's schedule" grep -q '^9,' "$T/c/log.csv"
 "$LM" train --resume "$T/b" --iterations 8 --stop-after 1 --quiet > /dev/null 2>&1
 check "a resume with flags writes them to the config" grep -q '"iterations": 8' "$T/b/config.json"
+
+# a time budget with an iteration cap reached first: the run ends at the cap (not one update
+# at a time at the final learning rate until the budget is spent)
+"$LM" train $TR --iterations 5000 --minutes 1 --clock wall --output "$T/cap" > /dev/null 2>&1
+last=$(tail -n 1 "$T/cap/log.csv" | cut -d, -f1)
+check "a budget run stops at its iteration cap (last update $last)" \
+  [ "${last:-0}" -ge 1 -a "${last:-0}" -le 5000 ]
+cap=$(sed -n 's/.*"iterations": \([0-9]*\),.*/\1/p' "$T/cap/config.json")
+check "its config keeps the cap ($cap)" [ "${cap:-0}" -ge 1 -a "${cap:-0}" -le 5000 ]
 
 R="$LM train"
 expect_error "no output" 2 "give the new run folder with --output" "$T/a.tmp" -- $R --fork "$T/a"
