@@ -6,6 +6,7 @@
 #include "data/synth.h"
 #include "data/spectra.h"
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -368,15 +369,22 @@ lm_status lm_synth_scene(uint64_t seed, int h, int w, const lm_synth_palette *pa
 }
 
 /* ---- fine narrowband detail ------------------------------------------------------------ */
-/* Binned narrowband spectra of one FWHM for peaks at 400, 401, ..., 700 nm (301 x 31). */
-static lm_status narrow_table(double fwhm, float *tab, lm_err *err)
+/* Binned narrowband spectra for FWHM 10, 15, ..., 40 nm (7) and peaks at 400, 401, ..., 700 nm
+ * (301): 7 x 301 x 31 values, made once per process (they depend on nothing else). */
+#define FINE_WIDTHS 7
+static float fine_tab[FINE_WIDTHS * 301 * LM_SYNTH_BANDS];
+static lm_status fine_tab_status = LM_OK;
+static pthread_once_t fine_tab_once = PTHREAD_ONCE_INIT;
+
+static void fine_tab_make(void)
 {
-    for (int k = 0; k <= 300; k++) {
-        lm_synth_gauss g = {1, {400.0 + k, 0.0}, fwhm};
-        lm_status st = lm_synth_gauss_bins(&g, tab + (size_t)k * LM_SYNTH_BANDS, err);
-        if (st) return st;
-    }
-    return LM_OK;
+    lm_err e = {0};
+    for (int f = 0; f < FINE_WIDTHS && !fine_tab_status; f++)
+        for (int k = 0; k <= 300 && !fine_tab_status; k++) {
+            lm_synth_gauss g = {1, {400.0 + k, 0.0}, 10.0 + 5.0 * f};
+            fine_tab_status = lm_synth_gauss_bins(
+                &g, fine_tab + ((size_t)f * 301 + (size_t)k) * LM_SYNTH_BANDS, &e);
+        }
 }
 
 static const float *narrow_at(const float *tab, double peak)
@@ -400,13 +408,12 @@ lm_status lm_synth_fine(uint64_t seed, int h, int w, const lm_synth_palette *pal
 {
     lm_status st = lm_synth_scene(seed, h, w, pal, cube, err);
     if (st) return st;
-    /* tables for FWHM 10, 15, ..., 40 nm, made when first drawn */
-    float *tabs = malloc(sizeof(float) * 7 * 301 * LM_SYNTH_BANDS), *tab = NULL;
-    unsigned char made[7] = {0};
-    if (!tabs) {
+    pthread_once(&fine_tab_once, fine_tab_make);
+    if (fine_tab_status) {
         lm_cube_free(cube);
-        return lm_err_set(err, LM_ERR_NOMEM, "synth fine: out of memory");
+        return lm_err_set(err, fine_tab_status, "synth fine: cannot make the narrowband spectra");
     }
+    const float *tab = NULL;
     lm_rng r;
     lm_rng_seed(&r, seed ^ 0xF1E5EEDull);
     if (lm_rng_below(&r, 2)) { /* the iridescent sheet */
@@ -417,9 +424,7 @@ lm_status lm_synth_fine(uint64_t seed, int h, int w, const lm_synth_palette *pal
                     ph = lm_rng_uniform(&r), a = lm_rng_uniform_range(&r, 0.5f, 1.0f),
                     cover = lm_rng_uniform_range(&r, 0.5f, 1.0f);
         const float ga = lm_rng_uniform_range(&r, 0.0f, 6.2831853f); /* grating direction */
-        const int fi = 1 + (int)lm_rng_below(&r, 6);
-        tab = tabs + (size_t)fi * 301 * LM_SYNTH_BANDS;
-        st = made[fi]++ ? LM_OK : narrow_table(10.0 + 5.0 * fi, tab, err);
+        tab = fine_tab + (size_t)(1 + lm_rng_below(&r, 6)) * 301 * LM_SYNTH_BANDS;
         for (int y = 0; y < h && !st; y++)
             for (int x = 0; x < w; x++) {
                 const float fy = (float)y + 0.5f, fx = (float)x + 0.5f;
@@ -441,9 +446,7 @@ lm_status lm_synth_fine(uint64_t seed, int h, int w, const lm_synth_palette *pal
                     p0 = lm_rng_uniform_range(&r, 400.0f, 700.0f),
                     drift = lm_rng_uniform_range(&r, -60.0f, 60.0f),
                     a = lm_rng_uniform_range(&r, 0.4f, 1.0f);
-        const int fi = (int)lm_rng_below(&r, 7);
-        tab = tabs + (size_t)fi * 301 * LM_SYNTH_BANDS;
-        st = made[fi]++ ? LM_OK : narrow_table(10.0 + 5.0 * fi, tab, err);
+        tab = fine_tab + (size_t)lm_rng_below(&r, FINE_WIDTHS) * 301 * LM_SYNTH_BANDS;
         const float dy = sinf(th), dx = cosf(th), reach = 0.5f * len + wd + 1.0f;
         const int y0 = (int)floorf(cy - reach), y1 = (int)ceilf(cy + reach),
                   x0 = (int)floorf(cx - reach), x1 = (int)ceilf(cx + reach);
@@ -459,7 +462,5 @@ lm_status lm_synth_fine(uint64_t seed, int h, int w, const lm_synth_palette *pal
                 blend_px(cube, y, x, al, a, narrow_at(tab, p0 + drift * t / len));
             }
     }
-    free(tabs);
-    if (st) lm_cube_free(cube);
     return st;
 }
