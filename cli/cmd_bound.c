@@ -23,7 +23,9 @@ static void help(void)
            "A model that reconstructs from the mosaic with a per-pixel spectral map of this\n"
            "form stays below these figures; one that uses neighbouring pixels' spectra\n"
            "(texture, materials) can exceed them. Two buckets carry the same per-pixel light\n"
-           "(bucket 0 sums the other LEDs), so the bound holds for both.\n\n"
+           "(bucket 0 sums the other LEDs), so the bound holds for both. The means are\n"
+           "followed by each scored scene's PSNR, for comparison with 'lumosaic eval\n"
+           "--output', which writes each scene's scores too.\n\n"
            "  DATA             scenes or folders of scenes (as for 'lumosaic train'); their\n"
            "                   split is train's: the maps are fitted on the training scenes\n"
            "  --split S        the scored scenes: test (default) or val\n"
@@ -118,6 +120,18 @@ int lm_cmd_bound(int argc, char **argv)
                     printf("  %-9s %8g %10.3f %8.4f %9.3f %8.0e\n", lm_bound_map_name(m),
                            100.0 * o.k[l], res.m[m][l].psnr, res.m[m][l].ssim, res.m[m][l].sam,
                            res.ridge[m][l]);
+            printf("per scene, PSNR dB (%s / %s):\n  %-28s", lm_bound_map_name(0),
+                   lm_bound_map_name(1), "scene");
+            for (int l = 0; l < o.nnoise; l++) printf("  %13g %%", 100.0 * o.k[l]);
+            printf("\n");
+            for (int i = 0; i < res.nscored; i++) {
+                printf("  %-28s", res.scene[i].name);
+                for (int l = 0; l < o.nnoise; l++)
+                    printf("  %7.2f / %5.2f", res.scene[i].m[0][l].psnr,
+                           res.scene[i].m[1][l].psnr);
+                printf("\n");
+            }
+            lm_bound_result_free(&res);
             rc = 0;
         }
     }

@@ -239,7 +239,7 @@ typedef struct scene_set {
     int n;
     lm_cube *cube;
     float **resp;
-    const char **path;
+    const char **path, **name;
 } scene_set;
 
 static void set_free(scene_set *ss)
@@ -251,6 +251,7 @@ static void set_free(scene_set *ss)
     free(ss->cube);
     free(ss->resp);
     free(ss->path);
+    free(ss->name);
     memset(ss, 0, sizeof *ss);
 }
 
@@ -262,7 +263,8 @@ static lm_status set_load(const lm_bound_run_opts *o, const lm_system *sys,
     ss->cube = calloc((size_t)nls + 1, sizeof *ss->cube);
     ss->resp = calloc((size_t)nls + 1, sizeof *ss->resp);
     ss->path = calloc((size_t)nls + 1, sizeof *ss->path);
-    if (!ss->cube || !ss->resp || !ss->path) {
+    ss->name = calloc((size_t)nls + 1, sizeof *ss->name);
+    if (!ss->cube || !ss->resp || !ss->path || !ss->name) {
         set_free(ss);
         return lm_err_set(e, LM_ERR_NOMEM, "bound: out of memory");
     }
@@ -271,6 +273,7 @@ static lm_status set_load(const lm_bound_run_opts *o, const lm_system *sys,
         lm_status st = load_scene(o, sys, &ls[i], &ss->cube[ss->n], e);
         if (st) return st;
         ss->path[ss->n] = ls[i].path;
+        ss->name[ss->n] = ls[i].name;
         st = scene_responses(o, sys, &ls[i], &ss->cube[ss->n], level, &ss->resp[ss->n], e);
         ss->n++; /* freed by set_free from here on */
         if (st) return st;
@@ -278,9 +281,10 @@ static lm_status set_load(const lm_bound_run_opts *o, const lm_system *sys,
     return LM_OK;
 }
 
-/* The mean metrics of a fitted map over a set of scenes. */
+/* The mean metrics of a fitted map over a set of scenes; with per (not NULL), also each
+ * scene's, into per[i].m[map][level]. */
 static lm_status set_score(const lm_bound_fit *fit, const scene_set *ss, lm_metrics *out,
-                           lm_err *e)
+                           lm_bound_scene *per, int level, lm_err *e)
 {
     lm_metrics_acc acc;
     memset(&acc, 0, sizeof acc);
@@ -295,6 +299,10 @@ static lm_status set_score(const lm_bound_fit *fit, const scene_set *ss, lm_metr
         lm_status st = lm_metrics_compute(pred, ss->cube[i].data, NB, H, W, 0, NB, &mt, &me);
         free(pred);
         if (st) return lm_err_set(e, st, "%s: %s", ss->path[i], me.msg);
+        if (per) {
+            snprintf(per[i].name, sizeof per[i].name, "%s", ss->name[i]);
+            per[i].m[fit->map][level] = mt;
+        }
         lm_metrics_acc_add(&acc, &mt);
     }
     *out = lm_metrics_acc_mean(&acc);
@@ -316,7 +324,7 @@ static lm_status pick_ridge(const lm_bound_run_opts *o, lm_bound_fit *fit, const
         if (st == LM_ERR_NUMERIC) continue;
         if (st) return lm_err_set(e, st, "%s", se.msg);
         lm_metrics m;
-        if ((st = set_score(fit, val, &m, e))) return st;
+        if ((st = set_score(fit, val, &m, NULL, 0, e))) return st;
         if (m.psnr > best_psnr) best_psnr = m.psnr, best = r;
     }
     if (best < 0.0)
@@ -358,13 +366,22 @@ static lm_status run_level(const lm_bound_run_opts *o, const lm_system *sys,
         double r = 0.0;
         st = pick_ridge(o, &fit[m], &val, &r, e);
         if (!st) st = lm_bound_solve(&fit[m], r, e);
-        if (!st) st = set_score(&fit[m], &scored, &res->m[m][level], e);
+        if (!st && scored.n != res->nscored)
+            st = lm_err_set(e, LM_ERR_ARG, "bound: %d scored scenes read, %d listed", scored.n,
+                            res->nscored);
+        if (!st) st = set_score(&fit[m], &scored, &res->m[m][level], res->scene, level, e);
         res->ridge[m][level] = r;
     }
     set_free(&val);
     set_free(&scored);
     for (int m = 0; m < LM_BOUND_MAPS; m++) lm_bound_fit_free(&fit[m]);
     return st;
+}
+
+void lm_bound_result_free(lm_bound_result *res)
+{
+    free(res->scene);
+    res->scene = NULL;
 }
 
 lm_status lm_bound_run(const lm_bound_run_opts *o, lm_bound_result *res, lm_err *e)
@@ -397,6 +414,8 @@ lm_status lm_bound_run(const lm_bound_run_opts *o, lm_bound_result *res, lm_err 
             st = lm_err_set(e, LM_ERR_ARG, "no scene of split '%s' among the %d given",
                             o->split == LM_SPLIT_VAL ? "val" : "test", nls);
     }
+    if (!st && !(res->scene = calloc((size_t)res->nscored, sizeof *res->scene)))
+        st = lm_err_set(e, LM_ERR_NOMEM, "bound: out of memory");
     res->nleds = sys.nleds;
     for (int l = 0; l < o->nnoise && !st; l++) {
         say(o, "noise %g %%: fitting on %d training scene(s), scoring %d", 100.0 * o->k[l],
@@ -405,5 +424,6 @@ lm_status lm_bound_run(const lm_bound_run_opts *o, lm_bound_result *res, lm_err 
     }
     free(ls);
     lm_system_free(&sys);
+    if (st) lm_bound_result_free(res);
     return st;
 }

@@ -86,14 +86,26 @@ extern const double lm_bound_ridge_grid[LM_BOUND_RIDGES]; /* 1e-9, 1e-8, ..., 1e
 /* Defaults: split test, one level 0, ridge chosen on the validation scenes (-1), seed 1. */
 void lm_bound_run_opts_default(lm_bound_run_opts *o);
 
+/* One scored scene: its name (as lumosaic eval prints it) and metrics per map and level. */
+typedef struct lm_bound_scene {
+    char name[256];
+    lm_metrics m[LM_BOUND_MAPS][LM_BOUND_MAX_NOISE];
+} lm_bound_scene;
+
 typedef struct lm_bound_result {
     int nleds, ntrain, nval, nscored;
     long train_pixels;
     lm_metrics m[LM_BOUND_MAPS][LM_BOUND_MAX_NOISE]; /* means over the scored scenes */
     double ridge[LM_BOUND_MAPS][LM_BOUND_MAX_NOISE]; /* the ridge of each map and level */
+    lm_bound_scene *scene; /* nscored scenes, in the dataset's order (lm_bound_result_free) */
 } lm_bound_result;
 
-/* Errors: those of the system, the scene listing and the reader ("<path>: ..."); LM_ERR_ARG
+/* Free what lm_bound_run allocated in res (safe on a zeroed or already freed result). */
+void lm_bound_result_free(lm_bound_result *res);
+
+/* On success res holds the means and each scored scene's metrics (free with
+ * lm_bound_result_free); on error nothing is left allocated.
+ * Errors: those of the system, the scene listing and the reader ("<path>: ..."); LM_ERR_ARG
  * ("no training scenes among the N given", "no validation scenes ... (give --ridge)", "no
  * scene of split 'S' among the N given");
  * LM_ERR_NUMERIC from the solve. */
