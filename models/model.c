@@ -14,6 +14,7 @@ struct preset {
     lm_han_cfg han;  /* han */
     int width;       /* mcan: feats; srnet: dim; rt: width; mst: stages; lmmse: features;
                       * lmmse-guide: the guide's window; lmmse-gri: the interpolation's */
+    int depth;       /* tn: residual blocks (0: 2) */
 };
 
 /* The families' builders, called with their preset row. */
@@ -61,7 +62,7 @@ static lm_status build_rt_nc(lm_model *m, const preset *ps, lm_err *err)
 
 static lm_status build_tile(lm_model *m, const preset *ps, lm_err *err)
 {
-    return lm_tile_build(m, ps->width, 1, err);
+    return lm_tile_build(m, ps->width, ps->depth ? ps->depth : 2, 1, err);
 }
 
 #define CL LM_CAP_OPENCL
@@ -72,46 +73,49 @@ static lm_status build_tile(lm_model *m, const preset *ps, lm_err *err)
 #define B2 LM_CAP_TWO_BUCKETS
 static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rfD]" its flags,
                                    * "lmmse-b2" those of "lmmse-K-b2" */
-    {"linear", build_linear, CL, {0, 0, 0, 0, 0}, 0},
-    {"lmmse", build_lmmse, CL | FIT, {0, 0, 0, 0, 0}, 0},
-    {"lmmse-rf", build_lmmse, CL | FIT, {0, 0, 0, 0, 0}, 256},
-    {"han-tiny", build_han, CL, {2, 2, 16, 4, 0}, 0},
-    {"han-tiny-nc", build_han, CL, {2, 2, 16, 4, 1}, 0}, /* noise-conditioned, as rt-N-nc */
-    {"han-g3b2c32", build_han, CL, {3, 2, 32, 8, 0}, 0},
-    {"han-g3b2c32-nc", build_han, CL, {3, 2, 32, 8, 1}, 0},
-    {"han-small", build_han, CL, {4, 6, 64, 16, 0}, 0},
-    {"han-paper", build_han, CL, {10, 18, 128, 16, 0}, 0},
-    {"mcan-tiny", build_mcan, CL, {0, 0, 0, 0, 0}, 16},
-    {"mcan", build_mcan, CL, {0, 0, 0, 0, 0}, 64},
-    {"srnet-tiny", build_srnet, CL, {0, 0, 0, 0, 0}, 8},
-    {"srnet", build_srnet, CL, {0, 0, 0, 0, 0}, 32},
-    {"mst-tiny", build_mst, RGB | WHOLE, {0, 0, 0, 0, 0}, 1},
-    {"mst", build_mst, RGB | WHOLE, {0, 0, 0, 0, 0}, 3},
-    {"mst-coded", build_mst, WHOLE, {0, 0, 0, 0, 0}, 3},
-    {"qdo-mst", build_mst, RGB | WHOLE | QDO, {0, 0, 0, 0, 0}, 1}, /* MST++-tiny behind a DOE */
+    {"linear", build_linear, CL, {0, 0, 0, 0, 0}, 0, 0},
+    {"lmmse", build_lmmse, CL | FIT, {0, 0, 0, 0, 0}, 0, 0},
+    {"lmmse-rf", build_lmmse, CL | FIT, {0, 0, 0, 0, 0}, 256, 0},
+    {"han-tiny", build_han, CL, {2, 2, 16, 4, 0}, 0, 0},
+    {"han-tiny-nc", build_han, CL, {2, 2, 16, 4, 1}, 0, 0}, /* noise-conditioned, as rt-N-nc */
+    {"han-g3b2c32", build_han, CL, {3, 2, 32, 8, 0}, 0, 0},
+    {"han-g3b2c32-nc", build_han, CL, {3, 2, 32, 8, 1}, 0, 0},
+    {"han-small", build_han, CL, {4, 6, 64, 16, 0}, 0, 0},
+    {"han-paper", build_han, CL, {10, 18, 128, 16, 0}, 0, 0},
+    {"mcan-tiny", build_mcan, CL, {0, 0, 0, 0, 0}, 16, 0},
+    {"mcan", build_mcan, CL, {0, 0, 0, 0, 0}, 64, 0},
+    {"srnet-tiny", build_srnet, CL, {0, 0, 0, 0, 0}, 8, 0},
+    {"srnet", build_srnet, CL, {0, 0, 0, 0, 0}, 32, 0},
+    {"mst-tiny", build_mst, RGB | WHOLE, {0, 0, 0, 0, 0}, 1, 0},
+    {"mst", build_mst, RGB | WHOLE, {0, 0, 0, 0, 0}, 3, 0},
+    {"mst-coded", build_mst, WHOLE, {0, 0, 0, 0, 0}, 3, 0},
+    {"qdo-mst", build_mst, RGB | WHOLE | QDO, {0, 0, 0, 0, 0}, 1, 0}, /* MST++-tiny behind a DOE */
     /* the same with the DOE learned end to end (QDO proper; train/doe_opt.c) */
-    {"qdo-mst-doe", build_mst, RGB | WHOLE | QDO | LM_CAP_DOE_LEARNED, {0, 0, 0, 0, 0}, 1},
-    {"rt-8", build_rt, CL, {0, 0, 0, 0, 0}, 8},
-    {"rt-16", build_rt, CL, {0, 0, 0, 0, 0}, 16},
+    {"qdo-mst-doe", build_mst, RGB | WHOLE | QDO | LM_CAP_DOE_LEARNED, {0, 0, 0, 0, 0}, 1, 0},
+    {"rt-8", build_rt, CL, {0, 0, 0, 0, 0}, 8, 0},
+    {"rt-16", build_rt, CL, {0, 0, 0, 0, 0}, 16, 0},
     /* both buckets: the same families reading bucket 1 and bucket 0 (2 input planes) */
-    {"lmmse-b2", build_lmmse, CL | FIT | B2, {0, 0, 0, 0, 0}, 0},
+    {"lmmse-b2", build_lmmse, CL | FIT | B2, {0, 0, 0, 0, 0}, 0, 0},
     /* lmmse-b2 plus the panchromatic guide's ratio features (host features: no OpenCL) */
-    {"lmmse-guide-b2", build_lmmse_guide, FIT | B2, {0, 0, 0, 0, 0}, 7},
+    {"lmmse-guide-b2", build_lmmse_guide, FIT | B2, {0, 0, 0, 0, 0}, 7, 0},
     /* lmmse-b2 plus each LED's plane interpolated by a guided filter on g (host features) */
-    {"lmmse-gri-b2", build_lmmse_gri, FIT | B2, {0, 0, 0, 0, 0}, 15},
-    {"rt-8-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 8},
-    {"rt-16-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 16},
+    {"lmmse-gri-b2", build_lmmse_gri, FIT | B2, {0, 0, 0, 0, 0}, 15, 0},
+    {"rt-8-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 8, 0},
+    {"rt-16-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 16, 0},
     /* multi-frame: the current frame and its two neighbours aligned to it (3 input planes) */
-    {"rt-8-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0, 0}, 8},
-    {"rt-16-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0, 0}, 16},
+    {"rt-8-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0, 0}, 8, 0},
+    {"rt-16-mf3", build_rt, CL | LM_CAP_MULTI_FRAME, {0, 0, 0, 0, 0}, 16, 0},
     /* noise-conditioned: the branch also sees the input's estimated noise level */
-    {"rt-8-nc", build_rt_nc, CL, {0, 0, 0, 0, 0}, 8},
-    {"rt-16-nc", build_rt_nc, CL, {0, 0, 0, 0, 0}, 16},
+    {"rt-8-nc", build_rt_nc, CL, {0, 0, 0, 0, 0}, 8, 0},
+    {"rt-16-nc", build_rt_nc, CL, {0, 0, 0, 0, 0}, 16, 0},
     /* tile resolution, noise-conditioned: the phase planes of each tile, `width` channels */
-    {"tn-64-nc", build_tile, CL, {0, 0, 0, 0, 0}, 64},
-    {"tn-96-nc", build_tile, CL, {0, 0, 0, 0, 0}, 96},
-    {"tn-160-nc", build_tile, CL, {0, 0, 0, 0, 0}, 160},
-    {"tn-96-nc-b2", build_tile, CL | B2, {0, 0, 0, 0, 0}, 96},
+    {"tn-64-nc", build_tile, CL, {0, 0, 0, 0, 0}, 64, 0},
+    {"tn-96-nc", build_tile, CL, {0, 0, 0, 0, 0}, 96, 0},
+    {"tn-160-nc", build_tile, CL, {0, 0, 0, 0, 0}, 160, 0},
+    {"tn-96-nc-b2", build_tile, CL | B2, {0, 0, 0, 0, 0}, 96, 0},
+    /* deeper: four residual blocks (each 3x3 layer reaches one tile further) */
+    {"tn-64-d4-nc", build_tile, CL, {0, 0, 0, 0, 0}, 64, 4},
+    {"tn-96-d4-nc", build_tile, CL, {0, 0, 0, 0, 0}, 96, 4},
 };
 #undef B2
 #undef CL
@@ -182,6 +186,8 @@ static const struct { const char *name, *purpose; } purposes[] = {
     {"tn-96-nc", "tile-resolution residual, 96 channels, sees the noise level: best residual on lmmse"},
     {"tn-160-nc", "tile-resolution residual, 160 channels, sees the noise level (2x han-tiny's cost)"},
     {"tn-96-nc-b2", "tn-96-nc reading both buckets: the residual on lmmse-b2"},
+    {"tn-64-d4-nc", "tn-64-nc with four residual blocks: tn-96-nc's cost, 9 tiles' reach"},
+    {"tn-96-d4-nc", "tn-96-nc with four residual blocks (1.8x its cost)"},
 };
 
 const char *lm_model_preset_purpose(const char *name)

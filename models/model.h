@@ -204,8 +204,10 @@ lm_status lm_lmmse_set_filter(lm_model *m, int level, int phase, const double *c
 /* noise_cond: "-nc" presets, a bias from the input's noise sd in the branch (noise_input). */
 lm_status lm_rt_build(lm_model *m, int width, int noise_cond, lm_err *err);
 /* Tile resolution (models/tile.c): unshuffle to the tile's phase planes, 3x3 conv to `width`
- * channels, two residual blocks, 1x1 to 33 x phases, shuffle back; noise_cond as rt's. */
-lm_status lm_tile_build(lm_model *m, int width, int noise_cond, lm_err *err);
+ * channels, `blocks` residual blocks (1..LM_TILE_MAX_BLOCKS), 1x1 to 33 x phases, shuffle
+ * back; noise_cond as rt's. */
+#define LM_TILE_MAX_BLOCKS 8
+lm_status lm_tile_build(lm_model *m, int width, int blocks, int noise_cond, lm_err *err);
 /* The "-nc" presets' bias: B x w x 1 x 1 = LM_NOISE_BIAS_SCALE x each item's noise sd
  * (m->noise_sigma_items, else m->noise_sigma) x weights (w values). NULL with the ctx error set
  * when the model was given no noise level. */

@@ -62,6 +62,13 @@ static void test_parameter_counts(void)
         snprintf(nm, sizeof nm, "tn-%d-nc", C);
         check_count(nm, n, n);
     }
+    /* "-d4": four residual blocks, eight 3x3 C -> C */
+    for (int C = 64; C <= 96; C += 32) {
+        long n = (9L * 12 * C + C) + 8 * (9L * C * C + C) + ((long)C * 396 + 396) + C;
+        char nm[16];
+        snprintf(nm, sizeof nm, "tn-%d-d4-nc", C);
+        check_count(nm, n, n);
+    }
 }
 
 /* The noise weights of a "-nc" model (rt-N-nc: body.0.noise, han-tiny-nc: head.0.noise). */
