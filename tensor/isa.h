@@ -49,6 +49,12 @@ lm_isa lm_isa_active(void);
 /* The best level the CPU supports (ignoring LM_ISA). */
 lm_isa lm_isa_best(void);
 
+/* 1 when the operating system lets this process use the AMX tile data (Linux: requested once
+ * per process with arch_prctl(ARCH_REQ_XCOMP_PERM, XFEATURE_XTILEDATA), the first time this is
+ * called); 0 when refused, or when the CPU has no AMX-BF16. The level stays amx when refused:
+ * the bf16 product then runs AVX-512-BF16 (tensor/ops/gemm_bf16.h). */
+int lm_amx_tile_granted(void);
+
 /* "generic", "avx2", "avx512", "amx". */
 const char *lm_isa_name(lm_isa isa);
 
