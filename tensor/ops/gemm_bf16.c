@@ -79,40 +79,12 @@ size_t lm_bf16_pack_b_size_for(lm_bf16_kernel k, int K, int n)
     return (size_t)((K + 1) / 2) * pad16(n) * 2;
 }
 
-void lm_bf16_pack_a_for(lm_bf16_kernel kern, int M, int K, const float *A, long lda,
-                        lm_bf16 *Ap)
-{
-    if (kern == LM_BF16_AMX) {
-        const amx_geom g = amx_cut(K);
-        const int MB = pad16(M) / 16;
-        for (int mb = 0; mb < MB; mb++)
-            for (int s = 0; s < g.S; s++)
-                for (int r = 0; r < 16; r++) {
-                    lm_bf16 *d = Ap + (((size_t)mb * g.S + s) * 16 + r) * 2 * g.kb;
-                    const int m = 16 * mb + r;
-                    for (int c = 0; c < 2 * g.kb; c++) {
-                        const int k = 2 * s * g.kb + c;
-                        d[c] = m < M && k < K ? lm_bf16_round(A[(long)m * lda + k]) : 0;
-                    }
-                }
-        return;
-    }
-    const int K2 = (K + 1) / 2, P = (M + MR - 1) / MR;
-    for (int p = 0; p < P; p++)
-        for (int q = 0; q < K2; q++)
-            for (int r = 0; r < MR; r++)
-                for (int t = 0; t < 2; t++) {
-                    const int m = p * MR + r, k = 2 * q + t;
-                    Ap[(((size_t)p * K2 + q) * MR + r) * 2 + t] =
-                        m < M && k < K ? lm_bf16_round(A[(long)m * lda + k]) : 0;
-                }
-}
-
 #if LM_HAVE_BF16_KERNEL
-/* lm_bf16_round of 16 floats, each in the low half of its 32-bit lane. */
-__attribute__((target("avx512f"))) static inline __m512i round16(const float *p)
+/* lm_bf16_round of 16 floats (mask: which are read; the others 0), each in the low half of
+ * its 32-bit lane. */
+__attribute__((target("avx512f"))) static inline __m512i round16(const float *p, __mmask16 mask)
 {
-    const __m512i u = _mm512_castps_si512(_mm512_loadu_ps(p));
+    const __m512i u = _mm512_castps_si512(_mm512_maskz_loadu_ps(mask, p));
     const __m512i one = _mm512_set1_epi32(1);
     __m512i r = _mm512_add_epi32(u, _mm512_set1_epi32(0x7fff));
     r = _mm512_srli_epi32(_mm512_add_epi32(r, _mm512_and_si512(_mm512_srli_epi32(u, 16), one)), 16);
@@ -126,11 +98,65 @@ __attribute__((target("avx512f"))) static inline __m512i round16(const float *p)
 __attribute__((target("avx512f"))) static void pack_pair16(const float *b0, const float *b1,
                                                            lm_bf16 *d)
 {
-    __m512i r = round16(b0);
-    if (b1) r = _mm512_or_si512(r, _mm512_slli_epi32(round16(b1), 16));
+    __m512i r = round16(b0, 0xffff);
+    if (b1) r = _mm512_or_si512(r, _mm512_slli_epi32(round16(b1, 0xffff), 16));
     _mm512_storeu_si512(d, r);
 }
 #endif
+
+#if LM_HAVE_BF16_KERNEL
+/* 16 floats (mask: which) rounded to bf16 into d (the masked lanes only). */
+__attribute__((target("avx512f,avx512vl,avx512bw"))) static void round_store16(const float *p,
+                                                                              __mmask16 mask,
+                                                                              lm_bf16 *d)
+{
+    _mm256_mask_storeu_epi16(d, mask, _mm512_cvtepi32_epi16(round16(p, mask)));
+}
+#endif
+
+/* d[i] = bf16(x[i]), i < cnt (vec: AVX-512 at this level). */
+static void round_row(const float *x, int cnt, int vec, lm_bf16 *d)
+{
+    int i = 0;
+#if LM_HAVE_BF16_KERNEL
+    if (vec)
+        for (; i < cnt; i += 16) {
+            const int w = cnt - i < 16 ? cnt - i : 16;
+            round_store16(x + i, (__mmask16)((1u << w) - 1u), d + i);
+        }
+#else
+    (void)vec;
+#endif
+    for (; i < cnt; i++) d[i] = lm_bf16_round(x[i]);
+}
+
+void lm_bf16_pack_a_for(lm_bf16_kernel kern, int M, int K, const float *A, long lda,
+                        lm_bf16 *Ap)
+{
+    if (kern == LM_BF16_AMX) {
+        const amx_geom g = amx_cut(K);
+        const int MB = pad16(M) / 16, vec = LM_HAVE_BF16_KERNEL && lm_isa_active() >= LM_ISA_AVX512;
+        for (int mb = 0; mb < MB; mb++)
+            for (int s = 0; s < g.S; s++)
+                for (int r = 0; r < 16; r++) {
+                    lm_bf16 *d = Ap + (((size_t)mb * g.S + s) * 16 + r) * 2 * g.kb;
+                    const int m = 16 * mb + r, k0 = 2 * s * g.kb;
+                    const int cnt = m >= M ? 0 : K - k0 < 2 * g.kb ? K - k0 : 2 * g.kb;
+                    round_row(A + (long)m * lda + k0, cnt, vec, d);
+                    memset(d + cnt, 0, sizeof(lm_bf16) * (size_t)(2 * g.kb - cnt));
+                }
+        return;
+    }
+    const int K2 = (K + 1) / 2, P = (M + MR - 1) / MR;
+    for (int p = 0; p < P; p++)
+        for (int q = 0; q < K2; q++)
+            for (int r = 0; r < MR; r++)
+                for (int t = 0; t < 2; t++) {
+                    const int m = p * MR + r, k = 2 * q + t;
+                    Ap[(((size_t)p * K2 + q) * MR + r) * 2 + t] =
+                        m < M && k < K ? lm_bf16_round(A[(long)m * lda + k]) : 0;
+                }
+}
 
 /* Pair-row q of B (rows 2q, 2q + 1; q past K2: zeros), columns [0, n) rounded and interleaved
  * into d, column j at d + 2 (j / 16) gap + 2 (j % 16), gap the bf16 between column blocks
