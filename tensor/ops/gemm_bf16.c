@@ -195,10 +195,15 @@ void lm_bf16_pack_b_for(lm_bf16_kernel kern, int K, int n, const float *B, long 
                         lm_bf16 *Bp)
 {
     const int vec = LM_HAVE_BF16_KERNEL && lm_isa_active() >= LM_ISA_AVX512;
-    if (kern == LM_BF16_AMX) {
+    if (kern == LM_BF16_AMX) { /* strips of 8 column blocks, each row by row */
         const amx_geom g = amx_cut(K);
-        for (int q = 0; q < g.BS; q++) /* (the last pair-row of each block: zero padding) */
-            pack_b_row(q < g.K2P ? K : 0, n, B, ldb, q, vec, (size_t)16 * g.BS, Bp + (size_t)q * 32);
+        for (int j0 = 0; j0 < n; j0 += 128) {
+            const int w = n - j0 < 128 ? n - j0 : 128;
+            lm_bf16 *d = Bp + (size_t)j0 * 2 * g.BS;
+            for (int q = 0; q < g.BS; q++) /* (the last pair-row of each block: zero padding) */
+                pack_b_row(q < g.K2P ? K : 0, w, B + j0, ldb, q, vec, (size_t)16 * g.BS,
+                           d + (size_t)q * 32);
+        }
         return;
     }
     const int K2 = (K + 1) / 2, NP = pad16(n);
