@@ -5,7 +5,7 @@
  * so) against a double reference, over shapes that cut every edge (M not a multiple of the
  * 6-row panel or the 16-row tile, K odd or not a multiple of 32, n not a multiple of 16 or 32),
  * with and without bias, writing and accumulating, C's leading dimension odd or a multiple of
- * 256 (the AMX kernel's prefetching path):
+ * 256 (the AMX kernel's prefetching path), packed A under and over 32 KiB (its two orders):
  *   - against the sums of the bf16-rounded operands: within fp32 summation error. A product of
  *     two bf16 values (8 significant bits each) is exact in fp32, so only the sums round: at
  *     most K + 1 additions, each off by at most 2^-24 of a partial sum bounded by
@@ -149,6 +149,9 @@ static void test_shapes(void)
     run_case(33, 256, 97, 256, 1, 0, &r);
     run_case(64, 256, 33, 512, 0, 1, &r);
     run_case(64, 1024, 144, 1027, 1, 0, &r); /* a Winograd-sized product */
+    /* A over 32 KiB packed (the AMX kernel's row-pairs-outer order), edges on every side */
+    run_case(96, 100, 200, 103, 1, 0, &r);
+    run_case(65, 70, 301, 256, 0, 1, &r);
     printf("     (cases per kernel: %ld, run as", cases_run[0]);
     for (int k = 0; k < 3; k++)
         printf(" [%s: %s]", lm_bf16_kernel_name(all_kernels[k]),
