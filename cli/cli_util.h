@@ -50,7 +50,8 @@ enum { LM_CLI_THREADS = 1u, LM_CLI_DEVICE = 2u, LM_CLI_SEED = 4u, LM_CLI_QUIET =
 /* The help line of --precision, the same for every command that takes it. */
 #define LM_CLI_PRECISION_HELP                                                                  \
     "  --precision P    fp32 (default) | bf16: operands of the 3x3 convolutions' products\n" \
-    "                   rounded to bf16, sums in fp32 (AVX-512-BF16 where the CPU has it)\n"
+    "                   rounded to bf16, sums in fp32 (AMX tiles or AVX-512-BF16 where the\n" \
+    "                   CPU has them)\n"
 /* Match one of the common options in `which` (LM_CLI_* flags), --seed in [0, seed_max]:
  * returns as the matchers above (1, 0 or -1 with the error printed). */
 int lm_cli_common_opt(lm_cli *c, unsigned which, long long seed_max, lm_cli_common *o);

@@ -204,8 +204,9 @@ LM_API lm_api_status lm_api_model_set_patchwise(lm_api_model *model, int patchwi
 /* Operand precision of the reconstruction's convolution products. */
 typedef enum lm_api_precision {
     LM_API_PRECISION_FP32 = 0, /* the default */
-    LM_API_PRECISION_BF16 = 1  /* operands rounded to bf16, sums in fp32 (AVX-512-BF16 products
-                                * where the CPU has them), as `lumosaic infer --precision bf16` */
+    LM_API_PRECISION_BF16 = 1  /* operands rounded to bf16, sums in fp32 (AMX tile or
+                                * AVX-512-BF16 products where the CPU has them), as
+                                * `lumosaic infer --precision bf16` */
 } lm_api_precision;
 
 /* The precision of the model's reconstructions (the weights stay fp32). */

@@ -5,6 +5,14 @@
 #include <stdlib.h>
 #include <string.h>
 
+#if defined(__x86_64__) && defined(__linux__)
+#include <sys/syscall.h>
+#include <unistd.h>
+#define LM_AMX_PRCTL 1
+#else
+#define LM_AMX_PRCTL 0
+#endif
+
 #if defined(__x86_64__) || defined(__i386__)
 #include <cpuid.h>
 #define LM_X86 1
@@ -72,6 +80,29 @@ const lm_cpu_features *lm_cpu_features_get(void)
 {
     pthread_once(&feat_once, detect);
     return &feat;
+}
+
+static int amx_granted;
+static pthread_once_t amx_once = PTHREAD_ONCE_INIT;
+
+/* Linux keeps the tile data (8 KiB of state per thread) off until a process asks for it;
+ * the permission then holds for every thread of the process, present and future. */
+static void amx_request(void)
+{
+#if LM_AMX_PRCTL
+    enum { ARCH_GET_XCOMP_PERM = 0x1022, ARCH_REQ_XCOMP_PERM = 0x1023, XFEATURE_XTILEDATA = 18 };
+    if (!lm_cpu_features_get()->amx_bf16) return;
+    if (syscall(SYS_arch_prctl, ARCH_REQ_XCOMP_PERM, XFEATURE_XTILEDATA) != 0) return;
+    unsigned long perm = 0;
+    if (syscall(SYS_arch_prctl, ARCH_GET_XCOMP_PERM, &perm) != 0) return;
+    amx_granted = (perm >> XFEATURE_XTILEDATA) & 1;
+#endif
+}
+
+int lm_amx_tile_granted(void)
+{
+    pthread_once(&amx_once, amx_request);
+    return amx_granted;
 }
 
 lm_isa lm_isa_best(void)
@@ -152,7 +183,9 @@ void lm_isa_describe(char *buf, int n)
     else if (isa_forced)
         snprintf(why, sizeof why, "set by LM_ISA (the CPU supports %s)", lm_isa_name(best));
     else if (best == LM_ISA_AMX)
-        snprintf(why, sizeof why, "the CPU has AMX-BF16 tiles and AVX-512");
+        snprintf(why, sizeof why, "the CPU has AMX-BF16 tiles and AVX-512; %s",
+                 lm_amx_tile_granted() ? "tile state granted by the kernel"
+                                       : "the kernel refuses the tile state (no tile kernels)");
     else if (best == LM_ISA_AVX512)
         snprintf(why, sizeof why, "the CPU has AVX-512 F/VL/BW/DQ%s; no AMX tiles",
                  f->avx512_bf16 ? " and AVX-512-BF16" : "");

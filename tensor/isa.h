@@ -49,6 +49,12 @@ lm_isa lm_isa_active(void);
 /* The best level the CPU supports (ignoring LM_ISA). */
 lm_isa lm_isa_best(void);
 
+/* 1 when the operating system lets this process use the AMX tile data (Linux: requested once
+ * per process with arch_prctl(ARCH_REQ_XCOMP_PERM, XFEATURE_XTILEDATA), the first time this is
+ * called); 0 when refused, or when the CPU has no AMX-BF16. The level stays amx when refused:
+ * the bf16 product then runs AVX-512-BF16 (tensor/ops/gemm_bf16.h). */
+int lm_amx_tile_granted(void);
+
 /* "generic", "avx2", "avx512", "amx". */
 const char *lm_isa_name(lm_isa isa);
 
@@ -56,9 +62,10 @@ const char *lm_isa_name(lm_isa isa);
  * no AMX tiles" or "avx2: forced by LM_ISA (the CPU supports avx512)"), into buf. */
 void lm_isa_describe(char *buf, int n);
 
-/* One line for users: which path a precision takes on this CPU, e.g. "bf16 (AVX-512-BF16
- * products, fp32 sums)" or "bf16 (operands rounded to bf16, products in fp32: this CPU has no
- * AVX-512-BF16)"; "fp32" for LM_PRECISION_FP32 (tensor.h); defined beside the bf16 product, tensor/ops/gemm_bf16.c. */
+/* One line for users: which path a precision takes on this CPU, e.g. "bf16 (AMX tiles, fp32
+ * sums)", "bf16 (AVX-512-BF16 products, fp32 sums)" or "bf16 (operands rounded to bf16, products
+ * in fp32: this CPU has no AVX-512-BF16)"; "fp32" for LM_PRECISION_FP32 (tensor.h); defined
+ * beside the bf16 product, tensor/ops/gemm_bf16.c. */
 const char *lm_precision_describe(int precision);
 
 #ifdef __cplusplus

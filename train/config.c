@@ -142,7 +142,8 @@ static const field fields[] = {
         "the process, all threads; not shrunk by a busy machine)", 0, 0),
     FLD("precision", F_STR, precision, "P", "fp32 | bf16: bf16 operands (fp32 sums, master "
         "weights, Adam, loss) for the 3x3 convolutions' Winograd products, forward and input "
-        "gradient; AVX-512-BF16 where the CPU has it, else the same arithmetic slower", 0, 0),
+        "gradient; AMX tiles or AVX-512-BF16 where the CPU has them, else the same arithmetic "
+        "slower", 0, 0),
     FLD("doe", F_STR, doe, "FILE", "qdo presets: DOE description (default: bundled; a run's "
         "doe.json)", 0, 0),
     FLD("doe_optimise", F_INT, doe_optimise, "0|1", "qdo presets: train the DOE's height map "
