@@ -187,7 +187,7 @@ static const struct { const char *name, *purpose; } purposes[] = {
     {"tn-160-nc", "tile-resolution residual, 160 channels, sees the noise level (2x han-tiny's cost)"},
     {"tn-96-nc-b2", "tn-96-nc reading both buckets: the residual on lmmse-b2"},
     {"tn-64-d4-nc", "tn-64-nc with four residual blocks: tn-96-nc's cost, 9 tiles' reach"},
-    {"tn-96-d4-nc", "tn-96-nc with four residual blocks (1.8x its cost)"},
+    {"tn-96-d4-nc", "tn-96-nc with four residual blocks (1.9x its cost)"},
 };
 
 const char *lm_model_preset_purpose(const char *name)
