@@ -8,7 +8,8 @@
  * Three kernels, one chosen per process at the first call (tensor/isa.h, lm_bf16_kernel_active):
  *   - AMX tiles (level amx, the kernel granting the tile state): tdpbf16ps on 16 x 32 bf16
  *     tiles of A and 16 pair-rows x 16 columns of B, 2 x 2 fp32 accumulator tiles (a 32 x 32
- *     block of C) per pass over K; 16 x 16 x 32 = 8,192 multiply-adds (16,384 FLOP) per instruction;
+ *     block of C) per pass over K; 16 x 16 x 32 = 8,192 multiply-adds (16,384 FLOP) per
+ *     instruction;
  *   - AVX-512-BF16 (level avx512 or amx without tiles): one vdpbf16ps does 32 multiply-adds,
  *     6 rows x 32 columns of C in registers;
  *   - the fp32 twin elsewhere: the same sums from the bf16 values, in fp32 (the products of
