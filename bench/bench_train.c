@@ -13,6 +13,7 @@
 #include "train/adam.h"
 #include "data/mosaic.h"
 #include "data/system.h"
+#include "tensor/isa.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -113,6 +114,9 @@ int main(int argc, char **argv)
     lm_system_free(&sys);
     printf("training step (forward + L1 + backward + Adam), batch %d of %dx%d, %d threads, "
            "%d repetitions (ms; fwd/bwd/adam are means)\n", B, H, W, threads, reps);
+    const char *prec = getenv("LM_BENCH_PRECISION");
+    printf("precision: %s\n", lm_precision_describe(prec && !strcmp(prec, "bf16")
+                                                        ? LM_PRECISION_BF16 : LM_PRECISION_FP32));
     printf("%-10s %-8s %10s %9s %9s %8s %8s %8s %9s\n", "preset", "mode", "params", "min",
            "median", "fwd", "bwd", "adam", "samples/s");
     static const char *dflt[] = {"linear", "han-tiny", "han-small", "mcan", "srnet"};
