@@ -566,19 +566,19 @@ void lm_bf16_pack_b(int K, int n, const float *B, long ldb, lm_bf16 *Bp)
     lm_bf16_pack_b_for(lm_bf16_kernel_active(), K, n, B, ldb, Bp);
 }
 
-void lm_gemm_bf16_panel_for(lm_bf16_kernel k, int M, int n, int K, const lm_bf16 *Ap,
-                            const lm_bf16 *Bp, const float *bias, int accumulate, float *C,
-                            long ldc)
+/* The product with kernel k, which the caller knows runs here (lm_bf16_kernel_runs). */
+static void run_kernel(lm_bf16_kernel k, int M, int n, int K, const lm_bf16 *Ap,
+                       const lm_bf16 *Bp, const float *bias, int accumulate, float *C, long ldc)
 {
     if (M <= 0 || n <= 0) return;
 #if LM_HAVE_AMX_KERNEL
-    if (k == LM_BF16_AMX && lm_bf16_kernel_runs(k)) {
+    if (k == LM_BF16_AMX) {
         panel_amx(M, n, K, Ap, Bp, bias, accumulate, C, ldc);
         return;
     }
 #endif
 #if LM_HAVE_BF16_KERNEL
-    if (k == LM_BF16_DPBF16 && lm_bf16_kernel_runs(k)) {
+    if (k == LM_BF16_DPBF16) {
         panel_avx512bf16(M, n, K, Ap, Bp, bias, accumulate, C, ldc);
         return;
     }
@@ -586,8 +586,20 @@ void lm_gemm_bf16_panel_for(lm_bf16_kernel k, int M, int n, int K, const lm_bf16
     panel_fp32(k, M, n, K, Ap, Bp, bias, accumulate, C, ldc);
 }
 
+void lm_gemm_bf16_panel_for(lm_bf16_kernel k, int M, int n, int K, const lm_bf16 *Ap,
+                            const lm_bf16 *Bp, const float *bias, int accumulate, float *C,
+                            long ldc)
+{
+    if (k != LM_BF16_FP32 && !lm_bf16_kernel_runs(k)) { /* its layout, multiplied in fp32 */
+        panel_fp32(k, M, n, K, Ap, Bp, bias, accumulate, C, ldc);
+        return;
+    }
+    run_kernel(k, M, n, K, Ap, Bp, bias, accumulate, C, ldc);
+}
+
+/* The process's kernel was checked once when it was chosen: no check per call. */
 void lm_gemm_bf16_panel(int M, int n, int K, const lm_bf16 *Ap, const lm_bf16 *Bp,
                         const float *bias, int accumulate, float *C, long ldc)
 {
-    lm_gemm_bf16_panel_for(lm_bf16_kernel_active(), M, n, K, Ap, Bp, bias, accumulate, C, ldc);
+    run_kernel(lm_bf16_kernel_active(), M, n, K, Ap, Bp, bias, accumulate, C, ldc);
 }
