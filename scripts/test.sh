@@ -3,8 +3,11 @@
 # Release build (portable, warnings as errors; the numerical tests also at each lower
 # instruction-set level, label "isa"), the Python package installed with pip in a virtual
 # environment and its pytest tests (scripts/test_python.sh), then the same suite built with
-# AddressSanitizer + UndefinedBehaviorSanitizer, then the core library compiled (not run) for
-# other CPU targets and with clang, warnings as errors (scripts/check_targets.sh).
+# AddressSanitizer + UndefinedBehaviorSanitizer (every test but the reruns per instruction set,
+# the long training anchor and the guide's commands: labels "isa", "slow", "guide", which run the
+# code the unit and CLI tests run, for a third of the sanitizer build's time), then the core
+# library compiled (not run) for other CPU targets and with clang, warnings as errors
+# (scripts/check_targets.sh).
 # Exits non-zero on any failure. A skipped OpenCL test fails the run when CI=true (CI installs
 # PoCL, so a skip there means the set-up is broken).
 set -euo pipefail
@@ -23,7 +26,8 @@ cmake -S . -B build-asan -DLM_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLM
 cmake --build build-asan -j"$jobs"
 ASAN_OPTIONS=${ASAN_OPTIONS:-abort_on_error=0:detect_leaks=1} \
 UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1} \
-  ctest --test-dir build-asan --output-on-failure -j"$jobs" -LE isa | tee build-asan/ctest.log
+  ctest --test-dir build-asan --output-on-failure -j"$jobs" -LE "isa|slow|guide" \
+  | tee build-asan/ctest.log
 
 echo "== compile for other targets (warnings as errors) =="
 # clang and its OpenMP runtime, the ARM cross compiler: only this check needs them
