@@ -10,8 +10,8 @@
 #include "data/mosaic.h"
 #include "data/util.h"
 #include <errno.h>
-#include <jansson.h>
 #include <math.h>
+#include <jansson.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -208,10 +208,17 @@ static lm_status fit_closed(const lm_train_cfg *cfg, lm_model *m, lm_dataset *d,
         fprintf(out, "train: %s fitted in closed form in %.1f s (%ld patches, %ld pixels; %ld "
                 "validation patches; solving %.1f s)\n", cfg->model, r.seconds, r.patches, r.rows,
                 r.val_patches, r.seconds_solve);
-        for (int l = 0; l < LM_LMMSE_LEVELS; l++)
-            fprintf(out, "  noise sd %-7g ridge %-6g synthetic share %-5.2g validation PSNR "
-                    "%.2f dB\n", (double)lm_lmmse_sigmas[l], r.ridge[l], r.synth_weight[l],
-                    r.val_psnr[l]);
+        for (int l = 0; l < LM_LMMSE_LEVELS; l++) {
+            if (isnan(r.ridge[l])) { /* a level between the sampled ones */
+                fprintf(out, "  noise sd %-7g interpolated between the levels around it\n",
+                        (double)lm_lmmse_sigmas[l]);
+                continue;
+            }
+            fprintf(out, "  noise sd %-7g ridge %-6g synthetic share %.2g",
+                    (double)lm_lmmse_sigmas[l], r.ridge[l], r.synth_weight[l]);
+            if (isnan(r.val_psnr[l])) fprintf(out, "\n");
+            else fprintf(out, "  validation PSNR %.2f dB\n", r.val_psnr[l]);
+        }
         if (!r.val_patches)
             fprintf(out, "  (no validation split: ridge fixed, synthetic share as sampled)\n");
     }
