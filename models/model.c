@@ -181,7 +181,7 @@ static const struct { const char *name, *purpose; } purposes[] = {
     {"rt-8-mf3", "rt-8 reading three aligned frames (video)"},
     {"rt-16-mf3", "rt-16 reading three aligned frames (video)"},
     {"rt-8-nc", "rt-8 that also sees the noise level"},
-    {"rt-16-nc", "rt-16 that also sees the noise level: the bundled demo residual on lmmse"},
+    {"rt-16-nc", "rt-16 that also sees the noise level: the bundled real-time residual on lmmse"},
     {"tn-64-nc", "tile-resolution residual, 64 channels, sees the noise level (1/3 han-tiny's cost)"},
     {"tn-96-nc", "tile-resolution residual, 96 channels, sees the noise level: best residual on lmmse"},
     {"tn-160-nc", "tile-resolution residual, 160 channels, sees the noise level (2x han-tiny's cost)"},
