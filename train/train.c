@@ -688,14 +688,15 @@ lm_status lm_train_run(const lm_train_cfg *cfg, lm_model *model, const lm_train_
     L.tty = isatty(fileno(opts->progress_out ? opts->progress_out : stderr));
     long start = 0;
     lm_status st = setup(&L, err);
-    if (!st) st = begin(&L, &start, err);
-    res->iterations_done = start;
-    L.it0 = start;
-    L.saved = opts->resume ? start : -1;
+    /* the clock first: begin() writes a fresh run's iteration-0 checkpoint, with its seconds */
     L.seconds0 = opts->resume ? lm_train_checkpoint_seconds(opts->resume) : 0.0;
     L.cpu_clock = !strcmp(cfg->clock, "cpu");
     L.t0 = L.last_print = now_s();
     L.t_train0 = train_s(&L);
+    if (!st) st = begin(&L, &start, err);
+    res->iterations_done = start;
+    L.it0 = start;
+    L.saved = opts->resume ? start : -1;
     if (!st) st = run_loop(&L, start, res, err);
     res->seconds = train_s(&L) - L.t_train0;
     if (L.opt.ema && !st) /* the caller's model: the average, as model.safetensors holds it */

@@ -145,6 +145,20 @@ s2=$(secs "$T/tr/optimizer.safetensors")
 check "resume continues the clock to the budget ($s1 -> $s2 s)" \
   python3 -c "import sys; sys.exit(not ($s1 < 3 and 5.5 <= $s2 <= 40))"
 
+# a run lost before its first regular checkpoint resumes from the iteration-0 one: that
+# checkpoint's clock must read the time trained (about none), on either clock
+for clk in cpu wall; do
+  rm -rf "$T/t0"
+  "$LM" train --model linear --data "$CAVE" --patch 33x32 --batch 2 --accum-steps 1 \
+    --iterations 100000 --minutes 5 --clock $clk --val-interval 0 --checkpoint-interval 100000 \
+    --workers 0 --output "$T/t0" --quiet > /dev/null 2>&1 &
+  pid=$!
+  for _ in $(seq 600); do [ -s "$T/t0/optimizer.safetensors" ] && break; sleep 0.1; done
+  kill -9 $pid 2> /dev/null; wait $pid 2> /dev/null
+  s0=$(secs "$T/t0/optimizer.safetensors")
+  check "iteration-0 checkpoint, $clk clock: $s0 s trained" python3 -c "import sys; sys.exit(not 0 <= $s0 < 5)"
+done
+
 # a bad base: one line, exit 2, no run folder
 "$LM" train --model rt-8 --base "$T/none" --data "$CAVE" --output "$T/b1" 2> "$T/e5"
 check "missing base: exit 2" [ $? -eq 2 ]
