@@ -18,8 +18,8 @@ static lm_status check_cube(const lm_system *s, const lm_cube *c, int y0, int x0
         return lm_err_set(err, LM_ERR_SHAPE, "forward: empty cube");
     if (c->bands != s->nbins)
         return lm_err_set(err, LM_ERR_SHAPE, "forward: cube has %d bands, the system's grid has "
-                          "%d (mirror 31-band cubes first: lm_forward_simulate31)", c->bands,
-                          s->nbins);
+                          "%d: give 31 bands on 400-700 nm (mirrored to the grid) or the grid's %d",
+                          c->bands, s->nbins, s->nbins);
     for (int b = 0; b < c->bands; b++) {
         float want = s->grid_start + s->grid_step * (float)b;
         if (fabsf(c->wavelength[b] - want) > 0.01f * s->grid_step)

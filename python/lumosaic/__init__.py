@@ -92,6 +92,8 @@ def _as_cube(cube: np.ndarray, what: str) -> np.ndarray:
         raise Error(Status.SHAPE, f"{what}: shape {a.shape}: a (height, width, bands) array")
     if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
         raise Error(Status.ARG, f"{what}: dtype {a.dtype}: a float array")
+    if a.size == 0:
+        raise Error(Status.SHAPE, f"{what}: shape {a.shape}: every size at least 1")
     return a
 
 
@@ -331,6 +333,17 @@ def _to_float(x: np.ndarray) -> np.ndarray:
     return x
 
 
+def _noise_level(noise: Optional[float]) -> float:
+    """The library's noise level: noise (0..1), or -1 (estimate it) for None."""
+    if noise is None:
+        return -1.0
+    level = float(noise)
+    if not 0.0 <= level <= 1.0:  # also NaN
+        raise Error(Status.ARG, f"noise {noise!r}: a level 0..1 (sd as a fraction of the "
+                                f"frame's maximum), or None to estimate it")
+    return level
+
+
 class Model:
     """A trained model with its system and its working memory.
 
@@ -455,7 +468,7 @@ class Model:
                                           f"{f1.shape}")
             if f0.dtype != f1.dtype:
                 f1, f0 = _to_float(f1), _to_float(f0)
-        level = -1.0 if noise is None else float(noise)
+        level = _noise_level(noise)
         h, w = f1.shape
         out = np.empty((31, h, w), np.float32)
         wl = np.empty(31, np.float32)
@@ -508,7 +521,7 @@ class Model:
             if f.shape != f1[0].shape or (f0 is not None and f0[i].shape != f.shape):
                 raise Error(Status.SHAPE, f"frames[{i}]: shape {f.shape} is not frame 0's "
                                           f"{f1[0].shape} (or its bucket 0's)")
-        level = -1.0 if noise is None else float(noise)
+        level = _noise_level(noise)
         n, (h, w) = len(f1), f1[0].shape
         kind = _capi.PIXEL_U16 if f1[0].dtype == np.uint16 else _capi.PIXEL_F32
         arr = (_capi.Frame * n)(*[

@@ -327,6 +327,17 @@ def test_errors_are_exceptions_with_one_line(tmp_path, model):
     with pytest.raises(lumosaic.Error) as e:
         model.reconstruct(np.zeros((66, 64), np.float32), noise=3.0)
     assert e.value.status == lumosaic.Status.ARG
+    for bad in (-1.0, float("nan")):  # None, not a negative level, asks for the estimate
+        with pytest.raises(lumosaic.Error) as e:
+            model.reconstruct_sequence([np.zeros((66, 64), np.float32)], noise=bad)
+        assert e.value.status == lumosaic.Status.ARG and "None" in str(e.value)
+    with pytest.raises(lumosaic.Error) as e:
+        lumosaic.simulate(np.zeros((0, 8, 31), np.float32))
+    assert e.value.status == lumosaic.Status.SHAPE and "(0, 8, 31)" in str(e.value)
+    with pytest.raises(lumosaic.Error) as e:
+        lumosaic.simulate(np.zeros((6, 8, 32), np.float32))
+    assert "32 bands" in str(e.value) and "400-700" in str(e.value)
+    assert "lm_" not in str(e.value)  # no function of the C library in a Python message
     with pytest.raises(lumosaic.Error):
         lumosaic.Model(MODEL, precision="fp16")
     with pytest.raises(lumosaic.Error):
