@@ -156,7 +156,8 @@ for clk in cpu wall; do
   for _ in $(seq 600); do [ -s "$T/t0/optimizer.safetensors" ] && break; sleep 0.1; done
   kill -9 $pid 2> /dev/null; wait $pid 2> /dev/null
   s0=$(secs "$T/t0/optimizer.safetensors")
-  check "iteration-0 checkpoint, $clk clock: $s0 s trained" python3 -c "import sys; sys.exit(not 0 <= $s0 < 5)"
+  check "iteration-0 checkpoint, $clk clock: $s0 s trained" \
+    python3 -c "import sys; sys.exit(not 0 <= $s0 < 5)"
 done
 
 # a bad base: one line, exit 2, no run folder
