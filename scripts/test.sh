@@ -3,9 +3,9 @@
 # Release build (portable, warnings as errors; the numerical tests also at each lower
 # instruction-set level, label "isa"), the Python package installed with pip in a virtual
 # environment and its pytest tests (scripts/test_python.sh), then the same suite built with
-# AddressSanitizer + UndefinedBehaviorSanitizer (every test but the reruns per instruction set,
-# the long training anchor and the guide's commands: labels "isa", "slow", "guide", which run the
-# code the unit and CLI tests run, for a third of the sanitizer build's time), then the core
+# AddressSanitizer + UndefinedBehaviorSanitizer (every test but labels "isa", "slow" and "guide":
+# the reruns per instruction set, the long training anchor and the guide's commands, whose code
+# the unit and CLI tests already run there; they would cost a third of its time), then the core
 # library compiled (not run) for other CPU targets and with clang, warnings as errors
 # (scripts/check_targets.sh).
 # Exits non-zero on any failure. A skipped OpenCL test fails the run when CI=true (CI installs
