@@ -422,6 +422,10 @@ static lm_status plan_sample(const lm_dataset *d, lm_data_split split, long i, s
     const float th = lm_rng_uniform_range(&rc, 0.0f, 6.2831853f), ey = lm_rng_uniform(&rc),
                 ex = lm_rng_uniform(&rc);
     in->mix_scene = -1;
+    /* clipping as a 16-bit PNG frame holds values, from a stream of its own */
+    lm_rng rk = lm_rng_split(&r, 6);
+    const float u_clip = lm_rng_uniform(&rk);
+    in->clip = c->sensor_clip || (train && u_clip < c->clip_fraction);
     if (train && in->kind == LM_SAMPLE_SCENE && u_col < c->collage) {
         const int n = d->count[split];
         const scene *s2 = &d->scenes[d->list[split][(int)(pick2 % (uint32_t)n)]];
@@ -667,12 +671,12 @@ static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, int noi
     const int ph = d->cfg.patch_h, pw = d->cfg.patch_w, two = d->cfg.buckets == 2;
     float *b0 = two ? raw + (size_t)ph * pw : NULL; /* raw bucket 0 until scaled below */
     if (st == LM_OK) st = clean_frame(d->cfg.sys, &p.info, &c41, raw, b0, err);
-    if (st == LM_OK && noisy && (p.info.noise_k > 0.0f || d->cfg.sensor_clip ||
+    if (st == LM_OK && noisy && (p.info.noise_k > 0.0f || p.info.clip ||
                                  d->cfg.sensor_bits || d->cfg.photons > 0 ||
                                  d->cfg.read_noise > 0.0f)) {
         lm_noise_opts no = {0};
         no.gauss_k = p.info.noise_k;
-        no.clip = d->cfg.sensor_clip;
+        no.clip = p.info.clip;
         no.bits = d->cfg.sensor_bits;
         no.photons = sample_photons(&d->cfg, split, &p.noise_rng); /* shot and read noise */
         no.read_noise = d->cfg.read_noise;
@@ -840,6 +844,9 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
                  1.0 / (1.0 + c->scale_jitter), 1.0 + c->scale_jitter);
     if (c->transpose)
         snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; transposes");
+    if (c->clip_fraction > 0 && !c->sensor_clip)
+        snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; clipped to [0, 1] %.0f%%",
+                 100.0 * c->clip_fraction);
     if (c->collage > 0)
         snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; collage %.0f%%",
                  100.0 * c->collage);
@@ -918,6 +925,9 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
         c->transpose > 1)
         return lm_err_set(err, LM_ERR_ARG, "dataset: scale jitter %g (0..1) or transpose %d "
                           "(0|1) out of range", (double)c->scale_jitter, c->transpose);
+    if (!(c->clip_fraction >= 0.0f && c->clip_fraction <= 1.0f))
+        return lm_err_set(err, LM_ERR_ARG, "dataset: clip share %g out of range (0..1)",
+                          (double)c->clip_fraction);
     if (!(c->collage >= 0.0f && c->collage <= 1.0f))
         return lm_err_set(err, LM_ERR_ARG, "dataset: collage share %g out of range (0..1)",
                           (double)c->collage);

@@ -55,6 +55,9 @@ typedef struct lm_dataset_cfg {
     int sensor_clip;            /* 1: after the noise, clip to [0, 1] (the full scale), as a
                                  * sensor or a 16-bit PNG frame holds values (default 0) */
     int sensor_bits;            /* quantise to this many bits (0 = off, 16 = PNG) */
+    float clip_fraction;        /* in [0, 1]: share of training samples clipped as sensor_clip
+                                 * clips (a frame that went through a 16-bit PNG), the rest
+                                 * keeping their negatives (0; sensor_clip 1: all) */
     double photons;             /* > 0: shot noise, photo-electrons at full scale (the white
                                  * response of the brightest LED), before the Gaussian k; 0 = off */
     double photons_min;         /* > 0: each training sample's photons drawn log-uniformly in
@@ -211,6 +214,8 @@ typedef struct lm_dataset_sample_info {
     float sy0, sx0;       /* the region's top-left in scene pixels (y0, x0 without zoom or
                            * transpose); region pixel (a, b) covers [sy0 + a zoom, sy0 +
                            * (a + 1) zoom) x [sx0 + b zoom, ...). Flips apply to the patch. */
+    int clip;             /* 1: the noisy frame is clipped to [0, 1] (sensor_clip, or drawn
+                           * with probability clip_fraction) */
     int collage;          /* 1: the patch above is blended with a second one (below) */
     int mix_scene;        /* the second patch: its scene (index in the split's list), */
     int mix_y0, mix_x0;   /* its top-left there (any pixel) and flips */

@@ -769,6 +769,68 @@ done:
     lm_dataset_close(clean);
 }
 
+/* clip_fraction: a share of the training samples clipped to [0, 1] as sensor_clip clips them
+ * all; the others exactly the unclipped loader's; validation samples never */
+static void test_clip_fraction(void)
+{
+    const char *paths[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    cfg.noise_min = 0.05f;
+    cfg.noise_max = 0.15f;
+    cfg.val_noise = 0.1f;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *plain = lm_dataset_open(&cfg, &e);
+    cfg.sensor_clip = 1;
+    lm_dataset *all = lm_dataset_open(&cfg, &e);
+    cfg.sensor_clip = 0;
+    cfg.clip_fraction = 0.5f;
+    lm_dataset *half = lm_dataset_open(&cfg, &e);
+    cfg.clip_fraction = 1.5f;
+    lm_err e2;
+    lm_err_clear(&e2);
+    lm_dataset *bad = lm_dataset_open(&cfg, &e2);
+    CHECK_MSG(bad == NULL && strstr(e2.msg, "clip share"), "clip share 1.5: %s", e2.msg);
+    lm_dataset_close(bad);
+    CHECK_MSG(plain && all && half, "%s", e.msg);
+    if (!plain || !all || !half) goto done;
+    const int N = 2000;
+    int clipped = 0;
+    for (long i = 0; i < N; i++) {
+        lm_dataset_sample_info info, p0;
+        CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        CHECK(lm_dataset_sample_info_get(plain, LM_SPLIT_TRAIN, i, &p0, &e) == LM_OK);
+        CHECK(p0.clip == 0 && info.noise_k == p0.noise_k && info.kind == p0.kind);
+        clipped += info.clip;
+    }
+    CHECK_CLOSE(clipped / (double)N, 0.5, 0.04, 0);
+    static float rh[PH * PW], rp[PH * PW], ra[PH * PW], t[33 * PH * PW];
+    int seen[2] = {0, 0}, had_neg = 0;
+    for (long i = 0; i < 24; i++) {
+        lm_dataset_sample_info info;
+        CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        CHECK(lm_dataset_batch(half, i, 1, rh, t, &e) == LM_OK);
+        CHECK(lm_dataset_batch(plain, i, 1, rp, t, &e) == LM_OK);
+        CHECK(lm_dataset_batch(all, i, 1, ra, t, &e) == LM_OK);
+        seen[info.clip]++;
+        CHECK_MSG(memcmp(rh, info.clip ? ra : rp, sizeof rh) == 0, "sample %ld (clip %d) is not "
+                  "the %s loader's", i, info.clip, info.clip ? "clipping" : "unclipped");
+        float mn = 0;
+        for (int q = 0; q < PH * PW; q++) mn = rh[q] < mn ? rh[q] : mn;
+        if (info.clip) CHECK(mn >= 0.0f);
+        for (int q = 0; q < PH * PW && info.clip; q++) had_neg |= rp[q] < 0.0f;
+    }
+    CHECK(seen[0] > 0 && seen[1] > 0);
+    CHECK(had_neg); /* the clipped samples differ from the unclipped ones */
+    CHECK(lm_dataset_eval_sample(half, LM_SPLIT_VAL, 0, rh, t, &e) == LM_OK);
+    CHECK(lm_dataset_eval_sample(plain, LM_SPLIT_VAL, 0, rp, t, &e) == LM_OK);
+    CHECK(memcmp(rh, rp, sizeof rh) == 0);
+done:
+    lm_dataset_close(plain);
+    lm_dataset_close(all);
+    lm_dataset_close(half);
+}
+
 static void test_synthetic_share(void)
 {
     const char *paths[1] = {g_pospath};
@@ -1460,6 +1522,7 @@ int main(void)
     RUN(test_batches_deterministic);
     RUN(test_noise_levels);
     RUN(test_synthetic_share);
+    RUN(test_clip_fraction);
     RUN(test_lru_bound);
     RUN(test_scene_normalised);
     RUN(test_shot_and_read_noise);
