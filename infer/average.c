@@ -75,6 +75,11 @@ lm_status lm_model_average(const char *const *paths, int n, const char *out_path
     char *f_hash = meta_or_empty(first.weights, "system_hash");
     char *f_sys = meta_or_empty(first.weights, "system");
     char *scenes = meta_or_empty(first.weights, "train_scenes");
+    /* the share of clipped training samples: the smallest of the models' ("" when one of
+     * them does not record it) */
+    char *f_clip = meta_or_empty(first.weights, "clipped");
+    double clip = f_clip && f_clip[0] ? atof(f_clip) : -1.0;
+    free(f_clip);
     size_t total = first.model->params.total, list_len = 1;
     double *sum = calloc(total ? total : 1, sizeof *sum);
     unsigned char *differs = calloc(total ? total : 1, 1);
@@ -92,6 +97,10 @@ lm_status lm_model_average(const char *const *paths, int n, const char *out_path
             char *b = meta_or_empty(im.weights, "base_preset");
             char *h = meta_or_empty(im.weights, "system_hash");
             char *sc = meta_or_empty(im.weights, "train_scenes");
+            char *cl = meta_or_empty(im.weights, "clipped");
+            const double c = cl && cl[0] ? atof(cl) : -1.0;
+            free(cl);
+            if (clip >= 0.0 && (c < 0.0 || c < clip)) clip = c;
             if (!b || !h || !sc)
                 st = lm_err_set(err, LM_ERR_NOMEM, "average: out of memory");
             else if (strcmp(im.model->preset, first.model->preset) || strcmp(b, f_base))
@@ -133,7 +142,8 @@ lm_status lm_model_average(const char *const *paths, int n, const char *out_path
         float *out = first.model->params.data;
         for (size_t j = 0; j < total; j++)
             if (differs[j]) out[j] = (float)(sum[j] / n);
-        char sys[PATH_MAX + 8], bk[8], fr[8], cnt[16];
+        char sys[PATH_MAX + 8], bk[8], fr[8], cnt[16], cs[32] = "";
+        if (clip >= 0.0) snprintf(cs, sizeof cs, "%.6g", clip);
         system_for(first.weights, f_sys, out_path, sys, sizeof sys);
         snprintf(bk, sizeof bk, "%d", lm_model_buckets(first.model));
         snprintf(fr, sizeof fr, "%d", lm_model_frames(first.model));
@@ -141,8 +151,8 @@ lm_status lm_model_average(const char *const *paths, int n, const char *out_path
         const char *meta[] = {"format", "lumosaic-checkpoint-1", "preset", first.model->preset,
                               "system", sys, "system_hash", f_hash, "buckets", bk,
                               "frames", fr, "train_scenes", scenes, "average_count", cnt,
-                              "average_of", list, "base_preset", f_base};
-        st = lm_params_save(&first.model->params, out_path, meta, f_base[0] ? 10 : 9, err);
+                              "average_of", list, "clipped", cs, "base_preset", f_base};
+        st = lm_params_save(&first.model->params, out_path, meta, f_base[0] ? 11 : 10, err);
     }
     free(sum), free(differs), free(list);
     free(f_base), free(f_hash), free(f_sys), free(scenes);

@@ -152,6 +152,9 @@ lm_status lm_infer_model_load(const char *path, const char *system_override, lm_
         return st;
     }
     im->train_scenes = lm_safetensors_meta(im->weights, "train_scenes", &e3);
+    char *cl = lm_safetensors_meta(im->weights, "clipped", &e3); /* older files: none */
+    im->clipped = cl && cl[0] ? atof(cl) : -1.0;
+    free(cl);
     char *bk = lm_safetensors_meta(im->weights, "buckets", &e3); /* older files: none */
     if (bk && bk[0] && atoi(bk) != lm_model_buckets(im->model))
         st = lm_err_set(err, LM_ERR_FORMAT, "%s: records %s bucket(s), its preset %s reads %d",

@@ -23,6 +23,8 @@ typedef struct lm_infer_model {
     char model_system[1024]; /* with a remap: the system file the model was trained with */
     char *train_scenes;   /* content hashes of its training scenes ("train_scenes" metadata,
                            * data/dataset.h); NULL when the file records none */
+    double clipped;       /* the share of its noisy training samples that were clipped to
+                           * [0, 1] ("clipped" metadata); -1 when the file records none */
     int noise_oracle;     /* eval only: give noise-reading models the simulated level */
     int sensor_clip, sensor_bits; /* eval only: simulated frames clipped to [0, 1] / quantised
                                    * after the noise, as a 16-bit PNG holds them */

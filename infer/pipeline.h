@@ -97,6 +97,7 @@ typedef struct lm_pipe {
     lm_raw raw;
     double *sat;              /* per frame: the share of saturated pixels (-1: not read) */
     lm_pipe_align al;
+    int clip_warned;          /* the note on clipped noisy frames was given */
 } lm_pipe;
 
 /* Open a run on files, as `lumosaic infer` does: input (a frame, pattern or folder), bucket0

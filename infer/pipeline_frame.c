@@ -11,6 +11,7 @@
 #include "infer/pipeline.h"
 #include "infer/pipeline_internal.h"
 #include "infer/recon.h"
+#include "data/noise_est.h"
 
 /* Read frame i of bucket 1 converted to the system's scale (infer/raw.h), its share of
  * saturated pixels noted in p->sat[i]. */
@@ -253,6 +254,32 @@ lm_status lm_pipe_reconstruct(lm_pipe *p, const float *in, int H, int W, lm_cube
     return lm_recon_camera_frame(&p->ctx, &p->im, in, H, W, &ro, cube, e);
 }
 
+/* Once per run: a noisy frame clipped at 0 (as a 16-bit PNG or TIFF holds it: at least 1 in
+ * 1000 pixels, and 16, exactly 0, none below) given to a model that records having been
+ * trained on unclipped samples only. Its dark areas come out biased (at 10 % noise the
+ * bundled models lost 3.6 dB on such frames before they were trained on both kinds). */
+static void clip_note(lm_pipe *p, int i, const float *in, int H, int W)
+{
+    if (p->clip_warned || p->im.clipped != 0.0) return;
+    const size_t n = (size_t)H * W;
+    size_t zeros = 0;
+    for (size_t k = 0; k < n; k++) {
+        if (in[k] < 0.0f) return; /* negatives kept: not clipped */
+        zeros += in[k] == 0.0f;
+    }
+    if (zeros < 16 || zeros * 1000 < n) return;
+    lm_noise_info ni;
+    lm_err ne = {0};
+    const lm_mosaic *mo = &p->im.model->mosaic;
+    if (lm_noise_analyze(in, H, W, mo->ty, mo->tx, &ni, &ne) || !(ni.level >= 0.02f)) return;
+    p->clip_warned = 1;
+    lm_pipe_say(p, LM_PIPE_WARNING, "%s: noisy (about %.0f %%) and clipped at 0, as a 16-bit "
+                "file holds it; model %s was trained on unclipped samples, so dark areas come "
+                "out too bright: a model trained on clipped samples too (train's clip_fraction) "
+                "reads such frames", p->src.name(p->src.self, i), 100.0 * ni.level,
+                p->im.model->preset);
+}
+
 lm_status lm_pipe_frame(lm_pipe *p, int i, lm_cube *cube, lm_pipe_info *info, lm_err *e)
 {
     memset(cube, 0, sizeof *cube);
@@ -264,6 +291,7 @@ lm_status lm_pipe_frame(lm_pipe *p, int i, lm_cube *cube, lm_pipe_info *info, lm
     lm_status st = frame_input(p, i, &f, &in, e);
     double ta = omp_get_wtime();
     const int H = f.height ? f.height : p->src.height, W = f.width ? f.width : p->src.width;
+    if (!st) clip_note(p, i, in, H, W);
     if (!st) st = with_bucket0(p, i, &in, H, W, f.height ? f.bits : 0, f.is_float, e);
     if (!st && lm_pipe_reconstruct(p, in, H, W, cube, e))
         st = lm_pipe_restate(e, p->src.name(p->src.self, i));

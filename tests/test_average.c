@@ -21,7 +21,7 @@ static char hash_[32], def_[1024];
 /* A model of preset (on base, or "") with seed's weights; the first `same` parameters set to
  * 1/3 (equal in every input), saved as a trained model with the given metadata. */
 static lm_model *save(const char *path, const char *preset, const char *base, uint64_t seed,
-                      const char *sys, const char *it, const char *scenes)
+                      const char *sys, const char *it, const char *scenes, const char *clip)
 {
     lm_err e = {0};
     lm_model *m = base[0] ? lm_model_create_residual(preset, base, NULL, seed, 0, 1.0f, &e)
@@ -40,8 +40,8 @@ static lm_model *save(const char *path, const char *preset, const char *base, ui
         }
     const char *meta[] = {"format", "lumosaic-checkpoint-1", "preset", preset, "system", sys,
                           "system_hash", hash_, "iteration", it, "train_scenes", scenes,
-                          "base_preset", base};
-    CHECK(lm_params_save(&m->params, path, meta, base[0] ? 7 : 6, &e) == LM_OK);
+                          "clipped", clip, "base_preset", base};
+    CHECK(lm_params_save(&m->params, path, meta, base[0] ? 8 : 7, &e) == LM_OK);
     return m;
 }
 
@@ -54,11 +54,12 @@ static void test_mean_and_record(void)
     const char *sc[3] = {"aaaaaaaaaaaaaaaa,bbbbbbbbbbbbbbbb", "bbbbbbbbbbbbbbbb,cccccccccccccccc",
                          ""};
     lm_model *m[3];
+    const char *clip[3] = {"0.5", "0.25", "1"}; /* the average records the smallest */
     for (int i = 0; i < 3; i++) {
         snprintf(p[i], sizeof p[i], "%s/m%d.safetensors", dir, i);
         char it[8];
         snprintf(it, sizeof it, "%d", 100 * (i + 1));
-        m[i] = save(p[i], "rt-8-nc", "lmmse", 11u + (uint64_t)i, "", it, sc[i]);
+        m[i] = save(p[i], "rt-8-nc", "lmmse", 11u + (uint64_t)i, "", it, sc[i], clip[i]);
     }
     snprintf(out, sizeof out, "%s/avg.safetensors", sub);
     lm_err e = {0};
@@ -95,6 +96,9 @@ static void test_mean_and_record(void)
     char *cnt = lm_safetensors_meta(out, "average_count", &e);
     CHECK(cnt && !strcmp(cnt, "3"));
     free(cnt);
+    char *cl = lm_safetensors_meta(out, "clipped", &e);
+    CHECK_MSG(cl && !strcmp(cl, "0.25"), "clipped share %s", cl ? cl : "(none)");
+    free(cl);
     /* two of them: a plain mean, rounded once */
     CHECK(lm_model_average(paths, 2, out, &e) == LM_OK);
     CHECK(lm_infer_model_load(out, NULL, &im, &e) == LM_OK);
@@ -129,7 +133,7 @@ static void test_system_path(void)
     CHECK(lm_path_relative(dir, def_, rel, sizeof rel) == 0);
     for (int i = 0; i < 2; i++) {
         snprintf(p[i], sizeof p[i], "%s/m%d.safetensors", dir, i);
-        lm_model_free(save(p[i], "linear", "", 3u + (uint64_t)i, rel, "5", ""));
+        lm_model_free(save(p[i], "linear", "", 3u + (uint64_t)i, rel, "5", "", ""));
     }
     snprintf(sub, sizeof sub, "%s/deeper/out", dir);
     char mid[300];
@@ -160,9 +164,9 @@ static void test_refusals(void)
     snprintf(b, sizeof b, "%s/b.safetensors", dir);
     snprintf(c, sizeof c, "%s/c.safetensors", dir);
     snprintf(out, sizeof out, "%s/out.safetensors", dir);
-    lm_model_free(save(a, "rt-8-nc", "lmmse", 1, "", "1", ""));
-    lm_model_free(save(b, "rt-8-nc", "", 2, "", "1", ""));   /* no base */
-    lm_model_free(save(c, "rt-16-nc", "lmmse", 3, "", "1", "")); /* another preset */
+    lm_model_free(save(a, "rt-8-nc", "lmmse", 1, "", "1", "", ""));
+    lm_model_free(save(b, "rt-8-nc", "", 2, "", "1", "", ""));   /* no base */
+    lm_model_free(save(c, "rt-16-nc", "lmmse", 3, "", "1", "", "")); /* another preset */
     lm_err e = {0};
     const char *one[1] = {a}, *nobase[2] = {a, b}, *other[2] = {a, c}, *missing[2] = {a, "/nonexistent/run"};
     CHECK(lm_model_average(one, 1, out, &e) == LM_ERR_ARG);

@@ -80,13 +80,15 @@ lm_status lm_train_save_checkpoint(const char *dir, const lm_model *m, const lm_
     snprintf(bk, sizeof bk, "%d", lm_model_buckets(m));
     char fr[8]; /* coded frames per output frame (1; 3 = multi-frame) */
     snprintf(fr, sizeof fr, "%d", lm_model_frames(m));
+    char clip[32]; /* the share of its noisy training samples clipped to [0, 1] */
+    snprintf(clip, sizeof clip, "%.6g", cfg->sensor_clip ? 1.0 : (double)cfg->clip_fraction);
     const char *meta[] = {"format", CKPT_FORMAT, "preset", m->preset, "system", sys,
                           "system_hash", hash, "iteration", it, "seconds", secs, "buckets", bk,
                           "frames", fr, "train_scenes",
                           opts && opts->train_scenes ? opts->train_scenes : "",
-                          "base_preset", m->base ? m->base->preset : ""};
+                          "clipped", clip, "base_preset", m->base ? m->base->preset : ""};
     dir_file(path, sizeof path, dir, "model.safetensors");
-    return lm_params_save(&m->params, path, meta, m->base ? 10 : 9, err);
+    return lm_params_save(&m->params, path, meta, m->base ? 11 : 10, err);
 }
 
 int lm_train_checkpoint_cpu_clock(const char *dir)

@@ -83,6 +83,26 @@ mkdir -p "$T/v3" && cp "$T"/v5/frames/frame_000[123].png "$T/v3/"
 "$LM" infer --model "$R" --input "$T/v3" --output "$T/v3o" 2> /dev/null
 check "5-frame sequence, frame 2 = middle of frames 1-3" cmp -s "$T/v5o/cube_0002.exr" "$T/v3o/cube_0001.exr"
 
+# ---- noisy frames clipped at 0 -----------------------------------------------------------
+# a 16-bit PNG of a noisy frame is clipped at 0: a model that records unclipped training
+# samples gets one warning per run; not for a clean PNG, a float EXR (negatives kept), or a
+# model trained on clipped samples too
+"$LM" simulate --input "$CAVE" --output "$T/noisy" --crop --noise 0.1 > /dev/null 2>&1
+"$LM" simulate --input "$CAVE" --output "$T/noisyx" --crop --noise 0.1 --format exr > /dev/null 2>&1
+cp "$T/noisy/frames/frame_0000.png" "$T/noisy/frames/frame_0001.png"
+"$LM" infer --model "$R" --input "$T/noisy/frames" --output "$T/cl" 2> "$T/err"
+check "clipped noisy frames: one warning, the model named: $(cat "$T/err")" \
+  [ "$(grep -c 'clipped at 0.*model linear was trained on unclipped samples' "$T/err")" -eq 1 ]
+"$LM" infer --model "$R" --input "$T/sim/frames/frame_0000.png" --output "$T/cl2" 2> "$T/err"
+check "clean frame: no clip warning" bash -c "! grep -q 'clipped at 0' '$T/err'"
+"$LM" infer --model "$R" --input "$T/noisyx/frames/frame_0000.exr" --output "$T/cl3" 2> "$T/err"
+check "float frame with negatives: no clip warning" bash -c "! grep -q 'clipped at 0' '$T/err'"
+"$LM" train --model linear --data "$CAVE" --iterations 4 --batch 4 --accum-steps 1 \
+  --synth-fraction 0 --clip-fraction 0.5 --val-patches 1 --output "$T/runc" --quiet > "$T/log" 2>&1
+check "train --clip-fraction: $(cat "$T/log")" [ -s "$T/runc/model.safetensors" ]
+"$LM" infer --model "$T/runc" --input "$T/noisy/frames/frame_0000.png" --output "$T/cl4" 2> "$T/err"
+check "model trained on clipped samples: no clip warning" bash -c "! grep -q 'clipped at 0' '$T/err'"
+
 # ---- bad input ---------------------------------------------------------------------------
 F=$T/sim/frames/frame_0000.png
 expect_error "missing model" 2 "no such model" "$T/e1" -- "$LM" infer --model "$T/nope" --input "$F" --output "$T/e1"
