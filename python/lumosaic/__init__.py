@@ -436,6 +436,13 @@ class Model:
         _capi.call("model_set_clamp", self._handle, int(bool(clamp)))
         self._wavelengths = np.arange(400, 701, 10, dtype=np.float32)
 
+    def _check_buckets(self, given: bool) -> None:
+        if self.buckets == 2 and not given:
+            raise Error(Status.ARG, f"model {self.preset} reads both buckets: pass bucket0= "
+                                    "(bucket 0 of the same frame)")
+        if self.buckets != 2 and given:
+            raise Error(Status.ARG, f"model {self.preset} reads bucket 1 only: pass no bucket0")
+
     @property
     def wavelengths(self) -> np.ndarray:
         """The wavelengths (nm) of the reconstructed cubes' 31 bands: 400, 410, ..., 700."""
@@ -461,6 +468,7 @@ class Model:
         """
         f1 = _frame_array(frame, "frame")
         f0 = None
+        self._check_buckets(bucket0 is not None)
         if bucket0 is not None:
             f0 = _frame_array(bucket0, "bucket0")
             if f0.shape != f1.shape:
@@ -509,6 +517,7 @@ class Model:
         f1 = [_frame_array(f, f"frames[{i}]") for i, f in enumerate(frames)]
         if not f1:
             raise Error(Status.ARG, "frames: an empty sequence (at least 1 frame)")
+        self._check_buckets(bucket0 is not None)
         f0 = None
         if bucket0 is not None:
             f0 = [_frame_array(f, f"bucket0[{i}]") for i, f in enumerate(bucket0)]

@@ -201,7 +201,7 @@ def test_reconstruct_sequence_errors(model):
     assert e.value.status == lumosaic.Status.SHAPE and "frames[1]" in str(e.value)
     with pytest.raises(lumosaic.Error) as e:
         model.reconstruct_sequence([f, f], bucket0=[f, f])  # a one-bucket model
-    assert e.value.status == lumosaic.Status.ARG and "bucket" in str(e.value)
+    assert e.value.status == lumosaic.Status.ARG and "pass no bucket0" in str(e.value)
     bad = f.copy()
     bad[3, 4] = np.nan
     with pytest.raises(lumosaic.Error) as e:
@@ -240,6 +240,13 @@ def test_auto_and_bundled_models(tmp_path):
         pytest.skip(f"no bundled model: {e}")
     with m:
         assert m.buckets == 1 and m.preset != "auto"
+    with lumosaic.Model.bundled(buckets=2, threads=THREADS) as m2:
+        assert m2.buckets == 2
+        f = np.zeros((66, 64), np.float32)
+        for call in (lambda: m2.reconstruct(f), lambda: m2.reconstruct_sequence([f])):
+            with pytest.raises(lumosaic.Error) as e:
+                call()
+            assert e.value.status == lumosaic.Status.ARG and "pass bucket0=" in str(e.value)
 
 
 @need_scene
@@ -323,7 +330,7 @@ def test_errors_are_exceptions_with_one_line(tmp_path, model):
     assert "dtype" in str(e.value)
     with pytest.raises(lumosaic.Error) as e:
         model.reconstruct(np.zeros((66, 64), np.float32), bucket0=np.zeros((66, 64)))
-    assert "bucket" in str(e.value)
+    assert "pass no bucket0" in str(e.value) and "->" not in str(e.value)
     with pytest.raises(lumosaic.Error) as e:
         model.reconstruct(np.zeros((66, 64), np.float32), noise=3.0)
     assert e.value.status == lumosaic.Status.ARG
