@@ -225,7 +225,7 @@ typedef enum lm_api_pixel {
 
 /* One coded frame in memory. */
 typedef struct lm_api_frame {
-    int height, width;     /* multiples of the mosaic tile, at least 66 x 64 */
+    int height, width;     /* multiples of the mosaic tile, at least 3 x 3 tiles (9 x 12) */
     lm_api_pixel type;
     const void *bucket1;   /* height x width samples: the coded frame */
     const void *bucket0;   /* two-bucket models only (NULL otherwise): bucket 0 divided by

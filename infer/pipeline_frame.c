@@ -186,6 +186,7 @@ static lm_status auto_frame(lm_pipe *p, const float *in, int H, int W, lm_tile_o
     const lm_auto_calib *a = &p->cal;
     to->win_h = a->win_h, to->win_w = a->win_w, to->stride_y = a->stride_y,
     to->stride_x = a->stride_x;
+    *to = lm_tile_fitted(to, H, W);
     const lm_mosaic *mo = &p->im.model->mosaic;
     if (lm_tile_check(to, H, W, mo->ty, mo->tx, e)) return e->status;
     int n = lm_auto_window_count(H, W, to);

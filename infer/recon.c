@@ -23,6 +23,7 @@ lm_status lm_recon_check(const lm_model *m, int height, int width, lm_err *err)
 {
     lm_tile_opts to;
     lm_tile_default_opts(&to);
+    to = lm_tile_fitted(&to, height, width);
     return lm_tile_check(&to, height, width, m->mosaic.ty, m->mosaic.tx, err);
 }
 

@@ -28,10 +28,24 @@ lm_status lm_tile_check(const lm_tile_opts *o, int height, int width, int ty, in
     if (height % ty || width % tx)
         return lm_err_set(err, LM_ERR_SHAPE, "tile: frame %dx%d (HxW) is not a multiple of the "
                           "%dx%d mosaic tile", height, width, ty, tx);
+    if (height < LM_TILE_MIN_TILES * ty || width < LM_TILE_MIN_TILES * tx)
+        return lm_err_set(err, LM_ERR_SHAPE, "tile: frame %dx%d (HxW) is smaller than %d x %d "
+                          "mosaic tiles (%dx%d)", height, width, LM_TILE_MIN_TILES,
+                          LM_TILE_MIN_TILES, LM_TILE_MIN_TILES * ty, LM_TILE_MIN_TILES * tx);
     if (height < o->win_h || width < o->win_w)
         return lm_err_set(err, LM_ERR_SHAPE, "tile: frame %dx%d (HxW) is smaller than the "
                           "%dx%d window", height, width, o->win_h, o->win_w);
     return LM_OK;
+}
+
+lm_tile_opts lm_tile_fitted(const lm_tile_opts *o, int height, int width)
+{
+    lm_tile_opts f = *o;
+    if (height > 0 && height < f.win_h) f.win_h = height;
+    if (width > 0 && width < f.win_w) f.win_w = width;
+    if (f.stride_y > f.win_h) f.stride_y = f.win_h;
+    if (f.stride_x > f.win_w) f.stride_x = f.win_w;
+    return f;
 }
 
 int lm_tile_positions(int n, int win, int stride, int *pos, int max)
@@ -200,6 +214,8 @@ lm_status lm_tile_fold_planes(lm_ctx *c, const float *frame, int planes, int hei
                               int ty, int tx, const lm_tile_opts *o, lm_tile_fn fn, void *user,
                               int out_ch, float *out, lm_tile_timing *t, lm_err *err)
 {
+    const lm_tile_opts fo = lm_tile_fitted(o, height, width);
+    o = &fo;
     if (lm_tile_check(o, height, width, ty, tx, err)) return err->status;
     if (out_ch <= 0) return lm_err_set(err, LM_ERR_ARG, "tile: %d output channels", out_ch);
     if (planes < 1 || planes > 3) return lm_err_set(err, LM_ERR_ARG, "tile: %d input planes", planes);
@@ -253,6 +269,8 @@ lm_status lm_tile_infer(lm_ctx *c, lm_model *m, const float *frame, int height, 
     if (m->out_channels != LM_MODEL_OUT_CHANNELS)
         return lm_err_set(err, LM_ERR_ARG, "tile: model '%s' has %d output channels, expected %d",
                           m->preset, m->out_channels, LM_MODEL_OUT_CHANNELS);
+    const lm_tile_opts fo = lm_tile_fitted(o, height, width);
+    o = &fo;
     if (lm_tile_check(o, height, width, m->mosaic.ty, m->mosaic.tx, err)) return err->status;
     const size_t plane = (size_t)height * width;
     lm_infer_set_noise(m, frame, height, width);

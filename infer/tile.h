@@ -32,11 +32,22 @@ typedef struct lm_tile_opts {
 /* 66 x 64, stride (30, 32), batch 8. */
 void lm_tile_default_opts(lm_tile_opts *o);
 
+/* The smallest frame patch-wise inference takes, in tiles each way (the noise estimate needs
+ * 3 x 3 samples of each phase). */
+#define LM_TILE_MIN_TILES 3
+
 /* Validate the options and the frame size for a tile of ty x tx pixels: window and stride
- * multiples of the tile and > 0, frame size a multiple of the tile and >= the window.
- * Errors: LM_ERR_ARG (options) / LM_ERR_SHAPE (frame), message starting "tile:". */
+ * multiples of the tile and > 0, frame size a multiple of the tile, at least
+ * LM_TILE_MIN_TILES tiles each way and >= the window (lm_tile_fitted shrinks the window to a
+ * smaller frame). Errors: LM_ERR_ARG (options) / LM_ERR_SHAPE (frame), message starting
+ * "tile:". */
 lm_status lm_tile_check(const lm_tile_opts *o, int height, int width, int ty, int tx,
                         lm_err *err);
+
+/* o with the window cut to the frame along an axis where the frame is smaller (one window
+ * covers it there; the stride no longer than the window). A frame that is a multiple of the
+ * tile keeps the window a multiple of it. Every patch-wise path fits its options so. */
+lm_tile_opts lm_tile_fitted(const lm_tile_opts *o, int height, int width);
 
 /* Window start positions along one axis of length n: 0, stride, 2 stride, ... while the window
  * fits, then n - win if the last one does not end at n. Writes up to max positions into pos

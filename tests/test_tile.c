@@ -7,7 +7,9 @@
 #include "infer/model_io.h"
 #include "infer/tile.h"
 #include "tests/check.h"
+#include "tests/model_fixture.h"
 #include "train/train.h"
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -232,6 +234,55 @@ static void test_determinism_across_batches(void)
     run_batches("mcan-tiny", 2, 1e-5, 99, 100, 3, (int[]){1, 4, 9});
 }
 
+/* Frames smaller than the 66 x 64 window (down to 3 x 3 tiles): every coded-frame family
+ * reconstructs them (the window cut to the frame), finite; the per-phase linear model equals
+ * its whole-frame result there too. */
+static void test_small_frames(void)
+{
+    static const char *presets[] = {"linear",      "lmmse",     "lmmse-rf",   "han-tiny-nc",
+                                    "mcan-tiny",   "srnet-tiny", "rt-16-nc",  "tn-96-nc",
+                                    "lmmse-b2",    "lmmse-gri-b2", "rt-16-b2", "tn-96-nc-b2",
+                                    "rt-8-mf3"};
+    static const int sizes[][2] = {{9, 12}, {30, 32}, {63, 64}, {66, 40}, {21, 200}};
+    lm_ctx c;
+    lm_ctx_init(&c, 2);
+    lm_mosaic mo;
+    test_mosaic(&mo); /* srnet reads the LED responses */
+    for (size_t i = 0; i < sizeof presets / sizeof *presets; i++) {
+        lm_err e = {0};
+        lm_model *m = lm_model_create(presets[i], &mo, 7, &e);
+        CHECK_MSG(m != NULL, "%s: %s", presets[i], e.msg);
+        if (!m) continue;
+        const int planes = lm_model_coded_planes(m);
+        for (size_t s = 0; s < sizeof sizes / sizeof *sizes; s++) {
+            const int H = sizes[s][0], W = sizes[s][1];
+            float *frame = random_frame(planes * H, W, 5 + s);
+            lm_tile_opts o;
+            lm_tile_default_opts(&o);
+            lm_cube cube = {0};
+            lm_err_clear(&e);
+            lm_status st = lm_tile_infer(&c, m, frame, H, W, &o, &cube, &e);
+            CHECK_MSG(st == LM_OK, "%s on a %d x %d frame: %s", presets[i], H, W, e.msg);
+            size_t bad = 0;
+            for (long p = 0; cube.data && p < 31L * H * W; p++) bad += !isfinite(cube.data[p]);
+            CHECK_MSG(st || (cube.height == H && cube.width == W && bad == 0),
+                      "%s on a %d x %d frame: %zu values not finite", presets[i], H, W, bad);
+            if (!st && !strcmp(presets[i], "linear") && H <= o.win_h && W <= o.win_w) {
+                lm_cube whole = {0};
+                lm_tile_opts big = o;
+                big.win_h = H, big.win_w = W;
+                CHECK(lm_tile_infer(&c, m, frame, H, W, &big, &whole, &e) == LM_OK);
+                CHECK(whole.data && !memcmp(whole.data, cube.data, sizeof(float) * 31 * H * W));
+                lm_cube_free(&whole);
+            }
+            lm_cube_free(&cube);
+            free(frame);
+        }
+        lm_model_free(m);
+    }
+    lm_ctx_free(&c);
+}
+
 static void test_errors(void)
 {
     lm_ctx c;
@@ -243,8 +294,15 @@ static void test_errors(void)
     CHECK(lm_tile_fold(&c, frame, 98, 100, 3, 4, &o, identity_fn, NULL, 1, out, &e) == LM_ERR_SHAPE);
     CHECK(strstr(e.msg, "tile:") && strstr(e.msg, "multiple"));
     lm_err_clear(&e);
-    CHECK(lm_tile_fold(&c, frame, 63, 100, 3, 4, &o, identity_fn, NULL, 1, out, &e) == LM_ERR_SHAPE);
-    CHECK(strstr(e.msg, "smaller than"));
+    CHECK(lm_tile_fold(&c, frame, 6, 100, 3, 4, &o, identity_fn, NULL, 1, out, &e) == LM_ERR_SHAPE);
+    CHECK_MSG(strstr(e.msg, "smaller than 3 x 3 mosaic tiles (9x12)"), "%s", e.msg);
+    lm_err_clear(&e);
+    CHECK(lm_tile_fold(&c, frame, 99, 8, 3, 4, &o, identity_fn, NULL, 1, out, &e) == LM_ERR_SHAPE);
+    lm_err_clear(&e);
+    /* a frame smaller than the window: one window covers it there */
+    CHECK_MSG(lm_tile_fold(&c, frame, 63, 100, 3, 4, &o, identity_fn, NULL, 1, out, &e) == LM_OK,
+              "%s", e.msg);
+    CHECK_ARRAY_CLOSE(out, frame, 63 * 100, 1e-6, 1e-6);
     lm_err_clear(&e);
     o.stride_y = 31;
     CHECK(lm_tile_fold(&c, frame, 99, 100, 3, 4, &o, identity_fn, NULL, 1, out, &e) == LM_ERR_ARG);
@@ -329,6 +387,7 @@ int main(void)
     RUN(test_fold_constant_and_identity);
     RUN(test_linear_patchwise_equals_whole);
     RUN(test_determinism_across_batches);
+    RUN(test_small_frames);
     RUN(test_errors);
     RUN(test_model_io);
     return check_summary();

@@ -427,7 +427,8 @@ class Model:
         self.preset: str = preset.value.decode()
         #: the buckets it reads: 1, or 2 (``reconstruct`` then needs ``bucket0``)
         self.buckets: int = buckets.value
-        #: the mosaic tile (rows, columns): frame sizes are multiples of it, at least 66 x 64
+        #: the mosaic tile (rows, columns): frame sizes are multiples of it, at least 3 x 3
+        #: tiles
         self.tile: Tuple[int, int] = (tr.value, tc.value)
         _capi.call("model_set_threads", self._handle, _threads(threads))
         _capi.call("model_set_precision", self._handle,
@@ -455,7 +456,8 @@ class Model:
         Args:
             frame: ``(height, width)`` coded frame (bucket 1), float (1.0 = full scale) or
                 uint16 (65535 = full scale); height and width multiples of :attr:`tile`, at
-                least 66 x 64. A C-contiguous float32 or uint16 array is read in place.
+                least 3 x 3 tiles (9 x 12). A C-contiguous float32 or uint16 array is read in
+                place.
             bucket0: two-bucket models: bucket 0 of the same frame divided by LEDs - 1 (as
                 :func:`simulate` gives it).
             noise: the frame's Gaussian noise level for models that read it (sd = noise x the

@@ -323,6 +323,11 @@ def test_errors_are_exceptions_with_one_line(tmp_path, model):
     with pytest.raises(lumosaic.Error) as e:
         model.reconstruct(np.zeros((127, 128), np.float32))  # not whole 3 x 4 tiles
     assert e.value.status == lumosaic.Status.SHAPE and "tile" in str(e.value)
+    small = np.random.default_rng(1).random((30, 32), dtype=np.float32)  # below one window
+    assert np.isfinite(model.reconstruct(small)).all()
+    with pytest.raises(lumosaic.Error) as e:
+        model.reconstruct(np.zeros((6, 32), np.float32))  # two tiles high
+    assert e.value.status == lumosaic.Status.SHAPE and "3 x 3 mosaic tiles" in str(e.value)
     with pytest.raises(lumosaic.Error):
         model.reconstruct(np.zeros((3, 66, 64), np.float32))
     with pytest.raises(lumosaic.Error) as e:

@@ -120,7 +120,12 @@ PY
 expect_error "model/system mismatch" 2 "model/system mismatch" "$T/e3" -- "$LM" infer --model "$R" --input "$F" --system "$T/other.json" --output "$T/e3"
 "$MK" "$T/small.exr" good 60 60
 "$LM" simulate --input "$T/small.exr" --output "$T/small" > /dev/null 2>&1
-expect_error "frame too small" 2 "smaller than the 66x64 window" "$T/e4" -- "$LM" infer --model "$R" --input "$T/small/frames/frame_0000.png" --output "$T/e4"
+"$LM" infer --model "$R" --input "$T/small/frames/frame_0000.png" --output "$T/s60" 2> "$T/err"
+check "a 60 x 60 frame (below the 66 x 64 window): $(cat "$T/err")" [ -s "$T/s60/cube_0000.exr" ]
+"$MK" "$T/tiny.exr" good 6 60
+"$LM" simulate --input "$T/tiny.exr" --output "$T/tiny" > /dev/null 2>&1
+check "a 6-row frame simulated" [ -s "$T/tiny/frames/frame_0000.png" ]
+expect_error "frame too small" 2 "smaller than 3 x 3 mosaic tiles" "$T/e4" -- "$LM" infer --model "$R" --input "$T/tiny/frames/frame_0000.png" --output "$T/e4"
 head -c 300 "$F" > "$T/corrupt.png"
 expect_error "corrupt frame" 2 "corrupt.png" "$T/e5" -- "$LM" infer --model "$R" --input "$T/corrupt.png" --output "$T/e5"
 expect_error "missing frames" 2 "nothing_here" "$T/e6" -- "$LM" infer --model "$R" --input "$T/nothing_here.png" --output "$T/e6"
