@@ -257,8 +257,8 @@ lm_status lm_pipe_reconstruct(lm_pipe *p, const float *in, int H, int W, lm_cube
 
 /* Once per run: a noisy frame clipped at 0 (as a 16-bit PNG or TIFF holds it: at least 1 in
  * 1000 pixels, and 16, exactly 0, none below) given to a model that records having been
- * trained on unclipped samples only. Its dark areas come out biased (at 10 % noise the
- * bundled models lost 3.6 dB on such frames before they were trained on both kinds). */
+ * trained on unclipped samples only. Its dark areas come out biased (such a network loses
+ * 3.6 dB at 10 % noise on them: docs/results.md, "Clipped frames"). */
 static void clip_note(lm_pipe *p, int i, const float *in, int H, int W)
 {
     if (p->clip_warned || p->im.clipped != 0.0) return;
