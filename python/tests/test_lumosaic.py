@@ -234,6 +234,8 @@ def test_auto_and_bundled_models(tmp_path):
         cube = m.reconstruct(frame)
         assert cube.shape == (132, 128, 31)
         np.testing.assert_array_equal(m.reconstruct_sequence([frame])[0], cube)
+        small = m.reconstruct(frame[:30, :32].copy())  # below one calibrated window
+        assert small.shape == (30, 32, 31) and np.isfinite(small).all()
     try:
         m = lumosaic.Model.bundled(buckets=1, threads=THREADS)
     except lumosaic.Error as e:
