@@ -107,8 +107,9 @@ static lm_status load_system(lm_infer_model *im, const char *override, uint64_t 
         return err->status;
     if (!im->system_path[0]) snprintf(im->system_path, sizeof im->system_path, "%s", recorded);
     if (!is_file(im->system_path))
-        return lm_err_set(err, LM_ERR_IO, "%s: system description '%s' not found (give one with "
-                          "--system)", im->weights, im->system_path);
+        return lm_err_set(err, LM_ERR_IO, "%s: system description '%s' not found (give the "
+                          "system description it was trained with: --system FILE, or a system "
+                          "when loading the model)", im->weights, im->system_path);
     uint64_t got = lm_file_hash(im->system_path);
     const int other = hash && got != hash;
     if (other && !(override && override[0]))

@@ -64,15 +64,16 @@ static lm_status auto_model(lm_pipe *p, int m, lm_infer_model *im, lm_err *e)
     const char *cf = p->o.auto_file;
     p->models[m] = im->model;
     if (im->remap.active)
-        return lm_err_set(e, LM_ERR_ARG, "--model auto: %s has other LED gains than model '%s' "
-                          "was trained with: give that model with --model (its frames are "
-                          "rescaled to its gains)", im->system_path, a->models[m].path);
+        return lm_err_set(e, LM_ERR_ARG, "%s: %s has other LED gains than model '%s' was "
+                          "trained with, and a calibrated auto model does not rescale frames: "
+                          "reconstruct with that model alone (its frames are rescaled to its "
+                          "gains)", cf, im->system_path, a->models[m].path);
     if (lm_model_buckets(im->model) == 2)
-        return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads both buckets: --model auto takes "
-                          "one-bucket models only", cf, a->models[m].path);
+        return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads both buckets: a calibrated auto "
+                          "model takes one-bucket models only", cf, a->models[m].path);
     if (lm_model_frames(im->model) != 1)
-        return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads three frames: --model auto takes "
-                          "one-frame models only", cf, a->models[m].path);
+        return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads three frames: a calibrated auto "
+                          "model takes one-frame models only", cf, a->models[m].path);
     if (im->model->mosaic.ty != p->im.model->mosaic.ty ||
         im->model->mosaic.tx != p->im.model->mosaic.tx ||
         im->model->out_channels != LM_MODEL_OUT_CHANNELS)

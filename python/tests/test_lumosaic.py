@@ -236,6 +236,16 @@ def test_auto_and_bundled_models(tmp_path):
         np.testing.assert_array_equal(m.reconstruct_sequence([frame])[0], cube)
         small = m.reconstruct(frame[:30, :32].copy())  # below one calibrated window
         assert small.shape == (30, 32, 31) and np.isfinite(small).all()
+    b2 = REPO / "models/demo/tn96nc-b2-lmmseb2.safetensors"
+    calib.write_text(calib.read_text().replace(f'"model": "{MODEL}", "preset": "rt-16-nc+lmmse", '
+                                               '"cost_s_per_window": 2',
+                                               f'"model": "{b2}", "preset": "tn-96-nc-b2+lmmse-b2", '
+                                               '"cost_s_per_window": 2'))
+    with pytest.raises(lumosaic.Error) as e:  # a two-bucket model in the calibration
+        lumosaic.Model.auto(calib, tol=0.5, threads=THREADS)
+    msg = str(e.value)
+    assert e.value.status == lumosaic.Status.ARG and "takes one-bucket models only" in msg
+    assert "--" not in msg, msg
     try:
         m = lumosaic.Model.bundled(buckets=1, threads=THREADS)
     except lumosaic.Error as e:
