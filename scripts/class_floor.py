@@ -32,6 +32,8 @@ VAL = {"glass_tiles_256", "pompoms_256", "watercolors_256"}
 def scenes(folders):
     out = []
     for d in folders:
+        if not os.path.isdir(d):
+            sys.exit(f"class_floor: {d}: not a folder of scenes")
         for name in sorted(os.listdir(d)):
             path = os.path.join(d, name)
             if os.path.isdir(path):
@@ -80,7 +82,15 @@ def main():
     ap.add_argument("--qc", type=int, default=2)
     ap.add_argument("--data", nargs="+", default=["../shared/data/cave", "../shared/data/cave-256"])
     a = ap.parse_args()
-    model = lumosaic.Model(a.model)
+    if a.k < 1 or a.k % 2 == 0:
+        sys.exit(f"class_floor: --k {a.k}: an odd window of at least 1")
+    try:
+        model = lumosaic.Model(a.model)
+    except lumosaic.Error as e:
+        sys.exit(f"class_floor: {e}")
+    if model.buckets != a.buckets:
+        sys.exit(f"class_floor: {a.model} reads {model.buckets} bucket(s): give --buckets "
+                 f"{model.buckets}")
     tr, tc = model.tile
     rows = []
     for name, path in scenes(a.data):
