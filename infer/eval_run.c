@@ -245,10 +245,17 @@ static lm_status open_device(lm_eval_run *r, lm_err *e)
     }
     lm_status st = lm_tile_device_open(&r->dev, r->o->device, r->im.model, &r->ctx, e);
     if (st) return st;
-    if (r->dev.backend->device != LM_DEVICE_CPU && !lm_model_has(r->im.model, LM_CAP_OPENCL))
+    if (r->dev.backend->device != LM_DEVICE_CPU && !lm_model_has(r->im.model, LM_CAP_OPENCL)) {
+        const lm_model *m = r->im.model;
+        if (m->base && !lm_model_has(m->base, LM_CAP_OPENCL)) /* the base is what lacks them */
+            return lm_err_set(e, LM_ERR_UNSUPPORTED, "--device %s: model %s+%s runs on the CPU "
+                              "only (its base %s has no OpenCL kernels)",
+                              lm_tile_device_name(&r->dev), m->preset, m->base->preset,
+                              m->base->preset);
         return lm_err_set(e, LM_ERR_UNSUPPORTED, "--device %s: model %s runs on the CPU only "
                           "(its layers have no OpenCL kernels)", lm_tile_device_name(&r->dev),
-                          r->im.model->preset);
+                          m->preset);
+    }
     if (r->dev.backend->device != LM_DEVICE_CPU) {
         snprintf(line, sizeof line, "device: %s", lm_tile_device_name(&r->dev));
         say(r, line);

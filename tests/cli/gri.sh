@@ -61,5 +61,14 @@ if ! command -v clinfo > /dev/null || clinfo -l 2> /dev/null | grep -q 'Platform
   check "OpenCL refused (status $rc): $(cat "$T/cl")" \
     bash -c "[ $rc -eq 2 ] && tail -n 1 '$T/cl' | grep -q 'runs on the CPU only'"
   check "OpenCL: no output left" no_output "$T/e5"
+  # a residual network on the guided floor: the refusal names the floor, not the network
+  "$LM" train --model rt-8-b2 --base "$G" --data "$CAVE" --iterations 2 --batch 2 \
+    --patch 24x32 --val-patches 1 --quiet --output "$T/res" > "$T/log" 2>&1
+  check "a residual on the guided floor: $(cat "$T/log")" [ -s "$T/res/model.safetensors" ]
+  "$LM" eval --model "$T/res" "$CAVE" --split all --noise 0 --rainbow 0 --device opencl \
+    > /dev/null 2> "$T/cl"
+  rc=$?
+  check "OpenCL eval of the residual refused (status $rc): $(cat "$T/cl")" \
+    bash -c "[ $rc -ne 0 ] && grep -q 'its base lmmse-7-ri11-b2 has no OpenCL kernels' '$T/cl'"
 fi
 finish
