@@ -6,18 +6,22 @@ its gradient in QA bins, its strength relative to the scene's mean in QS quantil
 coherence in QC bins; structure tensor of the band mean over a 5 x 5 box) and its mosaic phase;
 per class and phase a K x K window of the coded frame (both buckets' windows for a two-bucket
 model) plus a bias maps linearly to the 31-band correction truth - model, fitted by ridge
-regression on the 21 training scenes (clean frames). Printed: mean PSNR of the model and of
-model + correction on the training, validation and test scenes (prepared as `eval` prepares
-them: cropped to whole tiles, divided by their maximum).
+regression on the training scenes (clean frames). Printed: mean PSNR of the model and of
+model + correction on the training, validation and test scenes (split as the program splits
+them: `lumosaic eval` names them; prepared as `eval` prepares them: cropped to whole tiles,
+divided by their maximum).
 
     build/venv/bin/python scripts/class_floor.py models/zoo/lmmse
     build/venv/bin/python scripts/class_floor.py models/demo/tn96nc-lmmse.safetensors
     build/venv/bin/python scripts/class_floor.py models/zoo/lmmse-b2 --buckets 2
 
-Needs the Python package (scripts/test_python.sh installs it into build/venv) and numpy.
+Needs the Python package (scripts/test_python.sh installs it into build/venv), numpy and the
+built program (build/lumosaic, or --cli). Run from the top of the checkout.
 """
 import argparse
 import os
+import re
+import subprocess
 import sys
 
 import numpy as np
@@ -25,8 +29,20 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 import lumosaic
 
-TEST = {"cd_256", "fake_and_real_tomatoes_256", "real_and_fake_apples_256"}
-VAL = {"glass_tiles_256", "pompoms_256", "watercolors_256"}
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def split_names(cli, folders, split):
+    """The scenes of a split, as the program splits them (its `eval` names each scene scored)."""
+    if not os.access(cli, os.X_OK):
+        sys.exit(f"class_floor: {cli}: no lumosaic program (build it, or give --cli)")
+    r = subprocess.run([cli, "eval", "--model", os.path.join(REPO, "models/zoo/lmmse"), *folders,
+                        "--split", split, "--noise", "0", "--rainbow", "0", "--threads", "1"],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        last = (r.stderr.strip().splitlines() or ["eval failed"])[-1]
+        sys.exit(f"class_floor: the {split} split: {last}")
+    return set(re.findall(r"^scene \d+/\d+ (\S+) \(", r.stderr, re.M))
 
 
 def scenes(folders):
@@ -81,6 +97,8 @@ def main():
     ap.add_argument("--qs", type=int, default=3)
     ap.add_argument("--qc", type=int, default=2)
     ap.add_argument("--data", nargs="+", default=["../shared/data/cave", "../shared/data/cave-256"])
+    ap.add_argument("--cli", default=os.path.join(REPO, "build/lumosaic"),
+                    help="the lumosaic program (names each split's scenes)")
     a = ap.parse_args()
     if a.k < 1 or a.k % 2 == 0:
         sys.exit(f"class_floor: --k {a.k}: an odd window of at least 1")
@@ -92,8 +110,10 @@ def main():
         sys.exit(f"class_floor: {a.model} reads {model.buckets} bucket(s): give --buckets "
                  f"{model.buckets}")
     tr, tc = model.tile
+    found = scenes(a.data)
+    test, val = split_names(a.cli, a.data, "test"), split_names(a.cli, a.data, "val")
     rows = []
-    for name, path in scenes(a.data):
+    for name, path in found:
         cube = lumosaic.read_cube(path).astype(np.float32)
         h, w = cube.shape[0] // tr * tr, cube.shape[1] // tc * tc
         cube = np.ascontiguousarray(cube[:h, :w])
@@ -106,7 +126,7 @@ def main():
             planes = [np.ascontiguousarray(lumosaic.simulate(cube, noise=0.0, threads=1),
                                            np.float32)]
             out = model.reconstruct(planes[0], noise=0.0)
-        split = "test" if name in TEST else "val" if name in VAL else "train"
+        split = "test" if name in test else "val" if name in val else "train"
         rows.append((name, split, cube, planes, out))
     train = [r for r in rows if r[1] == "train"]
     if not train:
