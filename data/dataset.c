@@ -426,6 +426,10 @@ static lm_status plan_sample(const lm_dataset *d, lm_data_split split, long i, s
     lm_rng rk = lm_rng_split(&r, 6);
     const float u_clip = lm_rng_uniform(&rk);
     in->clip = c->sensor_clip || (train && u_clip < c->clip_fraction);
+    /* a noiseless training sample, from a stream of its own */
+    lm_rng rn = lm_rng_split(&r, 7);
+    in->clean = train && lm_rng_uniform(&rn) < c->clean_fraction;
+    if (in->clean) in->noise_k = 0.0f;
     if (train && in->kind == LM_SAMPLE_SCENE && u_col < c->collage) {
         const int n = d->count[split];
         const scene *s2 = &d->scenes[d->list[split][(int)(pick2 % (uint32_t)n)]];
@@ -671,15 +675,16 @@ static lm_status make_sample(lm_dataset *d, lm_data_split split, long i, int noi
     const int ph = d->cfg.patch_h, pw = d->cfg.patch_w, two = d->cfg.buckets == 2;
     float *b0 = two ? raw + (size_t)ph * pw : NULL; /* raw bucket 0 until scaled below */
     if (st == LM_OK) st = clean_frame(d->cfg.sys, &p.info, &c41, raw, b0, err);
-    if (st == LM_OK && noisy && (p.info.noise_k > 0.0f || p.info.clip ||
-                                 d->cfg.sensor_bits || d->cfg.photons > 0 ||
-                                 d->cfg.read_noise > 0.0f)) {
+    const int shot = !p.info.clean && (d->cfg.photons > 0 || d->cfg.read_noise > 0.0f);
+    if (st == LM_OK && noisy && (p.info.noise_k > 0.0f || p.info.clip || d->cfg.sensor_bits ||
+                                 shot)) {
         lm_noise_opts no = {0};
         no.gauss_k = p.info.noise_k;
         no.clip = p.info.clip;
         no.bits = d->cfg.sensor_bits;
         no.photons = sample_photons(&d->cfg, split, &p.noise_rng); /* shot and read noise */
         no.read_noise = d->cfg.read_noise;
+        if (p.info.clean) no.photons = 0.0, no.read_noise = 0.0f;
         st = lm_forward_noise(raw, ph, pw, &no, &p.noise_rng, 1, err);
         /* bucket 0 next from the same generator (lm_forward_noise advanced it), as
          * lm_forward_simulate does: bucket 1's numbers are those of a one-bucket sample */
@@ -847,6 +852,9 @@ void lm_dataset_describe(const lm_dataset *d, FILE *f)
     if (c->clip_fraction > 0 && !c->sensor_clip)
         snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; clipped to [0, 1] %.0f%%",
                  100.0 * c->clip_fraction);
+    if (c->clean_fraction > 0)
+        snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; without noise %.0f%%",
+                 100.0 * c->clean_fraction);
     if (c->collage > 0)
         snprintf(shot + strlen(shot), sizeof shot - strlen(shot), "; collage %.0f%%",
                  100.0 * c->collage);
@@ -928,6 +936,9 @@ static lm_status check_cfg(const lm_dataset_cfg *c, lm_err *err)
     if (!(c->clip_fraction >= 0.0f && c->clip_fraction <= 1.0f))
         return lm_err_set(err, LM_ERR_ARG, "dataset: clip share %g out of range (0..1)",
                           (double)c->clip_fraction);
+    if (!(c->clean_fraction >= 0.0f && c->clean_fraction <= 1.0f))
+        return lm_err_set(err, LM_ERR_ARG, "dataset: noiseless share %g out of range (0..1)",
+                          (double)c->clean_fraction);
     if (!(c->collage >= 0.0f && c->collage <= 1.0f))
         return lm_err_set(err, LM_ERR_ARG, "dataset: collage share %g out of range (0..1)",
                           (double)c->collage);

@@ -58,6 +58,10 @@ typedef struct lm_dataset_cfg {
     float clip_fraction;        /* in [0, 1]: share of training samples clipped as sensor_clip
                                  * clips (a frame that went through a 16-bit PNG), the rest
                                  * keeping their negatives (0; sensor_clip 1: all) */
+    float clean_fraction;       /* in [0, 1]: share of training samples without noise (no
+                                 * Gaussian, shot or read noise; noise_k 0), the rest drawn as
+                                 * above: a model that denoises without losing its clean
+                                 * accuracy (0) */
     double photons;             /* > 0: shot noise, photo-electrons at full scale (the white
                                  * response of the brightest LED), before the Gaussian k; 0 = off */
     double photons_min;         /* > 0: each training sample's photons drawn log-uniformly in
@@ -216,6 +220,7 @@ typedef struct lm_dataset_sample_info {
                            * (a + 1) zoom) x [sx0 + b zoom, ...). Flips apply to the patch. */
     int clip;             /* 1: the noisy frame is clipped to [0, 1] (sensor_clip, or drawn
                            * with probability clip_fraction) */
+    int clean;            /* 1: drawn without noise (probability clean_fraction; noise_k 0) */
     int collage;          /* 1: the patch above is blended with a second one (below) */
     int mix_scene;        /* the second patch: its scene (index in the split's list), */
     int mix_y0, mix_x0;   /* its top-left there (any pixel) and flips */

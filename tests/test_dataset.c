@@ -831,6 +831,68 @@ done:
     lm_dataset_close(half);
 }
 
+/* clean_fraction: a share of the training samples without noise (Gaussian, shot and read), each
+ * the noiseless loader's sample; the others exactly the plain loader's; validation samples never */
+static void test_clean_fraction(void)
+{
+    const char *paths[1] = {g_pospath};
+    lm_dataset_cfg cfg = base_cfg(paths, 1);
+    cfg.noise_min = 0.05f;
+    cfg.noise_max = 0.15f;
+    cfg.val_noise = 0.1f;
+    cfg.photons = 500.0;
+    cfg.read_noise = 3.0f;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *plain = lm_dataset_open(&cfg, &e);
+    cfg.clean_fraction = 0.5f;
+    lm_dataset *half = lm_dataset_open(&cfg, &e);
+    cfg.clean_fraction = 1.5f;
+    lm_err e2;
+    lm_err_clear(&e2);
+    lm_dataset *bad = lm_dataset_open(&cfg, &e2);
+    CHECK_MSG(bad == NULL && strstr(e2.msg, "noiseless share"), "noiseless share 1.5: %s", e2.msg);
+    lm_dataset_close(bad);
+    cfg.clean_fraction = 0.0f;
+    cfg.noise_min = cfg.noise_max = 0.0f;
+    cfg.photons = 0.0, cfg.read_noise = 0.0f;
+    lm_dataset *none = lm_dataset_open(&cfg, &e);
+    CHECK_MSG(plain && half && none, "%s", e.msg);
+    if (!plain || !half || !none) goto done;
+    const int N = 2000;
+    int clean = 0;
+    for (long i = 0; i < N; i++) {
+        lm_dataset_sample_info info, p0;
+        CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        CHECK(lm_dataset_sample_info_get(plain, LM_SPLIT_TRAIN, i, &p0, &e) == LM_OK);
+        CHECK(p0.clean == 0 && info.kind == p0.kind && info.scene == p0.scene);
+        CHECK(info.clean ? info.noise_k == 0.0f : info.noise_k == p0.noise_k);
+        clean += info.clean;
+    }
+    CHECK_CLOSE(clean / (double)N, 0.5, 0.04, 0);
+    static float rh[PH * PW], rp[PH * PW], rn[PH * PW], t[33 * PH * PW];
+    int seen[2] = {0, 0};
+    for (long i = 0; i < 24; i++) {
+        lm_dataset_sample_info info;
+        CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        CHECK(lm_dataset_batch(half, i, 1, rh, t, &e) == LM_OK);
+        CHECK(lm_dataset_batch(plain, i, 1, rp, t, &e) == LM_OK);
+        CHECK(lm_dataset_batch(none, i, 1, rn, t, &e) == LM_OK);
+        seen[info.clean]++;
+        CHECK_MSG(memcmp(rh, info.clean ? rn : rp, sizeof rh) == 0, "sample %ld (clean %d) is not "
+                  "the %s loader's", i, info.clean, info.clean ? "noiseless" : "noisy");
+        CHECK(memcmp(rn, rp, sizeof rn) != 0); /* the noisy loader's samples differ */
+    }
+    CHECK(seen[0] > 0 && seen[1] > 0);
+    CHECK(lm_dataset_eval_sample(half, LM_SPLIT_VAL, 0, rh, t, &e) == LM_OK);
+    CHECK(lm_dataset_eval_sample(plain, LM_SPLIT_VAL, 0, rp, t, &e) == LM_OK);
+    CHECK(memcmp(rh, rp, sizeof rh) == 0);
+done:
+    lm_dataset_close(plain);
+    lm_dataset_close(half);
+    lm_dataset_close(none);
+}
+
 static void test_synthetic_share(void)
 {
     const char *paths[1] = {g_pospath};
@@ -1523,6 +1585,7 @@ int main(void)
     RUN(test_noise_levels);
     RUN(test_synthetic_share);
     RUN(test_clip_fraction);
+    RUN(test_clean_fraction);
     RUN(test_lru_bound);
     RUN(test_scene_normalised);
     RUN(test_shot_and_read_noise);

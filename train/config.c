@@ -108,6 +108,9 @@ static const field fields[] = {
     FLD("clip_fraction", F_FLOAT, clip_fraction, "F", "share of noisy training samples clipped "
         "to [0, 1] as a 16-bit PNG frame holds them, the rest keeping their negatives: a model "
         "for both kinds of frame (0; sensor_clip 1 clips them all)", 0, 1),
+    FLD("clean_fraction", F_FLOAT, clean_fraction, "F", "share of training samples without "
+        "noise (no Gaussian, shot or read noise), the rest drawn as noise / photons say: a model "
+        "that denoises without losing its clean accuracy (0)", 0, 1),
     FLD("photons", F_FLOAT, photons, "P", "shot noise: photo-electrons at full scale (the "
         "brightest LED's white response; 0 = off), as simulate --poisson", 0, 1e12),
     FLD("photons_min", F_FLOAT, photons_min, "P", "shot noise over a range of light: each "
@@ -684,6 +687,7 @@ static lm_status cfg_save(const lm_train_cfg *c, const char *path, lm_err *err)
     if (root) json_object_set_new(root, "transpose", json_integer(c->transpose));
     if (root) json_object_set_new(root, "collage", json_real(c->collage));
     if (root) json_object_set_new(root, "clip_fraction", json_real(c->clip_fraction));
+    if (root) json_object_set_new(root, "clean_fraction", json_real(c->clean_fraction));
     if (root) json_object_set_new(root, "fine_fraction", json_real(c->fine_fraction));
     if (root) json_object_set_new(root, "ema", json_real(c->ema));
     if (root) json_object_set_new(root, "precision", json_string(c->precision));

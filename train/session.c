@@ -63,10 +63,12 @@ static lm_dataset *open_data(const lm_train_cfg *cfg, const lm_system *sys, int 
     dc.scale_jitter = cfg->scale_jitter, dc.transpose = cfg->transpose;
     dc.collage = cfg->collage, dc.fine_fraction = cfg->fine_fraction;
     dc.clip_fraction = cfg->clip_fraction;
+    dc.clean_fraction = cfg->clean_fraction;
     if (clean) { /* the fit adds noise, clipping and quantisation itself */
         dc.noise_min = dc.noise_max = dc.val_noise = 0.0f;
         dc.sensor_clip = dc.sensor_bits = 0;
         dc.clip_fraction = 0.0f;
+        dc.clean_fraction = 0.0f;
     }
     return lm_dataset_open(&dc, err);
 }
@@ -287,6 +289,12 @@ static lm_status session(const lm_train_cfg *cfg, lm_train_opts opts, lm_train_r
         st = lm_err_set(err, LM_ERR_ARG, "config: 'clip_fraction' with 'motion_fraction' or "
                         "'frames' 3: moving and multi-frame samples are clipped all or none "
                         "('sensor_clip')");
+    if (!st && closed && cfg->clean_fraction > 0.0f)
+        st = lm_err_set(err, LM_ERR_ARG, "config: 'clean_fraction': the closed-form fit of %s "
+                        "draws its own noise", cfg->model);
+    if (!st && (cfg->motion_fraction > 0.0f || cfg->frames == 3) && cfg->clean_fraction > 0.0f)
+        st = lm_err_set(err, LM_ERR_ARG, "config: 'clean_fraction' with 'motion_fraction' or "
+                        "'frames' 3: moving and multi-frame samples take the noise range only");
     if (!st && closed && (cfg->illum_jitter > 0.0f || cfg->gain_jitter > 0.0f))
         st = lm_err_set(err, LM_ERR_ARG, "config: 'illum_jitter' / 'gain_jitter': augmentation "
                         "of SGD training; the closed-form fit of %s reads the scenes as they are "

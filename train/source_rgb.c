@@ -39,6 +39,7 @@ static lm_status to_rgb(rgb_src *s, lm_data_split split, long i, const float *ta
     if (lm_dataset_sample_info_get(s->d, split, i, &info, err)) return err->status;
     lm_noise_opts no = s->noise;
     no.gauss_k = info.noise_k;
+    if (info.clean) no.photons = 0.0, no.read_noise = 0.0f;
     lm_rng base, r;
     lm_rng_seed(&base, s->seed ^ 0x5267622d63616dULL); /* "Rgb-cam" */
     r = lm_rng_split(&base, (uint64_t)split << 48 ^ (uint64_t)i);

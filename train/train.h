@@ -104,6 +104,8 @@ typedef struct lm_train_cfg {
                                      * (data/synth.h lm_synth_fine; 0 = none) */
     float clip_fraction;            /* share of noisy training samples clipped to [0, 1] (a
                                      * 16-bit PNG frame); the rest keep their negatives */
+    float clean_fraction;           /* share of training samples without noise (the rest as
+                                     * noise / photons say) */
     float collage;                  /* share of training scene samples with another scene's
                                      * patch pasted across an edge (data/dataset.h; 0 = off) */
     char snapshots[128];            /* "5,15,30": weights at these minutes of training time into
