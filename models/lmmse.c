@@ -36,7 +36,8 @@
  * i.e. a closed-form guided interpolation of each LED's share, multiplied back by the pixel's
  * panchromatic level: nonlinear in the frame, linear in its parameters, so fitted in closed
  * form as lmmse-rf is (noise sampled at six levels). The features are computed on the host
- * (no device path) and hold no parameters. (The share against a 3 x 3 mean of g instead: 1.0 dB
+ * (on a device ctx too: the frames read back, the maps written to the device for the readout)
+ * and hold no parameters. (The share against a 3 x 3 mean of g instead: 1.0 dB
  * lower validation PSNR clean, the same from noise sd 0.02 up; docs/results.md.)
  * Guided interpolation ("lmmse-gri-b2": K 11, N 15; "lmmse-K-riN-b2", odd N 3..31): lmmse-b2
  * plus D = P + 1 fixed features: for each LED l, its plane estimated at every pixel by a guided
@@ -48,10 +49,11 @@
  * so strips need 2R rows of context (conv_rows). The regularisation is a fixed constant in
  * white^2 units: the features do not depend on the noise level (the per-level readout adapts
  * to it). Read out per phase and level (the spectral map from the P interpolated LED values
- * and g), fitted in closed form as the guide is; host features, CPU only.
+ * and g), fitted in closed form as the guide is; host features, as the guide's.
  * What it is not: the fit (train/fit_lmmse.c) or the noise estimator. */
 #include "models/model.h"
 #include "models/lmmse_direct.h"
+#include "tensor/device.h"
 #include "tensor/isa.h"
 #include <math.h>
 #include <stdio.h>
@@ -369,16 +371,15 @@ static void gri_frame(const lm_model *m, const lmmse_net *n, const float *b1, co
     for (int l = 0; l < P; l++) gri_plane(m, R, l, b1, g, H, W, iy, ix, sc, out + l * plane);
 }
 
-/* The host features' maps of raw (B x 2 x H x W, host): B x D x H x W, no gradient; the
- * guide's (guide_frame) or the guided interpolation's (gri_frame), frame by frame. */
+/* The host features' maps of raw (B x 2 x H x W): B x D x H x W, no gradient; the guide's
+ * (guide_frame) or the guided interpolation's (gri_frame), frame by frame, on the host. On a
+ * device ctx the frames are read to the host and the maps written back to the device (the
+ * readout and everything after it run there). */
 static lm_tensor *host_maps(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm_tensor *raw)
 {
     const int gri = n->kind == LMMSE_FEAT_GRI;
     const char *what = gri ? "the guided interpolation" : "the panchromatic guide";
-    if (c->backend && c->backend != lm_backend_cpu()) {
-        lm_ctx_fail(c, LM_ERR_ARG, "%s: %s runs on the CPU only", m->preset, what);
-        return NULL;
-    }
+    const int dev = raw && raw->device != LM_DEVICE_CPU;
     if (!raw || raw->ndim != 4 || raw->shape[1] != 2) {
         lm_ctx_fail(c, LM_ERR_SHAPE, "%s: %s needs both buckets (B x 2 x H x W)", m->preset,
                     what);
@@ -388,8 +389,9 @@ static lm_tensor *host_maps(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm
     const size_t plane = (size_t)H * W;
     const size_t bytes = gri ? sizeof(double) * gri_scratch(H, W, n->RI / 2)
                              : sizeof(float) * 2 * plane;
-    lm_tensor *x = lm_contiguous(c, raw);
-    lm_tensor *h = x ? lm_tensor_new4(c, B, n->D, H, W) : NULL;
+    lm_tensor *x = dev ? lm_tensor_to_host(c, raw) : lm_contiguous(c, raw);
+    const int shape[4] = {B, n->D, H, W};
+    lm_tensor *h = x ? lm_tensor_new_on(c, LM_DEVICE_CPU, 4, shape) : NULL;
     void *sc = h ? lm_ctx_alloc(c, bytes) : NULL;
     if (!sc) return NULL; /* the ctx has the error */
     for (int b = 0; b < B; b++) {
@@ -398,7 +400,7 @@ static lm_tensor *host_maps(lm_ctx *c, const lm_model *m, const lmmse_net *n, lm
         if (gri) gri_frame(m, n, in, in + plane, H, W, sc, out);
         else guide_frame(m, n, in, in + plane, H, W, sc, (float *)sc + plane, out);
     }
-    return h;
+    return dev ? lm_tensor_to_device(c, h) : h;
 }
 
 /* Packed filters of one phase: K x K taps of `lanes` floats (channels, zero beyond nch) for

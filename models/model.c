@@ -96,10 +96,11 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     {"rt-16", build_rt, CL, {0, 0, 0, 0, 0}, 16, 0},
     /* both buckets: the same families reading bucket 1 and bucket 0 (2 input planes) */
     {"lmmse-b2", build_lmmse, CL | FIT | B2, {0, 0, 0, 0, 0}, 0, 0},
-    /* lmmse-b2 plus the panchromatic guide's ratio features (host features: no OpenCL) */
-    {"lmmse-guide-b2", build_lmmse_guide, FIT | B2, {0, 0, 0, 0, 0}, 7, 0},
+    /* lmmse-b2 plus the panchromatic guide's ratio features (host features; on a device the
+     * frames go to the host and the maps back) */
+    {"lmmse-guide-b2", build_lmmse_guide, CL | FIT | B2, {0, 0, 0, 0, 0}, 7, 0},
     /* lmmse-b2 plus each LED's plane interpolated by a guided filter on g (host features) */
-    {"lmmse-gri-b2", build_lmmse_gri, FIT | B2, {0, 0, 0, 0, 0}, 15, 0},
+    {"lmmse-gri-b2", build_lmmse_gri, CL | FIT | B2, {0, 0, 0, 0, 0}, 15, 0},
     {"rt-8-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 8, 0},
     {"rt-16-b2", build_rt, CL | B2, {0, 0, 0, 0, 0}, 16, 0},
     /* multi-frame: the current frame and its two neighbours aligned to it (3 input planes) */

@@ -1,6 +1,8 @@
 /* test_opencl_models.c — CPU vs OpenCL agreement of whole models: for linear, han-tiny (LAM and
  * CSAM scales set non-zero), mcan-tiny and srnet-tiny (with a response map), rt-8, rt-16, lmmse,
- * lmmse-5-rf6, residuals rt-8, rt-8-nc, han-tiny-nc and tn-64-nc on lmmse-5, the two-bucket lmmse-5-b2 and rt-8-b2 on it, and
+ * lmmse-5-rf6, residuals rt-8, rt-8-nc, han-tiny-nc and tn-64-nc on lmmse-5, the two-bucket
+ * lmmse-5-b2 and rt-8-b2 on it, the host-feature floors lmmse-5-g3-b2 and lmmse-5-ri5-b2 (rt-8-b2
+ * on the latter), and
  * the RGB baseline mst-tiny (3 channels in, 31 out; attention over the whole input), the same
  * weights
  * and input run forward + L1 loss + backward on a CPU ctx and on an OpenCL ctx (parameters
@@ -147,6 +149,10 @@ static void check_model_on(const char *preset, const char *base, int B, int H, i
     lm_param *nz = lm_params_find(&m->params, "body.0.noise"); /* "-nc": the noise bias acts */
     if (!nz) nz = lm_params_find(&m->params, "head.0.noise");
     for (int i = 0; nz && i < nz->t.shape[0]; i++) nz->t.data[i] = 0.4f - 0.1f * (float)(i % 9);
+    /* the closed-form floors' feature readout (zero until fitted): every feature map acts */
+    lm_param *ro = lm_params_find(&m->params, base ? "base.readout.weight" : "readout.weight");
+    for (long i = 0; ro && i < lm_tensor_numel(&ro->t); i++)
+        ro->t.data[i] = 0.05f * (float)((i * 7) % 13) - 0.3f;
     int shape[4] = {B, m->in_channels, H, W}; /* 3 for the RGB baseline (MST++) */
     long nx = (long)B * m->in_channels * H * W, ny = (long)B * H * W * m->out_channels;
     float *x = malloc((size_t)nx * sizeof(float)), *target = malloc((size_t)ny * sizeof(float));
@@ -188,6 +194,11 @@ static void test_models(void)
     check_model_on("rt-8", "lmmse-5", 2, 12, 16);
     check_model("lmmse-5-b2", 2, 12, 16); /* both buckets: two input planes */
     check_model_on("rt-8-b2", "lmmse-5-b2", 2, 12, 16);
+    /* host features (the panchromatic guide, the guided interpolation): read to the host, the
+     * maps written back to the device */
+    check_model("lmmse-5-g3-b2", 2, 12, 16);
+    check_model("lmmse-5-ri5-b2", 2, 24, 32);
+    check_model_on("rt-8-b2", "lmmse-5-ri5-b2", 2, 24, 32);
     check_model_on("rt-8-nc", "lmmse-5", 2, 12, 16); /* the noise level as a bias */
     check_model_on("han-tiny-nc", "lmmse-5", 2, 12, 16);
     check_model_on("tn-64-nc", "lmmse-5", 2, 12, 16);
