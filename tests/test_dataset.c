@@ -769,8 +769,61 @@ done:
     lm_dataset_close(clean);
 }
 
+/* A per-sample share (clip_fraction, clean_fraction) of 0.5 in `half`: about half of the
+ * training samples drawn with the flag (flag(info)), each exactly `alt`'s sample (the loader
+ * that does it to every sample), the others exactly `plain`'s (which never does); the plan's
+ * other draws unchanged; validation samples never. */
+static void check_share(lm_dataset *plain, lm_dataset *half, lm_dataset *alt,
+                        int (*flag)(const lm_dataset_sample_info *), const char *what)
+{
+    lm_err e;
+    lm_err_clear(&e);
+    const int N = 2000;
+    int n = 0;
+    for (long i = 0; i < N; i++) {
+        lm_dataset_sample_info info, p0;
+        CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        CHECK(lm_dataset_sample_info_get(plain, LM_SPLIT_TRAIN, i, &p0, &e) == LM_OK);
+        CHECK(!flag(&p0) && info.kind == p0.kind && info.scene == p0.scene);
+        n += flag(&info);
+    }
+    CHECK_CLOSE(n / (double)N, 0.5, 0.04, 0);
+    static float rh[PH * PW], rp[PH * PW], ra[PH * PW], t[33 * PH * PW];
+    int seen[2] = {0, 0}, differ = 0;
+    for (long i = 0; i < 24; i++) {
+        lm_dataset_sample_info info;
+        CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+        CHECK(lm_dataset_batch(half, i, 1, rh, t, &e) == LM_OK);
+        CHECK(lm_dataset_batch(plain, i, 1, rp, t, &e) == LM_OK);
+        CHECK(lm_dataset_batch(alt, i, 1, ra, t, &e) == LM_OK);
+        const int f = flag(&info);
+        seen[f]++;
+        CHECK_MSG(memcmp(rh, f ? ra : rp, sizeof rh) == 0, "sample %ld (%s %d) is not the %s "
+                  "loader's", i, what, f, f ? what : "plain");
+        differ += f && memcmp(ra, rp, sizeof ra) != 0;
+    }
+    CHECK(seen[0] > 0 && seen[1] > 0);
+    CHECK(differ > 0); /* the flagged samples are not the plain loader's */
+    CHECK(lm_dataset_eval_sample(half, LM_SPLIT_VAL, 0, rh, t, &e) == LM_OK);
+    CHECK(lm_dataset_eval_sample(plain, LM_SPLIT_VAL, 0, rp, t, &e) == LM_OK);
+    CHECK(memcmp(rh, rp, sizeof rh) == 0);
+}
+
+/* A share above 1 is refused with `msg`. */
+static void check_share_refused(const lm_dataset_cfg *cfg, const char *msg)
+{
+    lm_err e;
+    lm_err_clear(&e);
+    lm_dataset *bad = lm_dataset_open(cfg, &e);
+    CHECK_MSG(bad == NULL && strstr(e.msg, msg), "%s 1.5: %s", msg, e.msg);
+    lm_dataset_close(bad);
+}
+
+static int clip_flag(const lm_dataset_sample_info *i) { return i->clip; }
+static int clean_flag(const lm_dataset_sample_info *i) { return i->clean; }
+
 /* clip_fraction: a share of the training samples clipped to [0, 1] as sensor_clip clips them
- * all; the others exactly the unclipped loader's; validation samples never */
+ * all (the noise level kept); the others exactly the unclipped loader's */
 static void test_clip_fraction(void)
 {
     const char *paths[1] = {g_pospath};
@@ -787,52 +840,27 @@ static void test_clip_fraction(void)
     cfg.clip_fraction = 0.5f;
     lm_dataset *half = lm_dataset_open(&cfg, &e);
     cfg.clip_fraction = 1.5f;
-    lm_err e2;
-    lm_err_clear(&e2);
-    lm_dataset *bad = lm_dataset_open(&cfg, &e2);
-    CHECK_MSG(bad == NULL && strstr(e2.msg, "clip share"), "clip share 1.5: %s", e2.msg);
-    lm_dataset_close(bad);
+    check_share_refused(&cfg, "clip share");
     CHECK_MSG(plain && all && half, "%s", e.msg);
-    if (!plain || !all || !half) goto done;
-    const int N = 2000;
-    int clipped = 0;
-    for (long i = 0; i < N; i++) {
-        lm_dataset_sample_info info, p0;
-        CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
-        CHECK(lm_dataset_sample_info_get(plain, LM_SPLIT_TRAIN, i, &p0, &e) == LM_OK);
-        CHECK(p0.clip == 0 && info.noise_k == p0.noise_k && info.kind == p0.kind);
-        clipped += info.clip;
+    if (plain && all && half) {
+        check_share(plain, half, all, clip_flag, "clipping");
+        static float rh[PH * PW], t[33 * PH * PW];
+        for (long i = 0; i < 24; i++) {
+            lm_dataset_sample_info info, p0;
+            CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+            CHECK(lm_dataset_sample_info_get(plain, LM_SPLIT_TRAIN, i, &p0, &e) == LM_OK);
+            CHECK(info.noise_k == p0.noise_k);
+            CHECK(lm_dataset_batch(half, i, 1, rh, t, &e) == LM_OK);
+            for (int q = 0; q < PH * PW && info.clip; q++) CHECK(rh[q] >= 0.0f);
+        }
     }
-    CHECK_CLOSE(clipped / (double)N, 0.5, 0.04, 0);
-    static float rh[PH * PW], rp[PH * PW], ra[PH * PW], t[33 * PH * PW];
-    int seen[2] = {0, 0}, had_neg = 0;
-    for (long i = 0; i < 24; i++) {
-        lm_dataset_sample_info info;
-        CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
-        CHECK(lm_dataset_batch(half, i, 1, rh, t, &e) == LM_OK);
-        CHECK(lm_dataset_batch(plain, i, 1, rp, t, &e) == LM_OK);
-        CHECK(lm_dataset_batch(all, i, 1, ra, t, &e) == LM_OK);
-        seen[info.clip]++;
-        CHECK_MSG(memcmp(rh, info.clip ? ra : rp, sizeof rh) == 0, "sample %ld (clip %d) is not "
-                  "the %s loader's", i, info.clip, info.clip ? "clipping" : "unclipped");
-        float mn = 0;
-        for (int q = 0; q < PH * PW; q++) mn = rh[q] < mn ? rh[q] : mn;
-        if (info.clip) CHECK(mn >= 0.0f);
-        for (int q = 0; q < PH * PW && info.clip; q++) had_neg |= rp[q] < 0.0f;
-    }
-    CHECK(seen[0] > 0 && seen[1] > 0);
-    CHECK(had_neg); /* the clipped samples differ from the unclipped ones */
-    CHECK(lm_dataset_eval_sample(half, LM_SPLIT_VAL, 0, rh, t, &e) == LM_OK);
-    CHECK(lm_dataset_eval_sample(plain, LM_SPLIT_VAL, 0, rp, t, &e) == LM_OK);
-    CHECK(memcmp(rh, rp, sizeof rh) == 0);
-done:
     lm_dataset_close(plain);
     lm_dataset_close(all);
     lm_dataset_close(half);
 }
 
-/* clean_fraction: a share of the training samples without noise (Gaussian, shot and read), each
- * the noiseless loader's sample; the others exactly the plain loader's; validation samples never */
+/* clean_fraction: a share of the training samples without noise (Gaussian, shot and read: noise
+ * level 0), each the noiseless loader's sample; the others exactly the noisy loader's */
 static void test_clean_fraction(void)
 {
     const char *paths[1] = {g_pospath};
@@ -848,46 +876,21 @@ static void test_clean_fraction(void)
     cfg.clean_fraction = 0.5f;
     lm_dataset *half = lm_dataset_open(&cfg, &e);
     cfg.clean_fraction = 1.5f;
-    lm_err e2;
-    lm_err_clear(&e2);
-    lm_dataset *bad = lm_dataset_open(&cfg, &e2);
-    CHECK_MSG(bad == NULL && strstr(e2.msg, "noiseless share"), "noiseless share 1.5: %s", e2.msg);
-    lm_dataset_close(bad);
+    check_share_refused(&cfg, "noiseless share");
     cfg.clean_fraction = 0.0f;
     cfg.noise_min = cfg.noise_max = 0.0f;
     cfg.photons = 0.0, cfg.read_noise = 0.0f;
     lm_dataset *none = lm_dataset_open(&cfg, &e);
     CHECK_MSG(plain && half && none, "%s", e.msg);
-    if (!plain || !half || !none) goto done;
-    const int N = 2000;
-    int clean = 0;
-    for (long i = 0; i < N; i++) {
-        lm_dataset_sample_info info, p0;
-        CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
-        CHECK(lm_dataset_sample_info_get(plain, LM_SPLIT_TRAIN, i, &p0, &e) == LM_OK);
-        CHECK(p0.clean == 0 && info.kind == p0.kind && info.scene == p0.scene);
-        CHECK(info.clean ? info.noise_k == 0.0f : info.noise_k == p0.noise_k);
-        clean += info.clean;
+    if (plain && half && none) {
+        check_share(plain, half, none, clean_flag, "noiseless");
+        for (long i = 0; i < 200; i++) {
+            lm_dataset_sample_info info, p0;
+            CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
+            CHECK(lm_dataset_sample_info_get(plain, LM_SPLIT_TRAIN, i, &p0, &e) == LM_OK);
+            CHECK(info.clean ? info.noise_k == 0.0f : info.noise_k == p0.noise_k);
+        }
     }
-    CHECK_CLOSE(clean / (double)N, 0.5, 0.04, 0);
-    static float rh[PH * PW], rp[PH * PW], rn[PH * PW], t[33 * PH * PW];
-    int seen[2] = {0, 0};
-    for (long i = 0; i < 24; i++) {
-        lm_dataset_sample_info info;
-        CHECK(lm_dataset_sample_info_get(half, LM_SPLIT_TRAIN, i, &info, &e) == LM_OK);
-        CHECK(lm_dataset_batch(half, i, 1, rh, t, &e) == LM_OK);
-        CHECK(lm_dataset_batch(plain, i, 1, rp, t, &e) == LM_OK);
-        CHECK(lm_dataset_batch(none, i, 1, rn, t, &e) == LM_OK);
-        seen[info.clean]++;
-        CHECK_MSG(memcmp(rh, info.clean ? rn : rp, sizeof rh) == 0, "sample %ld (clean %d) is not "
-                  "the %s loader's", i, info.clean, info.clean ? "noiseless" : "noisy");
-        CHECK(memcmp(rn, rp, sizeof rn) != 0); /* the noisy loader's samples differ */
-    }
-    CHECK(seen[0] > 0 && seen[1] > 0);
-    CHECK(lm_dataset_eval_sample(half, LM_SPLIT_VAL, 0, rh, t, &e) == LM_OK);
-    CHECK(lm_dataset_eval_sample(plain, LM_SPLIT_VAL, 0, rp, t, &e) == LM_OK);
-    CHECK(memcmp(rh, rp, sizeof rh) == 0);
-done:
     lm_dataset_close(plain);
     lm_dataset_close(half);
     lm_dataset_close(none);
