@@ -18,7 +18,7 @@ static void help(void)
 {
     printf("usage: lumosaic fit-auto --models RUN,RUN[,...] [DATA...] [--synth N]\n"
            "                          --output FILE [--split val|test|valtest|all] [--bins B]\n"
-           "                          [--measure grad|relgrad] [--noise PERCENT] [--seed S]\n"
+           "                          [--measure grad|relgrad|noise] [--noise LIST] [--seed S]\n"
            "                          [--synth-size HxW] [--batch N] [--threads T]\n"
            "                          [--test-synth N] [--test-tol LIST]\n\n"
            "Calibrate 'lumosaic infer --model auto': on held-out scenes, per 66 x 64 window\n"
@@ -36,8 +36,12 @@ static void help(void)
            "  --output FILE    calibration file to write (JSON)\n"
            "  --bins B         difficulty bins (1..32; default 8)\n"
            "  --measure M      difficulty: grad = mean same-phase absolute difference\n"
-           "                   (default), relgrad = grad / mean level\n"
-           "  --noise PERCENT  Gaussian noise k of the simulated frames (default 0)\n"
+           "                   (default), relgrad = grad / mean level, noise = the\n"
+           "                   frame's estimated noise level (one choice per frame: e.g. a\n"
+           "                   network for clean frames beside one for noisy ones; give\n"
+           "                   --noise several levels)\n"
+           "  --noise LIST     Gaussian noise k of the simulated frames, in %%; every scene\n"
+           "                   at each level, e.g. 0,5,10,20 (1 to 8 levels; default 0)\n"
            "  --seed S         noise and procedural scene seed (default 1)\n"
            "  --test-synth N   after fitting, measure on N more procedural scenes (default 0;\n"
            "                   seeds disjoint from training's and the calibration scenes'):\n"
@@ -52,7 +56,7 @@ static void help(void)
 
 typedef struct cal_opts {
     lm_auto_fit_opts run; /* what the library runs */
-    const char *output, *split_s, *measure_s, *size_s, *tol_s;
+    const char *output, *split_s, *measure_s, *size_s, *tol_s, *noise_s;
     const char **data;
     lm_cli_common com;    /* --threads, --seed */
 } cal_opts;
@@ -71,7 +75,7 @@ static int parse_opt(lm_cli *c, cal_opts *o)
         (r = lm_cli_int(c, "--bins", 1, LM_AUTO_MAX_BINS, &o->run.bins)) ||
         (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_SEED, LLONG_MAX / 2000000, &o->com)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->run.batch)) ||
-        (r = lm_cli_real(c, "--noise", 0.0, 100.0, &o->run.noise)))
+        (r = lm_cli_value(c, "--noise", &o->noise_s)))
         return r < 0 ? 2 : 1;
     return 0;
 }
@@ -97,12 +101,21 @@ static int check_opts(lm_cli *c, cal_opts *o)
     if (o->split_s && (r->split = lm_auto_fit_split_parse(o->split_s)) < 0)
         return lm_cli_error(c, "--split '%s': use val, test, valtest or all", o->split_s);
     int measure = lm_auto_measure_parse(o->measure_s ? o->measure_s : "grad");
-    if (measure < 0) return lm_cli_error(c, "--measure '%s': use grad or relgrad", o->measure_s);
+    if (measure < 0)
+        return lm_cli_error(c, "--measure '%s': use grad, relgrad or noise", o->measure_s);
     r->measure = (lm_auto_measure)measure;
     if (o->size_s && (lm_cli_parse_size(o->size_s, 64, 4096, &r->sh, &r->sw) || r->sh < 66))
         return lm_cli_error(c, "--synth-size '%s': want HxW, from 66x64 to 4096x4096",
                             o->size_s);
     if (parse_tol(c, o)) return 2;
+    if (o->noise_s) {
+        char why[128];
+        int n = lm_parse_list(o->noise_s, 0, 100, r->noise, LM_AUTO_FIT_MAX_NOISE, why, sizeof why);
+        if (n < 0)
+            return lm_cli_error(c, "--noise '%s': %s (levels in %%, e.g. 0,5,10,20)", o->noise_s,
+                                why);
+        r->nnoise = n;
+    }
     struct stat sb; /* an output that cannot be written is known before the fit */
     if (stat(o->output, &sb) == 0 && !S_ISREG(sb.st_mode))
         return lm_cli_error(c, "--output %s: exists and is not a file", o->output);
@@ -133,14 +146,14 @@ static void print_table(const lm_auto_fit_run *r)
 {
     const lm_auto_fit_opts *o = r->o;
     const lm_auto_calib *a = &r->cal;
-    printf("%ld windows from %d scene(s); measure %s\n", r->n, r->nscenes + (int)o->synth,
-           lm_auto_measure_name(a->measure));
+    printf("%ld windows from %d scene(s) at %d noise level(s); measure %s\n", r->n,
+           r->nscenes + (int)o->synth, o->nnoise, lm_auto_measure_name(a->measure));
     printf("model cost: ");
     for (int m = 0; m < a->nmodels; m++)
-        printf("%s%s %.3g ms/window (%.3g MMAC)", m ? ", " : "", a->models[m].preset,
+        printf("%s%s %.3g ms/window (%.3g MMAC)", m ? ", " : "", a->models[m].label,
                1e3 * a->models[m].cost, a->models[m].macs / 1e6);
     printf("\n%-24s %8s", "difficulty bin", "windows");
-    for (int m = 0; m < a->nmodels; m++) printf(" %10.10s", a->models[m].preset);
+    for (int m = 0; m < a->nmodels; m++) printf(" %10.10s", a->models[m].label);
     printf("   (expected PSNR, dB)\n");
     for (int b = 0; b < a->nbins; b++) {
         char lo[16] = "-inf", hi[16] = "inf", rng[40];
@@ -155,7 +168,7 @@ static void print_table(const lm_auto_fit_run *r)
 
 static void row_name(const lm_auto_fit_run *r, const lm_auto_test_row *w, char *s, size_t n)
 {
-    if (w->model >= 0) snprintf(s, n, "%s", r->cal.models[w->model].preset);
+    if (w->model >= 0) snprintf(s, n, "%s", r->cal.models[w->model].label);
     else snprintf(s, n, "auto tol %g", w->tol);
 }
 
@@ -178,14 +191,14 @@ static void print_test(const lm_auto_fit_run *r, const lm_auto_test *t)
                w->psnr - b->psnr, lm_auto_expected_psnr(a, w->choice, 0), lm_auto_test_row_est(r, w),
                n ? w->wall * t->wpf / n : 0.0, lm_auto_test_row_est(r, b) / lm_auto_test_row_est(r, w), w->wall);
         for (int m = 0; m < a->nmodels; m++) /* the models that ran */
-            if (w->win[m]) printf(" %s %.1f%%", a->models[m].preset, 100.0 * w->win[m] / n);
+            if (w->win[m]) printf(" %s %.1f%%", a->models[m].label, 100.0 * w->win[m] / n);
         if (w->same >= 0) printf("  (same choice as tol %g: reused)", t->rows[w->same].tol);
         printf("\n");
     }
     printf("vs best / speedup: against always %s (the best fixed model on these scenes; speedup "
            "from the estimated seconds). est: calibrated network seconds per window x windows; "
            "meas: wall time of the test reconstructions (difficulty, fold and all) per 640x480 "
-           "frame\n", a->models[t->best].preset);
+           "frame\n", a->models[t->best].label);
 }
 
 static void log_line(void *user, const char *line)

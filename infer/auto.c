@@ -3,6 +3,7 @@
  * What it is not: model loading or the CLI. */
 #include "infer/auto.h"
 #include "infer/model_io.h"
+#include "data/noise_est.h"
 #include <errno.h>
 #include <jansson.h>
 #include <math.h>
@@ -11,23 +12,50 @@
 #include <string.h>
 #include <unistd.h>
 
-static const char *const measure_names[] = {"grad", "relgrad"};
+static const char *const measure_names[] = {"grad", "relgrad", "noise"};
+#define NMEASURES 3
 
 const char *lm_auto_measure_name(lm_auto_measure m)
 {
-    return (unsigned)m < 2 ? measure_names[m] : "?";
+    return (unsigned)m < NMEASURES ? measure_names[m] : "?";
 }
 
 int lm_auto_measure_parse(const char *name)
 {
-    for (int i = 0; i < 2; i++)
+    for (int i = 0; i < NMEASURES; i++)
         if (name && !strcmp(name, measure_names[i])) return i;
     return -1;
+}
+
+/* The noise level k of a frame (0 without positive signal), or -1 with err set. */
+static double frame_level(const float *frame, int height, int width, int ty, int tx, lm_err *err)
+{
+    lm_noise_info ni;
+    lm_err e;
+    lm_err_clear(&e);
+    lm_status st = lm_noise_analyze(frame, height, width, ty, tx, &ni, &e);
+    if (st == LM_OK) return ni.level;
+    int finite = st == LM_ERR_NUMERIC; /* no positive signal (level 0), or NaN / inf */
+    for (size_t i = 0; finite && i < (size_t)height * width; i++) finite = isfinite(frame[i]);
+    if (finite) return 0.0;
+    lm_err_set(err, st, "auto: the noise measure: %s", e.msg);
+    return -1.0;
 }
 
 double lm_auto_difficulty(lm_auto_measure m, const float *frame, int width, int y0, int x0,
                           int wh, int ww, int ty, int tx)
 {
+    if (m == LM_AUTO_NOISE) { /* the window's own level (a copy: the estimator reads rows) */
+        float *w = malloc(sizeof(float) * (size_t)wh * ww);
+        if (!w) return NAN;
+        for (int i = 0; i < wh; i++)
+            memcpy(w + (size_t)i * ww, frame + (size_t)(y0 + i) * width + x0, sizeof(float) * ww);
+        lm_err e;
+        lm_err_clear(&e);
+        const double k = frame_level(w, wh, ww, ty, tx, &e);
+        free(w);
+        return k >= 0.0 ? k : NAN;
+    }
     double g = 0.0, s = 0.0;
     for (int i = 0; i < wh; i++) {
         const float *r = frame + (size_t)(y0 + i) * width + x0;
@@ -73,6 +101,13 @@ lm_status lm_auto_frame_difficulty(lm_auto_measure m, const float *frame, int he
                                    double *d, lm_err *err)
 {
     if (lm_tile_check(o, height, width, ty, tx, err)) return err->status;
+    if (m == LM_AUTO_NOISE) { /* one level for the frame */
+        const double k = frame_level(frame, height, width, ty, tx, err);
+        if (k < 0.0) return err->status;
+        const int n = lm_auto_window_count(height, width, o);
+        for (int i = 0; i < n; i++) d[i] = k;
+        return LM_OK;
+    }
     int *ys, *xs, ny, nx;
     if (positions(height, width, o, &ys, &ny, &xs, &nx, err)) return err->status;
     int nt = nthreads > 0 ? nthreads : omp_get_max_threads();
@@ -83,6 +118,31 @@ lm_status lm_auto_frame_difficulty(lm_auto_measure m, const float *frame, int he
     free(ys);
     free(xs);
     return LM_OK;
+}
+
+/* ---- labels ---------------------------------------------------------------------------- */
+void lm_auto_label(lm_auto_calib *a)
+{
+    for (int m = 0; m < a->nmodels; m++) {
+        lm_auto_model *x = &a->models[m];
+        int shared = 0;
+        for (int k = 0; k < a->nmodels; k++) shared |= k != m && !strcmp(a->models[k].preset, x->preset);
+        if (!shared) {
+            snprintf(x->label, sizeof x->label, "%s", x->preset);
+            continue;
+        }
+        char p[1024];
+        snprintf(p, sizeof p, "%s", x->path);
+        size_t n = strlen(p);
+        while (n > 1 && p[n - 1] == '/') p[--n] = '\0';
+        static const char tail[] = "/model.safetensors", ext[] = ".safetensors";
+        if (n > sizeof tail - 1 && !strcmp(p + n - (sizeof tail - 1), tail))
+            p[n -= sizeof tail - 1] = '\0';
+        else if (n > sizeof ext - 1 && !strcmp(p + n - (sizeof ext - 1), ext))
+            p[n -= sizeof ext - 1] = '\0';
+        const char *s = strrchr(p, '/');
+        snprintf(x->label, sizeof x->label, "%s", s ? s + 1 : p);
+    }
 }
 
 /* ---- selection ------------------------------------------------------------------------- */
@@ -166,6 +226,7 @@ lm_status lm_auto_fit(lm_auto_calib *a, const double *d, const double *mse, long
         }
     free(s);
     free(sum);
+    lm_auto_label(a);
     return LM_OK;
 }
 
@@ -279,7 +340,7 @@ static lm_status load_root(json_t *r, lm_auto_calib *a, const char **what)
     int meas = json_is_string(ms) ? lm_auto_measure_parse(json_string_value(ms)) : -1;
     if ((*what = "version 1"), !json_is_integer(v) || json_integer_value(v) != LM_AUTO_VERSION)
         return LM_ERR_FORMAT;
-    if ((*what = "measure (grad|relgrad)"), meas < 0) return LM_ERR_FORMAT;
+    if ((*what = "measure (grad|relgrad|noise)"), meas < 0) return LM_ERR_FORMAT;
     a->measure = (lm_auto_measure)meas;
     if ((*what = "window / stride [h, w] (integers in 1..4096)"),
         get_reals(r, "window", win, 2, 2) < 0 || get_reals(r, "stride", str, 2, 2) < 0)
@@ -335,6 +396,7 @@ lm_status lm_auto_load(const char *path, lm_auto_calib *a, lm_err *err)
         memset(a, 0, sizeof *a);
         return lm_err_set(err, ve.status, "auto: '%s': %s", path, ve.msg + 6);
     }
+    lm_auto_label(a);
     return LM_OK;
 }
 

@@ -5,6 +5,10 @@
  *     with same-phase differences only (pixels one tile apart, so the mosaic pattern itself
  *     does not count): "grad" = mean |f(y, x + tx) - f(y, x)| + |f(y + ty, x) - f(y, x)| over
  *     the window, and "relgrad" = grad / (mean |f| + 1e-3) (contrast rather than amplitude);
+ *     or "noise": the frame's estimated noise level k (data/noise_est.h, sigma over the robust
+ *     peak), the same for every window of a frame, so the choice is per frame: e.g. a network
+ *     trained for clean frames beside one trained for noisy ones, calibrated at several noise
+ *     levels (lm_auto_difficulty alone estimates the window's own level);
  *   - calibration: per window the difficulty and each model's K-weighted (infer/tile.h kernel)
  *     MSE on bands 400..700 nm against the truth (lm_auto_scene), then a fit (lm_auto_fit):
  *     quantile bins of difficulty, per bin and model the expected PSNR = -10 log10(mean MSE),
@@ -30,9 +34,13 @@
 #define LM_AUTO_MAX_BINS 32
 #define LM_AUTO_VERSION 1
 
-typedef enum lm_auto_measure { LM_AUTO_GRAD = 0, LM_AUTO_RELGRAD = 1 } lm_auto_measure;
+typedef enum lm_auto_measure {
+    LM_AUTO_GRAD = 0,
+    LM_AUTO_RELGRAD = 1,
+    LM_AUTO_NOISE = 2
+} lm_auto_measure;
 
-/* "grad" / "relgrad"; lm_auto_measure_parse returns -1 for an unknown name. */
+/* "grad" / "relgrad" / "noise"; lm_auto_measure_parse returns -1 for an unknown name. */
 const char *lm_auto_measure_name(lm_auto_measure m);
 int lm_auto_measure_parse(const char *name);
 
@@ -43,7 +51,9 @@ double lm_auto_difficulty(lm_auto_measure m, const float *frame, int width, int 
 /* Windows of a height x width frame under o (lm_tile_positions on both axes), raster order. */
 int lm_auto_window_count(int height, int width, const lm_tile_opts *o);
 /* Difficulty of every window into d (lm_auto_window_count entries), raster order; OpenMP over
- * windows with nthreads (0 = default). Errors: those of lm_tile_check. */
+ * windows with nthreads (0 = default); "noise": the frame's level in every entry (0 for a frame
+ * without positive signal). Errors: those of lm_tile_check; "noise" on a frame too small for
+ * the estimate (LM_ERR_SHAPE) or with NaN / inf (LM_ERR_NUMERIC). */
 lm_status lm_auto_frame_difficulty(lm_auto_measure m, const float *frame, int height, int width,
                                    int ty, int tx, const lm_tile_opts *o, int nthreads,
                                    double *d, lm_err *err);
@@ -51,6 +61,8 @@ lm_status lm_auto_frame_difficulty(lm_auto_measure m, const float *frame, int he
 typedef struct lm_auto_model {
     char path[1024];                 /* the model as given to calibration */
     char preset[64];
+    char label[128];                 /* for tables: the preset, or where two models share
+                                      * it, the run folder or file name (lm_auto_label) */
     double cost;                     /* seconds per window (lower = cheaper), > 0 */
     double macs;                     /* multiply-adds per window (information only) */
     double psnr[LM_AUTO_MAX_BINS];   /* expected PSNR (dB) per difficulty bin */
@@ -64,6 +76,11 @@ typedef struct lm_auto_calib {
     long windows[LM_AUTO_MAX_BINS];         /* calibration windows per bin */
     lm_auto_model models[LM_AUTO_MAX_MODELS];
 } lm_auto_calib;
+
+/* Every model's label: its preset when no other model of the calibration has it, else its
+ * path's run folder (".../RUN/model.safetensors", ".../RUN") or file name without
+ * ".safetensors". lm_auto_load and lm_auto_fit call it. */
+void lm_auto_label(lm_auto_calib *a);
 
 /* Bin of difficulty d: the number of edges <= d (0..nbins-1). */
 int lm_auto_bin(const lm_auto_calib *a, double d);

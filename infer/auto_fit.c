@@ -33,7 +33,7 @@ int lm_auto_fit_split_parse(const char *name)
 void lm_auto_fit_opts_default(lm_auto_fit_opts *o)
 {
     *o = (lm_auto_fit_opts){.split = LM_AUTO_FIT_VALTEST, .sh = 198, .sw = 256, .bins = 8,
-                            .measure = LM_AUTO_GRAD, .seed = 1, .batch = 8, .ntol = 5,
+                            .measure = LM_AUTO_GRAD, .nnoise = 1, .seed = 1, .batch = 8, .ntol = 5,
                             .tol = {0, 0.25, 0.5, 1, 2}};
 }
 
@@ -158,19 +158,17 @@ static lm_status scene_cube(const lm_auto_fit_run *r, int i, lm_cube *cube, lm_e
     return st ? st : lm_eval_prepare(cube, mo->ty, mo->tx, e);
 }
 
-/* Scene i prepared and its coded frame simulated (noise stream seed * 7919 + i). */
-static lm_status scene_frame(const lm_auto_fit_run *r, int i, lm_cube *cube, float **frame,
-                             lm_err *e)
+/* Scene i's coded frame (the cube prepared) simulated at noise level q (noise stream
+ * seed * 7919 + i + q * 104729). */
+static lm_status scene_frame(const lm_auto_fit_run *r, int i, int q, const lm_cube *cube,
+                             float **frame, lm_err *e)
 {
     *frame = NULL;
-    if (scene_cube(r, i, cube, e)) return e->status;
     size_t nf;
-    lm_noise_opts no = {.gauss_k = (float)(r->o->noise / 100.0)};
+    lm_noise_opts no = {.gauss_k = (float)(r->o->noise[q] / 100.0)};
     lm_rng rng;
-    lm_rng_seed(&rng, (uint64_t)r->o->seed * 7919u + (uint64_t)i);
-    lm_status st = lm_eval_simulate(&r->im[0], cube, &no, &rng, frame, &nf, e);
-    if (st) lm_cube_free(cube);
-    return st;
+    lm_rng_seed(&rng, (uint64_t)r->o->seed * 7919u + (uint64_t)i + (uint64_t)q * 104729u);
+    return lm_eval_simulate(&r->im[0], cube, &no, &rng, frame, &nf, e);
 }
 
 /* Make room for n more samples. */
@@ -194,12 +192,12 @@ static lm_status grow(lm_auto_fit_run *r, long n, lm_err *e)
     return LM_OK;
 }
 
-/* One scene's samples appended. */
-static lm_status scene_samples(lm_auto_fit_run *r, int i, lm_err *e)
+/* One scene's samples at noise level q appended. */
+static lm_status level_samples(lm_auto_fit_run *r, int i, int q, const lm_cube *c, lm_err *e)
 {
-    lm_cube cube;
+    lm_cube cube = *c;
     float *frame;
-    if (scene_frame(r, i, &cube, &frame, e)) return e->status;
+    if (scene_frame(r, i, q, &cube, &frame, e)) return e->status;
     int nw = lm_auto_window_count(cube.height, cube.width, &r->to), nm = r->cal.nmodels;
     double *mse = malloc(sizeof(double) * nw * nm);
     lm_status st = mse && !grow(r, nw, e) ? LM_OK
@@ -212,6 +210,16 @@ static lm_status scene_samples(lm_auto_fit_run *r, int i, lm_err *e)
     if (!st) r->n += nw;
     free(mse);
     free(frame);
+    return st;
+}
+
+/* One scene's samples at every noise level appended. */
+static lm_status scene_samples(lm_auto_fit_run *r, int i, lm_err *e)
+{
+    lm_cube cube;
+    if (scene_cube(r, i, &cube, e)) return e->status;
+    lm_status st = LM_OK;
+    for (int q = 0; q < r->o->nnoise && !st; q++) st = level_samples(r, i, q, &cube, e);
     lm_cube_free(&cube);
     return st;
 }
@@ -305,14 +313,15 @@ static lm_status test_row_run(lm_auto_fit_run *r, lm_auto_test_row *w, const flo
     return LM_OK;
 }
 
-/* One test scene through every row that runs (auto rows with a repeated choice do not). */
-static lm_status test_scene(lm_auto_fit_run *r, int i, lm_err *e)
+/* One test scene at noise level q through every row that runs (auto rows with a repeated
+ * choice do not). */
+static lm_status test_level(lm_auto_fit_run *r, int i, int q, const lm_cube *c, lm_err *e)
 {
     lm_auto_test *t = r->test;
     const lm_mosaic *mo = &r->models[0]->mosaic;
-    lm_cube cube;
+    lm_cube cube = *c;
     float *frame;
-    if (scene_frame(r, i, &cube, &frame, e)) return e->status;
+    if (scene_frame(r, i, q, &cube, &frame, e)) return e->status;
     const int H = cube.height, W = cube.width, n = lm_auto_window_count(H, W, &r->to);
     double *d = malloc(sizeof(double) * n);
     int *wm = malloc(sizeof(int) * n);
@@ -328,6 +337,16 @@ static lm_status test_scene(lm_auto_fit_run *r, int i, lm_err *e)
     free(d);
     free(wm);
     free(frame);
+    return st;
+}
+
+/* One test scene at every noise level. */
+static lm_status test_scene(lm_auto_fit_run *r, int i, lm_err *e)
+{
+    lm_cube cube;
+    if (scene_cube(r, i, &cube, e)) return e->status;
+    lm_status st = LM_OK;
+    for (int q = 0; q < r->o->nnoise && !st; q++) st = test_level(r, i, q, &cube, e);
     lm_cube_free(&cube);
     return st;
 }
@@ -364,7 +383,7 @@ static void test_means(lm_auto_fit_run *r)
             *w = t->rows[same];
             w->same = same, w->tol = tol;
         } else {
-            w->psnr /= (double)r->o->test_synth;
+            w->psnr /= (double)r->o->test_synth * r->o->nnoise;
         }
     }
     t->best = 0;
@@ -437,8 +456,13 @@ static json_t *test_json(const lm_auto_fit_run *r)
 
 lm_status lm_auto_fit_save(const lm_auto_fit_run *r, const char *path, lm_err *e)
 {
-    json_t *extra = r->test ? test_json(r) : NULL;
-    if (r->test && !extra) return lm_err_set(e, LM_ERR_NOMEM, "out of memory");
+    json_t *extra = r->test ? test_json(r) : json_object(), *levels = json_array();
+    for (int q = 0; levels && q < r->o->nnoise; q++)
+        json_array_append_new(levels, json_real(r->o->noise[q]));
+    if (!extra || !levels || json_object_set_new(extra, "noise_percent", levels)) {
+        json_decref(extra);
+        return lm_err_set(e, LM_ERR_NOMEM, "out of memory");
+    }
     lm_status st = lm_auto_save_ext(path, &r->cal, extra, e);
     json_decref(extra);
     return st;

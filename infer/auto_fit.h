@@ -3,7 +3,7 @@
  * What it is: the models loaded (2..LM_AUTO_MAX_MODELS, the same coded frames), the scenes
  * taken (DATA scenes of the dataset's val / test splits, as training splits them, then
  * `synth` procedural scenes whose seeds training does not draw), each scene's coded frame
- * simulated (noise stream seed x 7919 + scene index), per window the difficulty and every
+ * simulated at each noise level q (noise stream seed x 7919 + scene index + q x 104729), per window the difficulty and every
  * model's error recorded (lm_auto_scene), the fit of expected PSNR per difficulty bin
  * (lm_auto_fit), each model's measured seconds per window and MACs; and the held-out test:
  * `test_synth` more procedural scenes (a seed stream disjoint from the calibration scenes')
@@ -19,6 +19,7 @@
 #include "infer/model_io.h"
 
 #define LM_AUTO_FIT_MAX_TOL 16
+#define LM_AUTO_FIT_MAX_NOISE 8
 
 typedef enum lm_auto_fit_split {
     LM_AUTO_FIT_VAL = 0,
@@ -40,7 +41,9 @@ typedef struct lm_auto_fit_opts {
     int sh, sw;                 /* procedural scene size */
     long long bins;             /* difficulty bins, at most */
     lm_auto_measure measure;
-    double noise;               /* Gaussian noise k of the frames, in % */
+    double noise[LM_AUTO_FIT_MAX_NOISE]; /* Gaussian noise k of the frames, in %: every scene
+                                          * simulated at each level (calibration and test) */
+    int nnoise;                 /* levels (1..LM_AUTO_FIT_MAX_NOISE) */
     long long seed;             /* noise and procedural scene seed */
     long long batch;            /* windows per network call */
     int nthreads;               /* 0 = default */
@@ -52,7 +55,7 @@ typedef struct lm_auto_fit_opts {
     void *user;
 } lm_auto_fit_opts;
 
-/* Defaults: split valtest, 198 x 256 procedural scenes, 8 bins, grad, seed 1, batch 8,
+/* Defaults: split valtest, 198 x 256 procedural scenes, 8 bins, grad, noise 0, seed 1, batch 8,
  * tolerances 0, 0.25, 0.5, 1, 2 dB. */
 void lm_auto_fit_opts_default(lm_auto_fit_opts *o);
 

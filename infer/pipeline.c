@@ -359,7 +359,7 @@ void lm_pipe_auto_summarize(const lm_pipe *p, lm_pipe_auto_summary *s)
     const lm_auto_calib *a = &p->cal;
     s->nmodels = a->nmodels;
     for (int m = 0; m < a->nmodels; m++) {
-        s->preset[m] = a->models[m].preset;
+        s->preset[m] = a->models[m].label;
         s->windows[m] = p->windows[m];
         s->total += p->windows[m];
         if (m && lm_auto_expected_psnr(a, NULL, m) > lm_auto_expected_psnr(a, NULL, s->best))

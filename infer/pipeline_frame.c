@@ -203,7 +203,7 @@ static lm_status auto_frame(lm_pipe *p, const float *in, int H, int W, lm_tile_o
         int k = snprintf(line, sizeof line, "auto:");
         for (int m = 0; m < a->nmodels; m++) {
             if (k >= 0 && (size_t)k < sizeof line)
-                k += snprintf(line + k, sizeof line - k, " %s %.0f%%", a->models[m].preset,
+                k += snprintf(line + k, sizeof line - k, " %s %.0f%%", a->models[m].label,
                               100.0 * win[m] / n);
             p->windows[m] += win[m];
         }
@@ -257,11 +257,14 @@ lm_status lm_pipe_reconstruct(lm_pipe *p, const float *in, int H, int W, lm_cube
 
 /* Once per run: a noisy frame clipped at 0 (as a 16-bit PNG or TIFF holds it: at least 1 in
  * 1000 pixels, and 16, exactly 0, none below) given to a model that records having been
- * trained on unclipped samples only. Its dark areas come out biased (such a network loses
- * 3.6 dB at 10 % noise on them: docs/results.md, "Clipped frames"). */
+ * trained on unclipped samples only (a calibrated choice: when all of its models do). Its dark
+ * areas come out biased (such a network loses 3.6 dB at 10 % noise on them: docs/results.md,
+ * "Clipped frames"). */
 static void clip_note(lm_pipe *p, int i, const float *in, int H, int W)
 {
     if (p->clip_warned || p->im.clipped != 0.0) return;
+    for (int m = 1; p->is_auto && m < p->cal.nmodels; m++)
+        if (p->more[m].clipped != 0.0) return;
     const size_t n = (size_t)H * W;
     size_t zeros = 0;
     for (size_t k = 0; k < n; k++) {
@@ -275,10 +278,11 @@ static void clip_note(lm_pipe *p, int i, const float *in, int H, int W)
     if (lm_noise_analyze(in, H, W, mo->ty, mo->tx, &ni, &ne) || !(ni.level >= 0.02f)) return;
     p->clip_warned = 1;
     lm_pipe_say(p, LM_PIPE_WARNING, "%s: noisy (about %.0f %%) and clipped at 0, as a 16-bit "
-                "file holds it; model %s was trained on unclipped samples, so dark areas come "
+                "file holds it; %s%s%s%s trained on unclipped samples, so dark areas come "
                 "out too bright: a model trained on clipped samples too (train's clip_fraction) "
                 "reads such frames", p->src.name(p->src.self, i), 100.0 * ni.level,
-                p->im.model->preset);
+                p->is_auto ? "the calibrated models were" : "", p->is_auto ? "" : "model ",
+                p->is_auto ? "" : p->im.model->preset, p->is_auto ? "" : " was");
 }
 
 lm_status lm_pipe_frame(lm_pipe *p, int i, lm_cube *cube, lm_pipe_info *info, lm_err *e)

@@ -1,5 +1,6 @@
 /* test_auto.c — `--model auto` (infer/auto.h): the difficulty measure against hand-computed
- * values (zero on a constant frame and on a pure mosaic pattern); bin lookup; the selection on
+ * values (zero on a constant frame and on a pure mosaic pattern), the noise measure (the
+ * frame's estimated level in every window) and model labels; bin lookup; the selection on
  * a hand-made calibration (tol 0 = the best per bin, a huge tol = the cheapest everywhere, an
  * intermediate tol worked out by hand, cost ties); the quantile fit on hand-made samples;
  * save / load round trip and calibration file errors; the mixed-model fold: every window on
@@ -39,6 +40,67 @@ static void test_difficulty(void)
     CHECK_CLOSE(lm_auto_difficulty(LM_AUTO_GRAD, f, W, 3, 4, 6, 8, 3, 4), 0.125, 1e-6, 0);
     CHECK(lm_auto_measure_parse("relgrad") == LM_AUTO_RELGRAD);
     CHECK(lm_auto_measure_parse("nope") == -1);
+}
+
+/* "noise": the frame's estimated level k in every window (a smooth frame with Gaussian noise
+ * of sd k x its maximum reads about k; without noise about 0), the window's own level alone;
+ * a frame without signal reads 0; one too small for the estimate is refused. */
+static void test_noise_measure(void)
+{
+    CHECK(lm_auto_measure_parse("noise") == LM_AUTO_NOISE &&
+          !strcmp(lm_auto_measure_name(LM_AUTO_NOISE), "noise"));
+    enum { H = 132, W = 128 };
+    static float f[H * W];
+    static double d[64];
+    lm_tile_opts o;
+    lm_tile_default_opts(&o);
+    const int n = lm_auto_window_count(H, W, &o);
+    CHECK(n > 1 && n <= 64);
+    lm_rng r;
+    lm_rng_seed(&r, 3);
+    double k_read[2] = {0, 0};
+    for (int pass = 0; pass < 2; pass++) {
+        const float k = pass ? 0.1f : 0.0f;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                f[y * W + x] = 0.3f + 0.5f * (float)(y + x) / (H + W) + k * 0.8f * lm_rng_normal(&r);
+        lm_err e = {0};
+        CHECK(lm_auto_frame_difficulty(LM_AUTO_NOISE, f, H, W, 3, 4, &o, 1, d, &e) == LM_OK);
+        for (int i = 1; i < n; i++) CHECK(d[i] == d[0]); /* one level for the frame */
+        k_read[pass] = d[0];
+        const double w = lm_auto_difficulty(LM_AUTO_NOISE, f, W, 30, 32, 66, 64, 3, 4);
+        CHECK_MSG(fabs(w - k) < 0.03, "window level %g at k %g", w, (double)k);
+    }
+    CHECK_MSG(k_read[0] < 0.01 && fabs(k_read[1] - 0.1) < 0.02, "levels %g, %g", k_read[0],
+              k_read[1]);
+    memset(f, 0, sizeof f); /* no signal: level 0 */
+    lm_err e = {0};
+    CHECK(lm_auto_frame_difficulty(LM_AUTO_NOISE, f, H, W, 3, 4, &o, 1, d, &e) == LM_OK &&
+          d[0] == 0.0);
+    f[5] = NAN; /* not a number: refused */
+    CHECK(lm_auto_frame_difficulty(LM_AUTO_NOISE, f, H, W, 3, 4, &o, 1, d, &e) != LM_OK &&
+          strstr(e.msg, "noise measure"));
+}
+
+/* Labels: the preset where it is the calibration's only model of it, else the run folder or
+ * file name. */
+static void test_labels(void)
+{
+    lm_auto_calib a;
+    memset(&a, 0, sizeof a);
+    a.nmodels = 4;
+    const char *path[4] = {"runs/a/model.safetensors", "models/demo/b.safetensors", "runs/c/",
+                           "zoo/d"};
+    const char *preset[4] = {"tn-96-nc+lmmse", "tn-96-nc+lmmse", "rt-16", "tn-96-nc+lmmse"};
+    for (int m = 0; m < 4; m++) {
+        snprintf(a.models[m].path, sizeof a.models[m].path, "%s", path[m]);
+        snprintf(a.models[m].preset, sizeof a.models[m].preset, "%s", preset[m]);
+    }
+    lm_auto_label(&a);
+    const char *want[4] = {"a", "b", "rt-16", "d"};
+    for (int m = 0; m < 4; m++)
+        CHECK_MSG(!strcmp(a.models[m].label, want[m]), "model %d: label '%s', want '%s'", m,
+                  a.models[m].label, want[m]);
 }
 
 /* Three models: A cheap, B medium, C expensive; 3 bins. */
@@ -365,6 +427,8 @@ static void test_whole_vs_tiles(void)
 int main(void)
 {
     RUN(test_difficulty);
+    RUN(test_noise_measure);
+    RUN(test_labels);
     RUN(test_select);
     RUN(test_fit);
     RUN(test_file);

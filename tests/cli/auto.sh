@@ -6,11 +6,12 @@
 # shares summing to 1, positive times, a huge tolerance = the cheapest model's PSNR with all its
 # windows, tolerance 0 = the best model per bin; infer --model auto still reads the file); infer
 # --model auto with tolerance 0 and a huge tolerance (every window on one model: the summary
-# says so and the cube equals that model's patch-wise cube, cli_cube_diff); the linear model runs
-# on the whole frame by default and agrees with --tiles (PSNR between them > 40 dB); bad input:
-# missing / broken calibration, --auto without auto, one model, no scenes,
-# bad --split / --measure / --test-synth / --test-tol — one line on stderr, exit 2, no output
-# left.
+# says so and the cube equals that model's patch-wise cube, cli_cube_diff); the noise measure
+# (calibrated at two noise levels: one bin each, a clean frame to one model, a noisy one to the
+# other); the linear model runs on the whole frame by default and agrees with --tiles (PSNR
+# between them > 40 dB); bad input: missing / broken calibration, --auto without auto, one
+# model, no scenes, bad --split / --measure / --noise / --test-synth / --test-tol — one line on
+# stderr, exit 2, no output left.
 # usage: auto.sh LUMOSAIC MAKE_CUBE CUBE_PSNR CUBE_DIFF
 source "$(dirname "$0")/lib.sh"
 PSNR=$3
@@ -135,6 +136,34 @@ check "tol 0 = the best model's patch-wise cube" \
   same "$T/a0/cube_0000.exr" "$T/b0/cube_0000.exr"
 check "progress line has the share per model" grep -q '^auto: .* of [0-9]* windows' "$T/err"
 
+# ---- the noise measure: one choice per frame, by its estimated noise level -----------------
+"$LM" fit-auto --models "$T/lin,$T/mc" --synth 2 --synth-size 132x128 --bins 2 \
+  --measure noise --noise 0,10 --threads 1 --output "$T/autn.json" > "$T/ntable" 2> "$T/err"
+check "fit-auto --measure noise: $(cat "$T/err")" [ $? -eq 0 ]
+check "table: scenes at 2 noise levels" grep -q 'from 2 scene(s) at 2 noise level(s); measure noise' \
+  "$T/ntable"
+python3 - "$T/autn.json" <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))
+assert j["measure"] == "noise" and j["noise_percent"] == [0, 10], j
+# the clean frames read about 0, those at 10 % about 0.1: the one edge lies between them and
+# each bin holds one level's windows
+assert len(j["edges"]) == 1 and 0.005 < j["edges"][0] < 0.08, j["edges"]
+assert j["windows"] == [24, 24], j["windows"]
+for m in j["models"]:
+    m["psnr"] = [40.0, 20.0] if m["preset"] == "linear" else [20.0, 40.0]
+json.dump(j, open(sys.argv[1].replace(".json", "_x.json"), "w"))
+PY
+check "noise calibration fields" [ $? -eq 0 ]
+"$LM" simulate --input "$CAVE" --output "$T/sim10" --crop --noise 0.1 > "$T/log" 2>&1
+check "simulate at 10 %: $(cat "$T/log")" [ -s "$T/sim10/frames/frame_0000.png" ]
+"$LM" infer --model auto --auto "$T/autn_x.json" --auto-tol 0 --input "$F" --output "$T/n0" \
+  > "$T/sumn0" 2> "$T/err"
+check "noise auto, clean frame: $(cat "$T/err")" grep -q " linear 100.0%" "$T/sumn0"
+"$LM" infer --model auto --auto "$T/autn_x.json" --auto-tol 0 \
+  --input "$T/sim10/frames/frame_0000.png" --output "$T/n1" > "$T/sumn1" 2> "$T/err"
+check "noise auto, noisy frame: $(cat "$T/err")" grep -q " mcan-tiny 100.0%" "$T/sumn1"
+
 # ---- whole frame vs windows for the linear model -----------------------------------------
 "$LM" infer --model "$T/lin" --input "$F" --output "$T/w" 2> /dev/null
 "$LM" infer --model "$T/lin" --tiles --input "$F" --output "$T/t" 2> /dev/null
@@ -172,6 +201,11 @@ expect_error "fit-auto bad --test-tol" 2 "--test-tol" "$T/e12.json" -- \
 expect_error "fit-auto negative --test-tol" 2 "--test-tol" "$T/e13.json" -- \
   "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --test-synth 1 --test-tol -0.5 \
   --output "$T/e13.json"
+expect_error "fit-auto bad --noise" 2 "--noise '0,x'" "$T/e15.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --noise 0,x --output "$T/e15.json"
+expect_error "fit-auto nine --noise levels" 2 "--noise" "$T/e16.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --noise 0,1,2,3,4,5,6,7,8 \
+  --output "$T/e16.json"
 expect_error "fit-auto empty --test-tol" 2 "--test-tol" "$T/e14.json" -- \
   "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --test-tol , --output "$T/e14.json"
 finish
