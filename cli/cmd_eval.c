@@ -24,7 +24,7 @@ static void help(void)
            "                     [--motion 0,60,120,240] [--motion-noise 0,10]\n"
            "                     [--align confident|plain] [--precision fp32|bf16]\n"
            "                     [--device cpu|opencl] [--mat-key NAME] [--scenes NAMES]\n"
-           "                     [--report [--report-noise K]]\n\n"
+           "                     [--report [--report-noise K]] [--auto FILE [--auto-tol DB]]\n\n"
            "Score a trained model (docs/system.md, Metrics): each scene is cropped to the tile,\n"
            "divided by its own maximum, simulated at each noise level and reconstructed\n"
            "patch-wise; PSNR (peak 1), SSIM, MAE and SAM (degrees) on the 31 bands 400-700 nm.\n"
@@ -36,7 +36,14 @@ static void help(void)
            "counted). A scored scene that the model was trained on (its content hash is among\n"
            "those the checkpoint records) gets a warning line: its score is not held out (one\n"
            "line names them all when there are more than three).\n\n"
-           "  --model RUN      a training run folder or a .safetensors written by 'lumosaic train'\n"
+           "  --model RUN      a training run folder or a .safetensors written by 'lumosaic train';\n"
+           "                   or 'auto' with --auto\n"
+           "  --auto FILE      with --model auto: a calibration written by 'lumosaic fit-auto';\n"
+           "                   each frame reconstructed as 'infer --model auto --auto FILE' does\n"
+           "                   (per window the cheapest model within --auto-tol dB of the best\n"
+           "                   expected PSNR; one-bucket models, CPU)\n"
+           "  --auto-tol DB    accuracy the choice may give up per window, in dB of expected\n"
+           "                   PSNR (>= 0; default 0.5; 0 = always the best model)\n"
            "  DATA...          scenes (CAVE folders, .mat, spectral .exr) or folders of scenes;\n"
            "                   bands other than 31 at 400-700 nm are resampled (docs/system.md)\n"
            "  --mat-key NAME   the .mat variable holding each cube (default: automatic)\n"
@@ -140,6 +147,8 @@ static int parse_opt(lm_cli *c, eval_opts *o)
     const char *noise = NULL, *motion = NULL, *mnoise = NULL;
     int r;
     if ((r = lm_cli_value(c, "--model", &o->run.model)) ||
+        (r = lm_cli_value(c, "--auto", &o->run.auto_file)) ||
+        (r = lm_cli_real(c, "--auto-tol", 0.0, 1e6, &o->run.auto_tol)) ||
         (r = lm_cli_value(c, "--output", &o->output)) ||
         (r = lm_cli_value(c, "--system", &o->run.system)) ||
         (r = lm_cli_value(c, "--mat-key", &o->run.mat_key)) ||
@@ -192,6 +201,12 @@ static int parse(lm_cli *c, eval_opts *o)
         if (lm_cli_positional(c, o->data, &o->ndata)) return 2;
     }
     if (!o->run.model) return lm_cli_error(c, "--model is required (see 'lumosaic eval --help')");
+    const int is_auto = !strcmp(o->run.model, "auto");
+    if (is_auto && !o->run.auto_file)
+        return lm_cli_error(c, "--model auto needs --auto FILE (a calibration written by "
+                               "'lumosaic fit-auto')");
+    if (o->run.auto_file && !is_auto)
+        return lm_cli_error(c, "--auto is only for --model auto");
     if (!o->ndata)
         return lm_cli_error(c, "no DATA given: name scenes or folders of scenes "
                                "(see 'lumosaic eval --help')");

@@ -369,6 +369,20 @@ static lm_status load_root(json_t *r, lm_auto_calib *a, const char **what)
     return LM_OK;
 }
 
+/* A relative model path is the calibration's folder's when it names something there (a
+ * calibration shipped beside its models), else the working folder's. */
+static void relative_models(lm_auto_calib *a, const char *calib)
+{
+    const char *slash = strrchr(calib, '/');
+    if (!slash) return; /* the calibration is in the working folder */
+    for (int m = 0; m < a->nmodels; m++) {
+        char *p = a->models[m].path, alt[sizeof a->models[m].path];
+        if (p[0] == '/') continue;
+        int n = snprintf(alt, sizeof alt, "%.*s/%s", (int)(slash - calib), calib, p);
+        if (n > 0 && (size_t)n < sizeof alt && access(alt, F_OK) == 0) memcpy(p, alt, n + 1);
+    }
+}
+
 lm_status lm_auto_load(const char *path, lm_auto_calib *a, lm_err *err)
 {
     memset(a, 0, sizeof *a);
@@ -396,6 +410,7 @@ lm_status lm_auto_load(const char *path, lm_auto_calib *a, lm_err *err)
         memset(a, 0, sizeof *a);
         return lm_err_set(err, ve.status, "auto: '%s': %s", path, ve.msg + 6);
     }
+    relative_models(a, path);
     lm_auto_label(a);
     return LM_OK;
 }
@@ -604,5 +619,31 @@ lm_status lm_auto_scene(lm_ctx *c, lm_model *const *models, int nmodels, lm_auto
     free(out);
     free(ys);
     free(xs);
+    return st;
+}
+
+lm_status lm_auto_run(lm_ctx *c, const lm_auto_calib *a, const int *choice,
+                      lm_model *const *models, const float *frame, int height, int width,
+                      const lm_tile_opts *o, lm_cube *cube, int *nwin, long *windows,
+                      lm_err *err)
+{
+    memset(cube, 0, sizeof *cube);
+    lm_tile_opts to = *o;
+    to.win_h = a->win_h, to.win_w = a->win_w, to.stride_y = a->stride_y, to.stride_x = a->stride_x;
+    to = lm_tile_fitted(&to, height, width);
+    const lm_mosaic *mo = &models[0]->mosaic;
+    if (lm_tile_check(&to, height, width, mo->ty, mo->tx, err)) return err->status;
+    const int n = lm_auto_window_count(height, width, &to);
+    double *d = malloc(sizeof(double) * n);
+    int *wm = malloc(sizeof(int) * n);
+    lm_status st = d && wm ? LM_OK : lm_err_set(err, LM_ERR_NOMEM, "auto: out of memory");
+    if (!st) st = lm_auto_frame_difficulty(a->measure, frame, height, width, mo->ty, mo->tx, &to,
+                                           lm_nthreads(c), d, err);
+    for (int i = 0; i < n && !st; i++) wm[i] = choice[lm_auto_bin(a, d[i])];
+    if (!st) st = lm_auto_infer(c, models, a->nmodels, wm, frame, height, width, &to, cube,
+                                windows, err);
+    if (nwin) *nwin = n;
+    free(d);
+    free(wm);
     return st;
 }

@@ -112,6 +112,8 @@ lm_status lm_auto_save(const char *path, const lm_auto_calib *a, lm_err *err);
 struct json_t;
 lm_status lm_auto_save_ext(const char *path, const lm_auto_calib *a, struct json_t *extra,
                            lm_err *err);
+/* load: a relative model path is the calibration file's folder's when it names something there
+ * (a calibration shipped beside its models), else the working folder's. */
 lm_status lm_auto_load(const char *path, lm_auto_calib *a, lm_err *err);
 
 /* Calibration samples of one scene: frame (height x width coded frame), truth (31 x height x
@@ -131,6 +133,14 @@ lm_status lm_auto_scene(lm_ctx *c, lm_model *const *models, int nmodels, lm_auto
 lm_status lm_auto_fold(lm_ctx *c, lm_model *const *models, int nmodels, const int *win_model,
                        const float *frame, int height, int width, const lm_tile_opts *o,
                        int out_ch, float *out, long *windows, lm_err *err);
+/* The calibrated choice on one frame, as `infer --model auto` and `eval --auto` run it: the
+ * calibration's windows and strides (fitted to the frame, lm_tile_fitted; o gives the batch),
+ * every window's difficulty (a->measure), the model choice[its bin], lm_auto_infer. *nwin
+ * (may be NULL) = the frame's windows; windows[m] (may be NULL) += those model m ran. */
+lm_status lm_auto_run(lm_ctx *c, const lm_auto_calib *a, const int *choice,
+                      lm_model *const *models, const float *frame, int height, int width,
+                      const lm_tile_opts *o, lm_cube *cube, int *nwin, long *windows,
+                      lm_err *err);
 /* lm_auto_fold, then channels 1..31 as a 31-band cube (allocated here), as lm_tile_infer. */
 lm_status lm_auto_infer(lm_ctx *c, lm_model *const *models, int nmodels, const int *win_model,
                         const float *frame, int height, int width, const lm_tile_opts *o,

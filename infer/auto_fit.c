@@ -454,6 +454,23 @@ static json_t *test_json(const lm_auto_fit_run *r)
     return json_pack("{s:o}", "test", test);
 }
 
+/* The calibration as saved to path: models under path's folder named relative to it (the
+ * folder and its models move together), the others by absolute path. */
+static void saved_paths(const lm_auto_fit_run *r, const char *path, lm_auto_calib *c)
+{
+    *c = r->cal;
+    char dir[1024];
+    const char *slash = strrchr(path, '/');
+    snprintf(dir, sizeof dir, "%.*s", slash ? (int)(slash - path) : 1, slash ? path : ".");
+    char *abs = realpath(*dir ? dir : "/", NULL);
+    const size_t n = abs ? strlen(abs) : 0;
+    for (int m = 0; abs && m < c->nmodels; m++) {
+        char *p = c->models[m].path;
+        if (n > 1 && !strncmp(p, abs, n) && p[n] == '/') memmove(p, p + n + 1, strlen(p + n));
+    }
+    free(abs);
+}
+
 lm_status lm_auto_fit_save(const lm_auto_fit_run *r, const char *path, lm_err *e)
 {
     json_t *extra = r->test ? test_json(r) : json_object(), *levels = json_array();
@@ -463,7 +480,9 @@ lm_status lm_auto_fit_save(const lm_auto_fit_run *r, const char *path, lm_err *e
         json_decref(extra);
         return lm_err_set(e, LM_ERR_NOMEM, "out of memory");
     }
-    lm_status st = lm_auto_save_ext(path, &r->cal, extra, e);
+    lm_auto_calib c;
+    saved_paths(r, path, &c);
+    lm_status st = lm_auto_save_ext(path, &c, extra, e);
     json_decref(extra);
     return st;
 }

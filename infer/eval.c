@@ -153,6 +153,13 @@ lm_status lm_eval_reconstruct(lm_ctx *c, const lm_infer_model *im, const float *
     if (m->in_channels != lm_model_coded_planes(m))
         return lm_err_set(err, LM_ERR_ARG, "eval: model %s takes %d input channels and is not "
                           "MST++", m->preset, m->in_channels);
+    if (im->auto_cal) { /* the calibrated choice per window (one-bucket models, the same gains) */
+        if (im->remap.active)
+            return lm_err_set(err, LM_ERR_ARG, "eval: a calibrated choice does not rescale "
+                              "frames of other LED gains");
+        return lm_auto_run(c, im->auto_cal, im->auto_choice, im->auto_models, frame, height,
+                           width, to, out, NULL, NULL, err);
+    }
     float *mapped = NULL, given = m->noise_given;
     if (im->remap.active) { /* frames of the camera's gains, rescaled to the model's */
         const int planes = lm_model_coded_planes(m);

@@ -22,7 +22,7 @@ void lm_eval_run_opts_default(lm_eval_run_opts *o)
 {
     *o = (lm_eval_run_opts){.seed = 1, .rainbow = 256, .batch = 8, .nnoise = 5,
                             .k = {0.0f, 0.05f, 0.10f, 0.15f, 0.20f}, .nmk = 1,
-                            .report_noise = -1};
+                            .report_noise = -1, .auto_tol = 0.5};
 }
 
 int lm_eval_motion_rows(const lm_eval_run_opts *o) { return o->nmotion * o->nmk; }
@@ -113,11 +113,57 @@ static lm_status list_scenes(lm_eval_run *r, lm_err *e)
     return LM_OK;
 }
 
+/* A calibration's models: model 0 into r->im, the others into r->more; the choice per bin. */
+static lm_status open_auto(lm_eval_run *r, lm_err *e)
+{
+    const char *cf = r->o->auto_file;
+    lm_auto_calib *a = &r->cal;
+    if (lm_auto_load(cf, a, e)) return e->status;
+    for (int m = 0; m < a->nmodels; m++) {
+        lm_infer_model *im = m ? &r->more[m] : &r->im;
+        lm_status st = lm_infer_model_load(a->models[m].path, r->o->system, im, e);
+        if (st) {
+            char msg[sizeof e->msg];
+            snprintf(msg, sizeof msg, "%s", e->msg);
+            return lm_err_set(e, st, "%s: model %d: %s", cf, m, msg);
+        }
+        const lm_model *x = im->model, *m0 = r->im.model;
+        if (im->remap.active)
+            return lm_err_set(e, LM_ERR_ARG, "%s: %s has other LED gains than model '%s' was "
+                              "trained with, and a calibrated choice does not rescale frames",
+                              cf, im->system_path, a->models[m].path);
+        if (lm_model_buckets(x) != 1 || lm_model_frames(x) != 1 ||
+            lm_model_has(x, LM_CAP_WHOLE_FRAME) || lm_model_has(x, LM_CAP_QDO_OPTICS))
+            return lm_err_set(e, LM_ERR_ARG, "%s: model '%s': a calibrated choice takes "
+                              "one-bucket, one-frame coded models only", cf, a->models[m].path);
+        if (x->mosaic.ty != m0->mosaic.ty || x->mosaic.tx != m0->mosaic.tx ||
+            x->out_channels != LM_MODEL_OUT_CHANNELS)
+            return lm_err_set(e, LM_ERR_ARG, "%s: models '%s' and '%s' do not fit the same "
+                              "system", cf, a->models[0].path, a->models[m].path);
+        r->im.auto_models[m] = im->model;
+    }
+    lm_auto_choose(a, r->o->auto_tol, r->choice);
+    r->im.auto_cal = a, r->im.auto_choice = r->choice;
+    char line[2048];
+    int k = snprintf(line, sizeof line, "auto (%s, tol %g dB), the model per %s bin:", cf,
+                     r->o->auto_tol, lm_auto_measure_name(a->measure));
+    for (int b = 0; b < a->nbins && k > 0 && (size_t)k < sizeof line; b++)
+        k += snprintf(line + k, sizeof line - k, "%s [%.3g, %.3g) %s", b ? "," : "",
+                      b ? a->edges[b - 1] : -INFINITY, b < a->nbins - 1 ? a->edges[b] : INFINITY,
+                      a->models[r->choice[b]].label);
+    say(r, line);
+    return LM_OK;
+}
+
 lm_status lm_eval_run_open(lm_eval_run *r, const lm_eval_run_opts *o, lm_err *e)
 {
     memset(r, 0, sizeof *r);
     r->o = o;
-    lm_status st = lm_infer_model_load(o->model, o->system, &r->im, e);
+    if (o->auto_file && o->noise_oracle)
+        return lm_err_set(e, LM_ERR_ARG, "--noise-oracle with --auto: a calibrated choice reads "
+                          "each frame's estimated noise level");
+    lm_status st = o->auto_file ? open_auto(r, e) : lm_infer_model_load(o->model, o->system,
+                                                                         &r->im, e);
     if (st) return st;
     if (r->im.remap.active) {
         char line[3000], out[3100];
@@ -132,6 +178,7 @@ lm_status lm_eval_run_open(lm_eval_run *r, const lm_eval_run_opts *o, lm_err *e)
     r->im.sensor_clip = o->clip;
     r->im.sensor_bits = (int)o->bits;
     r->im.photons = o->photons, r->im.read_noise = (float)o->read_noise;
+    r->im.auto_models[0] = r->im.model;
     return list_scenes(r, e);
 }
 
@@ -245,6 +292,9 @@ static lm_status open_device(lm_eval_run *r, lm_err *e)
     }
     lm_status st = lm_tile_device_open(&r->dev, r->o->device, r->im.model, &r->ctx, e);
     if (st) return st;
+    if (r->dev.backend->device != LM_DEVICE_CPU && r->im.auto_cal)
+        return lm_err_set(e, LM_ERR_UNSUPPORTED, "--device %s: a calibrated choice (--auto) runs "
+                          "on the CPU only", lm_tile_device_name(&r->dev));
     if (r->dev.backend->device != LM_DEVICE_CPU && !lm_model_has(r->im.model, LM_CAP_OPENCL)) {
         const lm_model *m = r->im.model;
         if (m->base && !lm_model_has(m->base, LM_CAP_OPENCL)) /* the base is what lacks them */
@@ -269,6 +319,10 @@ static void check_overlap(lm_eval_run *r)
 {
     for (int i = 0; i < r->nsc; i++) {
         r->sc[i].trained = lm_eval_trained_on(&r->im, r->sc[i].path);
+        for (int m = 1; r->im.auto_cal && m < r->cal.nmodels && r->sc[i].trained >= 0; m++) {
+            const int t = lm_eval_trained_on(&r->more[m], r->sc[i].path); /* any of them */
+            r->sc[i].trained = t < 0 ? t : r->sc[i].trained || t;
+        }
         if (r->sc[i].trained < 0) {
             r->overlap_unknown = 1;
             return;
@@ -298,5 +352,6 @@ void lm_eval_run_free(lm_eval_run *r)
     if (r->have_ctx) lm_ctx_free(&r->ctx);
     free(r->sc);
     lm_infer_model_free(&r->im);
+    for (int m = 1; m < LM_AUTO_MAX_MODELS; m++) lm_infer_model_free(&r->more[m]);
     memset(r, 0, sizeof *r);
 }

@@ -25,7 +25,11 @@ typedef enum lm_eval_split {
 const char *lm_eval_split_name(int split);
 
 typedef struct lm_eval_run_opts {
-    const char *model;          /* a training run folder or a .safetensors */
+    const char *model;          /* a training run folder or a .safetensors (ignored with
+                                 * auto_file) */
+    const char *auto_file;      /* a `lumosaic fit-auto` calibration: every frame reconstructed
+                                 * by its choice per window (one-bucket models, CPU), or NULL */
+    double auto_tol;            /* dB of expected PSNR the choice may give up (0.5) */
     const char *system;         /* NULL = the model's */
     int no_remap;               /* a system of other gains: frames given to the model as is */
     const char *const *data;    /* scenes or folders of scenes */
@@ -56,7 +60,7 @@ typedef struct lm_eval_run_opts {
 } lm_eval_run_opts;
 
 /* Defaults: seed 1, rainbow 256, batch 8, levels 0, 5, 10, 15, 20 %, one motion noise level 0,
- * report_noise -1, split test. */
+ * report_noise -1, split test, auto_tol 0.5. */
 void lm_eval_run_opts_default(lm_eval_run_opts *o);
 
 typedef struct lm_eval_scene_res {
@@ -71,7 +75,10 @@ typedef struct lm_eval_scene_res {
 
 typedef struct lm_eval_run {
     const lm_eval_run_opts *o;
-    lm_infer_model im;
+    lm_infer_model im;    /* the model (a calibration's: model 0) */
+    lm_infer_model more[LM_AUTO_MAX_MODELS]; /* a calibration's models 1.. */
+    lm_auto_calib cal;    /* with auto_file */
+    int choice[LM_AUTO_MAX_BINS];
     lm_ctx ctx;
     int have_ctx;
     lm_tile_device dev;
@@ -92,8 +99,9 @@ int lm_eval_motion_rows(const lm_eval_run_opts *o);
  * report_noise is not a level). */
 int lm_eval_report_level(const lm_eval_run_opts *o);
 
-/* Load the model (a gain remap is described through o->log; with no_remap it is switched off)
- * and list the scenes. *r is zeroed first; free it with lm_eval_run_free whatever the status.
+/* Load the model (a gain remap is described through o->log; with no_remap it is switched off),
+ * or a calibration's models (each one-bucket, one-frame, of model 0's tile, without a gain
+ * remap; the choice per bin at auto_tol), and list the scenes. *r is zeroed first; free it with lm_eval_run_free whatever the status.
  * Errors: those of lm_infer_model_load and lm_dataset_list_scenes; LM_ERR_ARG ("--scenes: no
  * scene 'X' among the N given (...)", "no scene of split 'S' among the N given (try --split
  * all)"); LM_ERR_NOMEM. */

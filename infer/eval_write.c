@@ -62,9 +62,19 @@ static void write_json(FILE *f, const lm_eval_run *r)
     const lm_eval_run_opts *o = r->o;
     char name[160];
     fprintf(f, "{\n  \"model\": ");
-    json_path(f, r->im.weights);
+    json_path(f, o->auto_file ? o->auto_file : r->im.weights);
     fprintf(f, ",\n  \"preset\": ");
-    json_str(f, lm_model_name(r->im.model, name, sizeof name));
+    json_str(f, o->auto_file ? "auto" : lm_model_name(r->im.model, name, sizeof name));
+    if (o->auto_file) { /* the calibrated models and the choice per bin */
+        fprintf(f, ",\n  \"auto_tol\": %.10g,\n  \"auto_models\": [", o->auto_tol);
+        for (int m = 0; m < r->cal.nmodels; m++) {
+            fprintf(f, "%s", m ? ", " : "");
+            json_path(f, m ? r->more[m].weights : r->im.weights);
+        }
+        fprintf(f, "],\n  \"auto_choice\": [");
+        for (int b = 0; b < r->cal.nbins; b++) fprintf(f, "%s%d", b ? ", " : "", r->choice[b]);
+        fprintf(f, "]");
+    }
     fprintf(f, ",\n  \"split\": \"%s\",\n  \"seed\": %lld,\n  \"noise_percent\": [",
             o->scenes ? "chosen" : lm_eval_split_name(o->split), o->seed);
     for (int n = 0; n < o->nnoise; n++) fprintf(f, "%s%g", n ? ", " : "", 100.0 * o->k[n]);

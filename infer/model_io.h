@@ -11,6 +11,7 @@
 #define LM_MODEL_IO_H
 #include "data/qdocam.h"
 #include "data/system.h"
+#include "infer/auto.h"
 #include "infer/raw.h"
 #include "models/model.h"
 
@@ -31,6 +32,12 @@ typedef struct lm_infer_model {
     double photons;       /* eval only: shot noise (photo-electrons at full scale, 0 = off) */
     float read_noise;     /* eval only: read noise (electrons with photons; 0 = off) */
     lm_qdocam *qdo;       /* LM_CAP_QDO_OPTICS models: the camera (NULL: eval builds one) */
+    /* eval only, with a calibration (`eval --model auto --auto FILE`): each frame reconstructed
+     * by the calibrated choice (lm_auto_run) among auto_cal's models auto_models[0..n)
+     * (auto_models[0] = model); auto_cal NULL: none */
+    const lm_auto_calib *auto_cal;
+    const int *auto_choice;
+    lm_model *auto_models[LM_AUTO_MAX_MODELS];
 } lm_infer_model;
 
 /* The bundled models (models/demo/ of the source tree, or LM_MODELS_DIR when set): the best

@@ -179,25 +179,14 @@ static lm_status frame_input(lm_pipe *p, int i, lm_frame *f, const float **data,
     return LM_OK;
 }
 
-/* A calibrated choice on one frame: difficulty per window, its bin's model, the mixed fold. */
-static lm_status auto_frame(lm_pipe *p, const float *in, int H, int W, lm_tile_opts *to,
+/* A calibrated choice on one frame (lm_auto_run), its share of windows per model said. */
+static lm_status auto_frame(lm_pipe *p, const float *in, int H, int W, const lm_tile_opts *to,
                             lm_cube *cube, lm_err *e)
 {
     const lm_auto_calib *a = &p->cal;
-    to->win_h = a->win_h, to->win_w = a->win_w, to->stride_y = a->stride_y,
-    to->stride_x = a->stride_x;
-    *to = lm_tile_fitted(to, H, W);
-    const lm_mosaic *mo = &p->im.model->mosaic;
-    if (lm_tile_check(to, H, W, mo->ty, mo->tx, e)) return e->status;
-    int n = lm_auto_window_count(H, W, to);
-    double *d = malloc(sizeof(double) * n);
-    int *wm = malloc(sizeof(int) * n);
-    lm_status st = d && wm ? LM_OK : lm_err_set(e, LM_ERR_NOMEM, "out of memory");
-    if (!st) st = lm_auto_frame_difficulty(a->measure, in, H, W, mo->ty, mo->tx, to,
-                                           lm_nthreads(&p->ctx), d, e);
-    for (int i = 0; i < n && !st; i++) wm[i] = p->choice[lm_auto_bin(a, d[i])];
     long win[LM_AUTO_MAX_MODELS] = {0};
-    if (!st) st = lm_auto_infer(&p->ctx, p->models, a->nmodels, wm, in, H, W, to, cube, win, e);
+    int n = 0;
+    lm_status st = lm_auto_run(&p->ctx, a, p->choice, p->models, in, H, W, to, cube, &n, win, e);
     if (!st) {
         char line[1200];
         int k = snprintf(line, sizeof line, "auto:");
@@ -209,8 +198,6 @@ static lm_status auto_frame(lm_pipe *p, const float *in, int H, int W, lm_tile_o
         }
         lm_pipe_say(p, LM_PIPE_INFO, "%s of %d windows", line, n);
     }
-    free(d);
-    free(wm);
     return st;
 }
 

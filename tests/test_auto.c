@@ -16,6 +16,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 static void test_difficulty(void)
@@ -201,6 +202,31 @@ static lm_status load_text(const char *text, lm_err *e)
 #define GOOD_HEAD "{\"version\": 1, \"measure\": \"grad\", \"window\": [66, 64], \"stride\": [30, 32], "
 #define GOOD_MODEL "{\"model\": \"x\", \"cost_s_per_window\": 0.001, \"psnr\": [30, 20]}"
 #define GOOD_MODELS GOOD_MODEL ", " GOOD_MODEL /* a choice needs two */
+
+/* A calibration beside its models: a relative model path found from the calibration's folder
+ * (not from the working one) is taken from there; one found nowhere is kept as written. */
+static void test_relative_models(void)
+{
+    lm_auto_calib a;
+    hand_calib(&a);
+    char dir[64], path[128], model[128];
+    snprintf(dir, sizeof dir, "/tmp/test_auto_rel_%d", (int)getpid());
+    snprintf(path, sizeof path, "%s/calib.json", dir);
+    snprintf(model, sizeof model, "%s/m1", dir);
+    CHECK(mkdir(dir, 0700) == 0);
+    FILE *f = fopen(model, "w"); /* a file named like model 1's path */
+    CHECK(f != NULL);
+    if (f) fclose(f);
+    lm_err e = {0};
+    CHECK(lm_auto_save(path, &a, &e) == LM_OK);
+    lm_auto_calib b;
+    CHECK(lm_auto_load(path, &b, &e) == LM_OK);
+    CHECK_MSG(!strcmp(b.models[1].path, model), "model 1: %s", b.models[1].path);
+    CHECK_MSG(!strcmp(b.models[0].path, "m0"), "model 0: %s", b.models[0].path);
+    remove(model);
+    remove(path);
+    rmdir(dir);
+}
 
 static void test_file(void)
 {
@@ -429,6 +455,7 @@ int main(void)
     RUN(test_difficulty);
     RUN(test_noise_measure);
     RUN(test_labels);
+    RUN(test_relative_models);
     RUN(test_select);
     RUN(test_fit);
     RUN(test_file);

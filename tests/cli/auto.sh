@@ -8,7 +8,8 @@
 # --model auto with tolerance 0 and a huge tolerance (every window on one model: the summary
 # says so and the cube equals that model's patch-wise cube, cli_cube_diff); the noise measure
 # (calibrated at two noise levels: one bin each, a clean frame to one model, a noisy one to the
-# other); the linear model runs on the whole frame by default and agrees with --tiles (PSNR
+# other; eval --model auto scores clean frames as the one and noisy frames as the other); the
+# linear model runs on the whole frame by default and agrees with --tiles (PSNR
 # between them > 40 dB); bad input: missing / broken calibration, --auto without auto, one
 # model, no scenes, bad --split / --measure / --noise / --test-synth / --test-tol — one line on
 # stderr, exit 2, no output left.
@@ -43,6 +44,8 @@ assert j["version"] == 1 and j["measure"] == "grad" and j["window"] == [66, 64],
 assert len(j["edges"]) == 2 and j["edges"][0] < j["edges"][1], j
 assert sum(j["windows"]) == 2 * 12, j  # 132 x 128: rows 0, 30, 60, 66; columns 0, 32, 64
 assert [m["preset"] for m in j["models"]] == ["linear", "mcan-tiny"], j
+# models beside the calibration are named relative to its folder (infer finds them from there)
+assert [m["model"] for m in j["models"]] == ["lin/model.safetensors", "mc/model.safetensors"], j
 for m in j["models"]:
     assert m["cost_s_per_window"] > 0 and len(m["psnr"]) == 3, m
     assert all(5 < p < 100 for p in m["psnr"]), m
@@ -163,6 +166,25 @@ check "noise auto, clean frame: $(cat "$T/err")" grep -q " linear 100.0%" "$T/su
 "$LM" infer --model auto --auto "$T/autn_x.json" --auto-tol 0 \
   --input "$T/sim10/frames/frame_0000.png" --output "$T/n1" > "$T/sumn1" 2> "$T/err"
 check "noise auto, noisy frame: $(cat "$T/err")" grep -q " mcan-tiny 100.0%" "$T/sumn1"
+# eval --model auto: each frame as infer reconstructs it, so clean frames score as linear and
+# noisy ones as mcan-tiny (the same scenes, noise draws and windows)
+EV="$CAVE --split all --noise 0,10 --rainbow 0 --threads 1"
+"$LM" eval --model auto --auto "$T/autn_x.json" --auto-tol 0 $EV --output "$T/eva" \
+  > "$T/evlog" 2>&1
+check "eval --model auto: $(cat "$T/evlog")" [ -s "$T/eva/eval.csv" ]
+check "eval names the model per bin" grep -q 'the model per noise bin:.* linear,.* mcan-tiny' \
+  "$T/evlog"
+"$LM" eval --model "$T/lin" $EV --output "$T/evl" > /dev/null 2>&1
+"$LM" eval --model "$T/mc" $EV --output "$T/evm" > /dev/null 2>&1
+row() { awk -F, -v k="$2" '$1 == "mean" && $2 == k { print $3 }' "$1/eval.csv"; }
+check "eval auto clean = linear ($(row "$T/eva" 0) vs $(row "$T/evl" 0))" \
+  [ "$(row "$T/eva" 0)" = "$(row "$T/evl" 0)" -a -n "$(row "$T/evl" 0)" ]
+check "eval auto 10 % = mcan-tiny ($(row "$T/eva" 10) vs $(row "$T/evm" 10))" \
+  [ "$(row "$T/eva" 10)" = "$(row "$T/evm" 10)" -a -n "$(row "$T/evm" 10)" ]
+check_not "the two models score apart at 10 %" [ "$(row "$T/evl" 10)" = "$(row "$T/evm" 10)" ]
+check "eval.json records the calibration" \
+  python3 -c "import json,sys; j=json.load(open(sys.argv[1])); assert j['preset']=='auto' \
+and len(j['auto_models'])==2 and j['auto_choice']==[0,1], j" "$T/eva/eval.json"
 
 # ---- whole frame vs windows for the linear model -----------------------------------------
 "$LM" infer --model "$T/lin" --input "$F" --output "$T/w" 2> /dev/null
@@ -206,6 +228,12 @@ expect_error "fit-auto bad --noise" 2 "--noise '0,x'" "$T/e15.json" -- \
 expect_error "fit-auto nine --noise levels" 2 "--noise" "$T/e16.json" -- \
   "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --noise 0,1,2,3,4,5,6,7,8 \
   --output "$T/e16.json"
+expect_error "eval auto without --auto" 2 "needs --auto FILE" "$T/e17" -- \
+  "$LM" eval --model auto $EV --output "$T/e17"
+expect_error "eval --auto without auto" 2 "only for --model auto" "$T/e18" -- \
+  "$LM" eval --model "$T/lin" --auto "$T/autn.json" $EV --output "$T/e18"
+expect_error "eval --auto with --noise-oracle" 2 "--noise-oracle with --auto" "$T/e19" -- \
+  "$LM" eval --model auto --auto "$T/autn.json" --noise-oracle $EV --output "$T/e19"
 expect_error "fit-auto empty --test-tol" 2 "--test-tol" "$T/e14.json" -- \
   "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --test-tol , --output "$T/e14.json"
 finish
