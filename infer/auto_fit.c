@@ -213,13 +213,14 @@ static lm_status level_samples(lm_auto_fit_run *r, int i, int q, const lm_cube *
     return st;
 }
 
-/* One scene's samples at every noise level appended. */
-static lm_status scene_samples(lm_auto_fit_run *r, int i, lm_err *e)
+/* Scene i read once and fn run on it at every noise level q. */
+typedef lm_status (*level_fn)(lm_auto_fit_run *r, int i, int q, const lm_cube *cube, lm_err *e);
+static lm_status each_level(lm_auto_fit_run *r, int i, level_fn fn, lm_err *e)
 {
     lm_cube cube;
     if (scene_cube(r, i, &cube, e)) return e->status;
     lm_status st = LM_OK;
-    for (int q = 0; q < r->o->nnoise && !st; q++) st = level_samples(r, i, q, &cube, e);
+    for (int q = 0; q < r->o->nnoise && !st; q++) st = fn(r, i, q, &cube, e);
     lm_cube_free(&cube);
     return st;
 }
@@ -255,7 +256,7 @@ lm_status lm_auto_fit_calibrate(lm_auto_fit_run *r, lm_err *e)
         lm_err se;
         lm_err_clear(&se);
         char line[1200];
-        if (scene_samples(r, i, &se))
+        if (each_level(r, i, level_samples, &se))
             return lm_err_set(e, se.status, "scene %d (%s): %s", i + 1,
                               i < r->nscenes ? r->scenes[i] : "procedural", se.msg);
         snprintf(line, sizeof line, "scene %d/%d: %.2f s", i + 1, total, omp_get_wtime() - t0);
@@ -340,17 +341,6 @@ static lm_status test_level(lm_auto_fit_run *r, int i, int q, const lm_cube *c, 
     return st;
 }
 
-/* One test scene at every noise level. */
-static lm_status test_scene(lm_auto_fit_run *r, int i, lm_err *e)
-{
-    lm_cube cube;
-    if (scene_cube(r, i, &cube, e)) return e->status;
-    lm_status st = LM_OK;
-    for (int q = 0; q < r->o->nnoise && !st; q++) st = test_level(r, i, q, &cube, e);
-    lm_cube_free(&cube);
-    return st;
-}
-
 /* The rows: the fixed models, then auto per tolerance (a choice already made is reused). */
 static void test_rows(lm_auto_fit_run *r)
 {
@@ -405,7 +395,7 @@ lm_status lm_auto_fit_test(lm_auto_fit_run *r, lm_err *e)
         lm_err se;
         lm_err_clear(&se);
         char line[200];
-        if (test_scene(r, first + i, &se))
+        if (each_level(r, first + i, test_level, &se))
             return lm_err_set(e, se.status, "test scene %d: %s", i + 1, se.msg);
         snprintf(line, sizeof line, "test scene %d/%lld: %.2f s", i + 1, r->o->test_synth,
                  omp_get_wtime() - t0);
