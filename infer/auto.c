@@ -126,7 +126,8 @@ void lm_auto_label(lm_auto_calib *a)
     for (int m = 0; m < a->nmodels; m++) {
         lm_auto_model *x = &a->models[m];
         int shared = 0;
-        for (int k = 0; k < a->nmodels; k++) shared |= k != m && !strcmp(a->models[k].preset, x->preset);
+        for (int k = 0; k < a->nmodels; k++)
+            shared |= k != m && !strcmp(a->models[k].preset, x->preset);
         if (!shared) {
             snprintf(x->label, sizeof x->label, "%s", x->preset);
             continue;

@@ -118,30 +118,8 @@ static lm_status open_auto(lm_eval_run *r, lm_err *e)
 {
     const char *cf = r->o->auto_file;
     lm_auto_calib *a = &r->cal;
-    if (lm_auto_load(cf, a, e)) return e->status;
-    for (int m = 0; m < a->nmodels; m++) {
-        lm_infer_model *im = m ? &r->more[m] : &r->im;
-        lm_status st = lm_infer_model_load(a->models[m].path, r->o->system, im, e);
-        if (st) {
-            char msg[sizeof e->msg];
-            snprintf(msg, sizeof msg, "%s", e->msg);
-            return lm_err_set(e, st, "%s: model %d: %s", cf, m, msg);
-        }
-        const lm_model *x = im->model, *m0 = r->im.model;
-        if (im->remap.active)
-            return lm_err_set(e, LM_ERR_ARG, "%s: %s has other LED gains than model '%s' was "
-                              "trained with, and a calibrated choice does not rescale frames",
-                              cf, im->system_path, a->models[m].path);
-        if (lm_model_buckets(x) != 1 || lm_model_frames(x) != 1 ||
-            lm_model_has(x, LM_CAP_WHOLE_FRAME) || lm_model_has(x, LM_CAP_QDO_OPTICS))
-            return lm_err_set(e, LM_ERR_ARG, "%s: model '%s': a calibrated choice takes "
-                              "one-bucket, one-frame coded models only", cf, a->models[m].path);
-        if (x->mosaic.ty != m0->mosaic.ty || x->mosaic.tx != m0->mosaic.tx ||
-            x->out_channels != LM_MODEL_OUT_CHANNELS)
-            return lm_err_set(e, LM_ERR_ARG, "%s: models '%s' and '%s' do not fit the same "
-                              "system", cf, a->models[0].path, a->models[m].path);
-        r->im.auto_models[m] = im->model;
-    }
+    if (lm_infer_auto_load(cf, r->o->system, a, &r->im, r->more, r->im.auto_models, e))
+        return e->status;
     lm_auto_choose(a, r->o->auto_tol, r->choice);
     r->im.auto_cal = a, r->im.auto_choice = r->choice;
     char line[2048];

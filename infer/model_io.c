@@ -251,3 +251,40 @@ lm_status lm_infer_bundled_model(int buckets, char *out, size_t n, lm_err *err)
                           buckets == 2 ? "two-bucket" : "single-bucket");
     return LM_OK;
 }
+
+lm_status lm_infer_auto_load(const char *file, const char *system_override, lm_auto_calib *a,
+                             lm_infer_model *im0, lm_infer_model *more, lm_model **models,
+                             lm_err *e)
+{
+    if (lm_auto_load(file, a, e)) return e->status;
+    for (int m = 0; m < a->nmodels; m++) {
+        lm_infer_model *im = m ? &more[m] : im0;
+        const char *path = a->models[m].path;
+        lm_status st = lm_infer_model_load(path, system_override, im, e);
+        if (st) {
+            char msg[sizeof e->msg];
+            snprintf(msg, sizeof msg, "%s", e->msg);
+            lm_err_clear(e);
+            return lm_err_set(e, st, "%s: model %d: %s", file, m, msg);
+        }
+        const lm_model *x = im->model, *x0 = im0->model;
+        models[m] = im->model;
+        if (im->remap.active)
+            return lm_err_set(e, LM_ERR_ARG, "%s: %s has other LED gains than model '%s' was "
+                              "trained with, and a calibrated auto model does not rescale "
+                              "frames: reconstruct with that model alone (its frames are "
+                              "rescaled to its gains)", file, im->system_path, path);
+        if (lm_model_buckets(x) == 2)
+            return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads both buckets: a calibrated "
+                              "auto model takes one-bucket models only", file, path);
+        if (lm_model_frames(x) != 1)
+            return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads three frames: a calibrated "
+                              "auto model takes one-frame models only", file, path);
+        if (x->mosaic.ty != x0->mosaic.ty || x->mosaic.tx != x0->mosaic.tx ||
+            x->out_channels != LM_MODEL_OUT_CHANNELS || lm_model_has(x, LM_CAP_WHOLE_FRAME) ||
+            lm_model_has(x, LM_CAP_QDO_OPTICS))
+            return lm_err_set(e, LM_ERR_ARG, "%s: models '%s' and '%s' do not fit the same "
+                              "system", file, a->models[0].path, path);
+    }
+    return LM_OK;
+}

@@ -69,6 +69,15 @@ void lm_infer_model_free(lm_infer_model *im);
  * with lm_qdocam_free + free. */
 lm_status lm_infer_qdocam(const char *weights, lm_qdocam **out, lm_err *err);
 
+/* A `lumosaic fit-auto` calibration and its models, as `infer --model auto --auto FILE` and
+ * `eval --auto FILE` run them: the file (lm_auto_load) into *a, model 0 into *im0 and model m
+ * >= 1 into more[m] (system_override as lm_infer_model_load), models[m] their networks. Every
+ * model must be one-bucket, one-frame, of model 0's tile with 33 outputs, its frames not
+ * rescaled (no gain remap). Errors name the file and the model. */
+lm_status lm_infer_auto_load(const char *file, const char *system_override, lm_auto_calib *a,
+                             lm_infer_model *im0, lm_infer_model *more, lm_model **models,
+                             lm_err *err);
+
 /* For a model that reads its input's noise level (m->noise_input): set m->noise_sigma for this
  * frame (height x width raw mosaic), from m->noise_given (k x the frame's maximum) when >= 0,
  * else estimated from the frame itself (data/noise_est.h). No-op for other models. Called by

@@ -57,45 +57,12 @@ void lm_frame_src_from_seq(lm_frame_src *s, lm_frame_seq *seq)
                         .name = seq_name};
 }
 
-/* Model m of a calibration (loaded into im) checked against model 0 (p->im). */
-static lm_status auto_model(lm_pipe *p, int m, lm_infer_model *im, lm_err *e)
-{
-    const lm_auto_calib *a = &p->cal;
-    const char *cf = p->o.auto_file;
-    p->models[m] = im->model;
-    if (im->remap.active)
-        return lm_err_set(e, LM_ERR_ARG, "%s: %s has other LED gains than model '%s' was "
-                          "trained with, and a calibrated auto model does not rescale frames: "
-                          "reconstruct with that model alone (its frames are rescaled to its "
-                          "gains)", cf, im->system_path, a->models[m].path);
-    if (lm_model_buckets(im->model) == 2)
-        return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads both buckets: a calibrated auto "
-                          "model takes one-bucket models only", cf, a->models[m].path);
-    if (lm_model_frames(im->model) != 1)
-        return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads three frames: a calibrated auto "
-                          "model takes one-frame models only", cf, a->models[m].path);
-    if (im->model->mosaic.ty != p->im.model->mosaic.ty ||
-        im->model->mosaic.tx != p->im.model->mosaic.tx ||
-        im->model->out_channels != LM_MODEL_OUT_CHANNELS)
-        return lm_err_set(e, LM_ERR_ARG, "%s: models '%s' and '%s' do not fit the same system",
-                          cf, a->models[0].path, a->models[m].path);
-    return LM_OK;
-}
-
 /* A calibration: its models (model 0 into p->im), the choice per bin. */
 static lm_status open_auto(lm_pipe *p, lm_err *e)
 {
     lm_auto_calib *a = &p->cal;
-    if (lm_auto_load(p->o.auto_file, a, e)) return e->status;
-    for (int m = 0; m < a->nmodels; m++) {
-        lm_infer_model *im = m ? &p->more[m] : &p->im;
-        if (lm_infer_model_load(a->models[m].path, p->o.system, im, e)) {
-            char prefix[1200];
-            snprintf(prefix, sizeof prefix, "%s: model %d", p->o.auto_file, m);
-            return lm_pipe_restate(e, prefix);
-        }
-        if (auto_model(p, m, im, e)) return e->status;
-    }
+    if (lm_infer_auto_load(p->o.auto_file, p->o.system, a, &p->im, p->more, p->models, e))
+        return e->status;
     lm_auto_choose(a, p->o.auto_tol, p->choice);
     snprintf(p->model_path, sizeof p->model_path, "%s", p->o.auto_file);
     return LM_OK;
