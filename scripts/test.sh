@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # test.sh — the whole test suite: set-up and build (scripts/setup.sh), every CTest test in the
 # Release build (portable, warnings as errors; the numerical tests also at each lower
-# instruction-set level, label "isa"), the Python package installed with pip in a virtual
+# instruction-set level this CPU runs, label "isa"), the Python package installed with pip in a virtual
 # environment and its pytest tests (scripts/test_python.sh), then the same suite built with
 # AddressSanitizer + UndefinedBehaviorSanitizer (every test but labels "isa", "slow" and "guide":
 # the reruns per instruction set, the long training anchor and the guide's commands, whose code
