@@ -18,7 +18,8 @@ static void help(void)
 {
     printf("usage: lumosaic fit-auto --models RUN,RUN[,...] [DATA...] [--synth N]\n"
            "                          --output FILE [--split val|test|valtest|all] [--bins B]\n"
-           "                          [--measure grad|relgrad|noise] [--noise LIST] [--seed S]\n"
+           "                          [--measure grad|relgrad|noise] [--noise LIST] [--clip]\n"
+           "                          [--bits N] [--seed S]\n"
            "                          [--synth-size HxW] [--batch N] [--threads T]\n"
            "                          [--test-synth N] [--test-tol LIST]\n\n"
            "Calibrate 'lumosaic infer --model auto': on held-out scenes, per 66 x 64 window\n"
@@ -42,6 +43,10 @@ static void help(void)
            "                   --noise several levels)\n"
            "  --noise LIST     Gaussian noise k of the simulated frames, in %%; every scene\n"
            "                   at each level, e.g. 0,5,10,20 (1 to 8 levels; default 0)\n"
+           "  --clip           clip the noisy frames to [0, 1] (full scale) as a sensor or a\n"
+           "                   16-bit PNG file holds them, as 'eval --clip' (default: off,\n"
+           "                   negatives kept): calibrate for the frames the models will read\n"
+           "  --bits N         quantise the frames to N bits (16: a PNG frame; default 0 = off)\n"
            "  --seed S         noise and procedural scene seed (default 1)\n"
            "  --test-synth N   after fitting, measure on N more procedural scenes (default 0;\n"
            "                   seeds disjoint from training's and the calibration scenes'):\n"
@@ -75,6 +80,8 @@ static int parse_opt(lm_cli *c, cal_opts *o)
         (r = lm_cli_int(c, "--bins", 1, LM_AUTO_MAX_BINS, &o->run.bins)) ||
         (r = lm_cli_common_opt(c, LM_CLI_THREADS | LM_CLI_SEED, LLONG_MAX / 2000000, &o->com)) ||
         (r = lm_cli_int(c, "--batch", 1, 4096, &o->run.batch)) ||
+        (r = lm_cli_flag(c, "--clip", &o->run.clip)) ||
+        (r = lm_cli_int(c, "--bits", 0, 24, &o->run.bits)) ||
         (r = lm_cli_value(c, "--noise", &o->noise_s)))
         return r < 0 ? 2 : 1;
     return 0;
@@ -146,8 +153,11 @@ static void print_table(const lm_auto_fit_run *r)
 {
     const lm_auto_fit_opts *o = r->o;
     const lm_auto_calib *a = &r->cal;
-    printf("%ld windows from %d scene(s) at %d noise level(s); measure %s\n", r->n,
+    printf("%ld windows from %d scene(s) at %d noise level(s); measure %s", r->n,
            r->nscenes + (int)o->synth, o->nnoise, lm_auto_measure_name(a->measure));
+    if (o->clip) printf("; frames clipped to [0, 1]");
+    if (o->bits) printf("; frames quantised to %lld bits", o->bits);
+    printf("\n");
     printf("model cost: ");
     for (int m = 0; m < a->nmodels; m++)
         printf("%s%s %.3g ms/window (%.3g MMAC)", m ? ", " : "", a->models[m].label,

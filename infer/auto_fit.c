@@ -165,7 +165,8 @@ static lm_status scene_frame(const lm_auto_fit_run *r, int i, int q, const lm_cu
 {
     *frame = NULL;
     size_t nf;
-    lm_noise_opts no = {.gauss_k = (float)(r->o->noise[q] / 100.0)};
+    lm_noise_opts no = {.gauss_k = (float)(r->o->noise[q] / 100.0), .clip = r->o->clip,
+                        .bits = (int)r->o->bits};
     lm_rng rng;
     lm_rng_seed(&rng, (uint64_t)r->o->seed * 7919u + (uint64_t)i + (uint64_t)q * 104729u);
     return lm_eval_simulate(&r->im[0], cube, &no, &rng, frame, &nf, e);
@@ -466,7 +467,9 @@ lm_status lm_auto_fit_save(const lm_auto_fit_run *r, const char *path, lm_err *e
     json_t *extra = r->test ? test_json(r) : json_object(), *levels = json_array();
     for (int q = 0; levels && q < r->o->nnoise; q++)
         json_array_append_new(levels, json_real(r->o->noise[q]));
-    if (!extra || !levels || json_object_set_new(extra, "noise_percent", levels)) {
+    if (!extra || !levels || json_object_set_new(extra, "noise_percent", levels) ||
+        json_object_set_new(extra, "clip", json_boolean(r->o->clip)) ||
+        json_object_set_new(extra, "bits", json_integer(r->o->bits))) {
         json_decref(extra);
         return lm_err_set(e, LM_ERR_NOMEM, "out of memory");
     }

@@ -44,6 +44,9 @@ typedef struct lm_auto_fit_opts {
     double noise[LM_AUTO_FIT_MAX_NOISE]; /* Gaussian noise k of the frames, in %: every scene
                                           * simulated at each level (calibration and test) */
     int nnoise;                 /* levels (1..LM_AUTO_FIT_MAX_NOISE) */
+    int clip;                   /* frames clipped to [0, 1] after the noise (as a sensor or a
+                                 * 16-bit PNG file holds them); 0 = negatives kept */
+    long long bits;             /* frames quantised to this many bits (0 = off; 16: a PNG) */
     long long seed;             /* noise and procedural scene seed */
     long long batch;            /* windows per network call */
     int nthreads;               /* 0 = default */

@@ -8,11 +8,11 @@
 # --model auto with tolerance 0 and a huge tolerance (every window on one model: the summary
 # says so and the cube equals that model's patch-wise cube, cli_cube_diff); the noise measure
 # (calibrated at two noise levels: one bin each, a clean frame to one model, a noisy one to the
-# other; eval --model auto scores clean frames as the one and noisy frames as the other); the
-# linear model runs on the whole frame by default and agrees with --tiles (PSNR
-# between them > 40 dB); bad input: missing / broken calibration, --auto without auto, one
-# model, no scenes, bad --split / --measure / --noise / --test-synth / --test-tol — one line on
-# stderr, exit 2, no output left.
+# other; calibrated on clipped 16-bit frames with --clip --bits 16; eval --model auto scores
+# clean frames as the one and noisy frames as the other); the linear model runs on the whole
+# frame by default and agrees with --tiles (PSNR between them > 40 dB); bad input: missing /
+# broken calibration, --auto without auto, one model, no scenes, bad --split / --measure /
+# --noise / --bits / --test-synth / --test-tol — one line on stderr, exit 2, no output left.
 # usage: auto.sh LUMOSAIC MAKE_CUBE CUBE_PSNR CUBE_DIFF
 source "$(dirname "$0")/lib.sh"
 PSNR=$3
@@ -158,6 +158,26 @@ for m in j["models"]:
 json.dump(j, open(sys.argv[1].replace(".json", "_x.json"), "w"))
 PY
 check "noise calibration fields" [ $? -eq 0 ]
+# calibrated on the frames a 16-bit file holds: clipped at 0 and quantised; the table and the file
+# say so, and the noisy bin's expected PSNR differs from the unclipped calibration's (the same
+# scenes and noise draws), the clean bin's by quantisation only
+"$LM" fit-auto --models "$T/lin,$T/mc" --synth 2 --synth-size 132x128 --bins 2 \
+  --measure noise --noise 0,10 --clip --bits 16 --threads 1 --output "$T/autc.json" \
+  > "$T/ctable" 2> "$T/err"
+check "fit-auto --clip --bits 16: $(cat "$T/err")" [ $? -eq 0 ]
+check "table: clipped, 16 bits" grep -q 'measure noise; frames clipped to \[0, 1\]; frames quantised to 16 bits$' \
+  "$T/ctable"
+python3 - "$T/autn.json" "$T/autc.json" <<'PY'
+import json, sys
+n, c = (json.load(open(f)) for f in sys.argv[1:])
+assert n["clip"] is False and n["bits"] == 0, n
+assert c["clip"] is True and c["bits"] == 16, c
+assert c["windows"] == n["windows"], (c["windows"], n["windows"])
+for mn, mc in zip(n["models"], c["models"]):
+    assert abs(mn["psnr"][0] - mc["psnr"][0]) < 0.5, (mn["psnr"], mc["psnr"])  # 16-bit steps
+    assert abs(mn["psnr"][1] - mc["psnr"][1]) > 1e-3, (mn["psnr"], mc["psnr"])  # clipped noise
+PY
+check "clipped calibration fields" [ $? -eq 0 ]
 "$LM" simulate --input "$CAVE" --output "$T/sim10" --crop --noise 0.1 > "$T/log" 2>&1
 check "simulate at 10 %: $(cat "$T/log")" [ -s "$T/sim10/frames/frame_0000.png" ]
 "$LM" infer --model auto --auto "$T/autn_x.json" --auto-tol 0 --input "$F" --output "$T/n0" \
@@ -234,6 +254,8 @@ expect_error "eval --auto without auto" 2 "only for --model auto" "$T/e18" -- \
   "$LM" eval --model "$T/lin" --auto "$T/autn.json" $EV --output "$T/e18"
 expect_error "eval --auto with --noise-oracle" 2 "--noise-oracle with --auto" "$T/e19" -- \
   "$LM" eval --model auto --auto "$T/autn.json" --noise-oracle $EV --output "$T/e19"
+expect_error "fit-auto bad --bits" 2 "--bits" "$T/e20.json" -- \
+  "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --bits 25 --output "$T/e20.json"
 expect_error "fit-auto empty --test-tol" 2 "--test-tol" "$T/e14.json" -- \
   "$LM" fit-auto --models "$T/lin,$T/mc" --synth 1 --test-tol , --output "$T/e14.json"
 finish
