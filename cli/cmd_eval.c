@@ -41,7 +41,7 @@ static void help(void)
            "  --auto FILE      with --model auto: a calibration written by 'lumosaic fit-auto';\n"
            "                   each frame reconstructed as 'infer --model auto --auto FILE' does\n"
            "                   (per window the cheapest model within --auto-tol dB of the best\n"
-           "                   expected PSNR; one-bucket models, CPU)\n"
+           "                   expected PSNR; models of one bucket count, CPU)\n"
            "  --auto-tol DB    accuracy the choice may give up per window, in dB of expected\n"
            "                   PSNR (>= 0; default 0.5; 0 = always the best model)\n"
            "  DATA...          scenes (CAVE folders, .mat, spectral .exr) or folders of scenes;\n"

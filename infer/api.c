@@ -122,7 +122,7 @@ lm_api_status lm_api_model_info(const lm_api_model *model, const char **preset, 
     if (!model) return lm_api_fail(err, LM_API_ERR_ARG, "lm_api_model_info: model is NULL");
     const lm_model *m = model->p->im.model;
     if (preset) *preset = model->p->is_auto ? "auto" : m->preset;
-    if (buckets) *buckets = model->p->is_auto ? 1 : lm_model_buckets(m);
+    if (buckets) *buckets = lm_model_buckets(m); /* auto: its calibration's models' */
     if (tile_rows) *tile_rows = m->mosaic.ty;
     if (tile_cols) *tile_cols = m->mosaic.tx;
     return lm_api_ok(err);
@@ -205,10 +205,10 @@ static lm_api_status check_frame(const lm_api_model *model, const lm_api_frame *
                            "not its input", m->preset, lm_model_frames(m) != 1
                            ? "three frames of a video (lm_api_reconstruct_sequence)"
                            : "an RGB image");
-    const int two = !model->p->is_auto && lm_model_buckets(m) == 2;
+    const int two = lm_model_buckets(m) == 2;
     if (two && !f->bucket0)
         return lm_api_fail(err, LM_API_ERR_ARG, "model %s reads both buckets: frame->bucket0 "
-                           "is NULL", m->preset);
+                           "is NULL", model->p->is_auto ? "auto" : m->preset);
     if (!two && f->bucket0)
         return lm_api_fail(err, LM_API_ERR_ARG, "model %s reads bucket 1 only: frame->bucket0 "
                            "must be NULL", model->p->is_auto ? "auto" : m->preset);

@@ -420,6 +420,7 @@ lm_status lm_auto_load(const char *path, lm_auto_calib *a, lm_err *err)
 typedef struct mix {
     lm_model *const *models;
     int nmodels, batch, next;  /* next: index of the first window of the coming fold batch */
+    int planes;                /* input planes per window (a two-bucket model's 2) */
     const int *win_model;
     long *windows;
     int *idx;                  /* fold batch scratch */
@@ -427,19 +428,19 @@ typedef struct mix {
     size_t cap;                /* windows' pixels the scratch holds per plane */
 } mix;
 
-/* Model m on windows idx[0..k) of raw (nb x 1 x h x w floats, host), its outputs into y
+/* Model m on windows idx[0..k) of raw (nb x np x h x w floats, host), its outputs into y
  * (nb x oc x h x w floats, host). On the CPU the group is gathered straight into the input
  * tensor and scattered straight from the output; on a device (gin, gout: host scratch) it goes
  * in and out through lm_tensor_from / lm_tensor_read. */
-static int run_group(lm_ctx *c, lm_model *m, const float *raw, int h, int w, const int *idx,
-                     int k, int oc, float *y, float *gin, float *gout)
+static int run_group(lm_ctx *c, lm_model *m, const float *raw, int np, int h, int w,
+                     const int *idx, int k, int oc, float *y, float *gin, float *gout)
 {
-    const size_t win = (size_t)h * w;
-    lm_tensor *in = gin ? NULL : lm_tensor_new(c, 4, (int[]){k, 1, h, w});
+    const size_t win = (size_t)h * w, iwin = (size_t)np * win;
+    lm_tensor *in = gin ? NULL : lm_tensor_new(c, 4, (int[]){k, np, h, w});
     float *dst = gin ? gin : in ? in->data : NULL;
     if (!dst) return -1;
-    for (int i = 0; i < k; i++) memcpy(dst + i * win, raw + idx[i] * win, sizeof(float) * win);
-    if (gin) in = lm_tensor_from(c, 4, (int[]){k, 1, h, w}, gin);
+    for (int i = 0; i < k; i++) memcpy(dst + i * iwin, raw + idx[i] * iwin, sizeof(float) * iwin);
+    if (gin) in = lm_tensor_from(c, 4, (int[]){k, np, h, w}, gin);
     lm_tensor *o = in ? lm_model_forward(c, m, in) : NULL;
     if (!o || lm_ctx_status(c)) return -1;
     if (o->ndim != 4 || o->shape[0] != k || o->shape[1] != oc || o->shape[2] != h ||
@@ -462,14 +463,14 @@ static int run_group(lm_ctx *c, lm_model *m, const float *raw, int h, int w, con
 static lm_tensor *mix_fn(lm_ctx *c, lm_tensor *raw, void *user)
 {
     mix *x = user;
-    const int nb = raw->shape[0], h = raw->shape[2], w = raw->shape[3];
+    const int nb = raw->shape[0], np = raw->shape[1], h = raw->shape[2], w = raw->shape[3];
     int oc = x->models[0]->out_channels;
     const size_t win = (size_t)h * w;
     int dev = raw->device != LM_DEVICE_CPU;
     if (dev && (!x->host || x->cap < (size_t)nb * win)) {
         free(x->host);
         x->cap = (size_t)nb * win;
-        x->host = malloc(x->cap * sizeof(float) * (2 + 2 * (size_t)oc));
+        x->host = malloc(x->cap * sizeof(float) * (2 * (size_t)np + 2 * (size_t)oc));
         if (!x->host) {
             lm_ctx_fail(c, LM_ERR_NOMEM, "auto: out of memory");
             return NULL;
@@ -478,8 +479,8 @@ static lm_tensor *mix_fn(lm_ctx *c, lm_tensor *raw, void *user)
     lm_tensor *y = dev ? NULL : lm_tensor_new(c, 4, (int[]){nb, oc, h, w});
     lm_tensor *rc = dev ? lm_contiguous(c, raw) : raw;
     if ((!dev && !y) || !rc) return NULL;
-    float *hraw = dev ? x->host : raw->data, *gin = dev ? hraw + x->cap : NULL;
-    float *hy = dev ? gin + x->cap : y->data, *gout = dev ? hy + x->cap * oc : NULL;
+    float *hraw = dev ? x->host : raw->data, *gin = dev ? hraw + x->cap * np : NULL;
+    float *hy = dev ? gin + x->cap * np : y->data, *gout = dev ? hy + x->cap * oc : NULL;
     if (dev && lm_tensor_read(c, rc, hraw)) return NULL;
     for (int m = 0; m < x->nmodels; m++) {
         int k = 0;
@@ -487,7 +488,7 @@ static lm_tensor *mix_fn(lm_ctx *c, lm_tensor *raw, void *user)
             if (x->win_model[x->next + b] == m) x->idx[k++] = b;
         for (int s = 0; s < k; s += x->batch) {
             int n = k - s < x->batch ? k - s : x->batch;
-            if (run_group(c, x->models[m], hraw, h, w, x->idx + s, n, oc, hy, gin, gout))
+            if (run_group(c, x->models[m], hraw, np, h, w, x->idx + s, n, oc, hy, gin, gout))
                 return NULL;
         }
         if (x->windows) x->windows[m] += k;
@@ -503,11 +504,14 @@ lm_status lm_auto_fold(lm_ctx *c, lm_model *const *models, int nmodels, const in
     if (nmodels < 1 || nmodels > LM_AUTO_MAX_MODELS)
         return lm_err_set(err, LM_ERR_ARG, "auto: %d models (need 1..%d)", nmodels,
                           LM_AUTO_MAX_MODELS);
+    const int planes = lm_model_coded_planes(models[0]);
     for (int m = 0; m < nmodels; m++)
         if (models[m]->mosaic.ty != models[0]->mosaic.ty ||
-            models[m]->mosaic.tx != models[0]->mosaic.tx || models[m]->out_channels != out_ch)
-            return lm_err_set(err, LM_ERR_ARG, "auto: models '%s' and '%s' differ in tile or "
-                              "output channels", models[0]->preset, models[m]->preset);
+            models[m]->mosaic.tx != models[0]->mosaic.tx || models[m]->out_channels != out_ch ||
+            lm_model_coded_planes(models[m]) != planes)
+            return lm_err_set(err, LM_ERR_ARG, "auto: models '%s' and '%s' differ in tile, "
+                              "buckets or output channels", models[0]->preset,
+                              models[m]->preset);
     if (lm_tile_check(o, height, width, models[0]->mosaic.ty, models[0]->mosaic.tx, err))
         return err->status;
     int nwin = lm_auto_window_count(height, width, o);
@@ -517,12 +521,13 @@ lm_status lm_auto_fold(lm_ctx *c, lm_model *const *models, int nmodels, const in
                               i, win_model[i], nmodels - 1);
     lm_tile_opts fo = *o;
     fo.batch = o->batch * nmodels;
-    mix x = {models, nmodels, o->batch, 0, win_model, windows, malloc(sizeof(int) * fo.batch),
-             NULL, 0};
+    mix x = {models, nmodels, o->batch, 0, planes, win_model, windows,
+             malloc(sizeof(int) * fo.batch), NULL, 0};
     if (!x.idx) return lm_err_set(err, LM_ERR_NOMEM, "auto: out of memory");
     for (int k = 0; k < nmodels; k++) lm_infer_set_noise(models[k], frame, height, width);
-    lm_status st = lm_tile_fold(c, frame, height, width, models[0]->mosaic.ty,
-                                models[0]->mosaic.tx, &fo, mix_fn, &x, out_ch, out, err);
+    const lm_mosaic *mo = &models[0]->mosaic;
+    lm_status st = lm_tile_fold_planes(c, frame, planes, height, width, mo->ty, mo->tx, &fo,
+                                       mix_fn, &x, out_ch, out, NULL, err);
     free(x.idx);
     free(x.host);
     return st;
@@ -592,6 +597,11 @@ lm_status lm_auto_scene(lm_ctx *c, lm_model *const *models, int nmodels, lm_auto
                         lm_err *err)
 {
     const int ty = models[0]->mosaic.ty, tx = models[0]->mosaic.tx;
+    const int planes = lm_model_coded_planes(models[0]);
+    for (int m = 1; m < nmodels; m++)
+        if (lm_model_coded_planes(models[m]) != planes)
+            return lm_err_set(err, LM_ERR_ARG, "auto: models '%s' and '%s' read other frames",
+                              models[0]->preset, models[m]->preset);
     if (lm_auto_frame_difficulty(meas, frame, height, width, ty, tx, o, lm_nthreads(c), d, err))
         return err->status;
     int nwin = lm_auto_window_count(height, width, o), *ys, *xs, ny, nx;
@@ -610,8 +620,8 @@ lm_status lm_auto_scene(lm_ctx *c, lm_model *const *models, int nmodels, lm_auto
     for (int m = 0; m < nmodels && !st; m++) {
         lm_infer_set_noise(models[m], frame, height, width);
         calib_cb x = {models[m], truth, height, width, nx, 0, ys, xs, K, mse + (size_t)m * nwin, 0};
-        st = lm_tile_fold(c, frame, height, width, ty, tx, o, calib_fn, &x,
-                          LM_MODEL_OUT_CHANNELS, out, err);
+        st = lm_tile_fold_planes(c, frame, planes, height, width, ty, tx, o, calib_fn, &x,
+                                 LM_MODEL_OUT_CHANNELS, out, NULL, err);
         if (secs) secs[m] += x.secs;
     }
     free(K);

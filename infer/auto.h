@@ -116,11 +116,11 @@ lm_status lm_auto_save_ext(const char *path, const lm_auto_calib *a, struct json
  * (a calibration shipped beside its models), else the working folder's. */
 lm_status lm_auto_load(const char *path, lm_auto_calib *a, lm_err *err);
 
-/* Calibration samples of one scene: frame (height x width coded frame), truth (31 x height x
- * width, 400..700 nm), the nmodels models (33 output channels, the same tile). For window i
- * (raster order under o): d[i] difficulty, mse[m * nwin + i] the K-weighted MSE of model m's
- * window output (channels 1..31) against the truth window; secs[m] += model m's network
- * seconds (may be NULL). c must hold no tensors. */
+/* Calibration samples of one scene: frame (the coded frame, as for lm_auto_fold), truth (31 x
+ * height x width, 400..700 nm), the nmodels models (33 output channels, the same tile and
+ * buckets). For window i (raster order under o): d[i] difficulty, mse[m * nwin + i] the
+ * K-weighted MSE of model m's window output (channels 1..31) against the truth window;
+ * secs[m] += model m's network seconds (may be NULL). c must hold no tensors. */
 lm_status lm_auto_scene(lm_ctx *c, lm_model *const *models, int nmodels, lm_auto_measure meas,
                         const float *frame, const float *truth, int height, int width,
                         const lm_tile_opts *o, double *d, double *mse, double *secs,
@@ -128,8 +128,11 @@ lm_status lm_auto_scene(lm_ctx *c, lm_model *const *models, int nmodels, lm_auto
 
 /* Fold with model win_model[i] for window i (raster order under o; o->batch = the per-model
  * network batch), out_ch x height x width into out (every model must return out_ch channels).
+ * The models read the same frames: one-bucket models a height x width frame, two-bucket ones
+ * bucket 1 then bucket 0 / (LEDs - 1), 2 x height x width (lm_tile_infer's layout); the
+ * difficulty and the noise level are read from bucket 1 (the first plane).
  * windows[m] (may be NULL) += windows run by model m. Errors: those of lm_tile_fold;
- * LM_ERR_ARG for a bad model index or models with different tiles. */
+ * LM_ERR_ARG for a bad model index or models with different tiles or buckets. */
 lm_status lm_auto_fold(lm_ctx *c, lm_model *const *models, int nmodels, const int *win_model,
                        const float *frame, int height, int width, const lm_tile_opts *o,
                        int out_ch, float *out, long *windows, lm_err *err);

@@ -58,7 +58,9 @@ static lm_status load_model(lm_auto_fit_run *r, const char *s, lm_err *e)
     lm_model_name(im->model, x->preset, sizeof x->preset); /* NET+BASE for residuals */
     r->models[a->nmodels++] = im->model;
     if (im->model->mosaic.ty != r->models[0]->mosaic.ty ||
-        im->model->mosaic.tx != r->models[0]->mosaic.tx || im->model->in_channels != 1 ||
+        im->model->mosaic.tx != r->models[0]->mosaic.tx || lm_model_frames(im->model) != 1 ||
+        im->model->in_channels != lm_model_buckets(im->model) ||
+        lm_model_buckets(im->model) != lm_model_buckets(r->models[0]) ||
         im->model->out_channels != LM_MODEL_OUT_CHANNELS)
         return lm_err_set(e, LM_ERR_ARG, "--models: '%s' does not take the same coded frames "
                           "as '%s'", s, a->models[0].path);

@@ -274,9 +274,12 @@ lm_status lm_infer_auto_load(const char *file, const char *system_override, lm_a
                               "trained with, and a calibrated auto model does not rescale "
                               "frames: reconstruct with that model alone (its frames are "
                               "rescaled to its gains)", file, im->system_path, path);
-        if (lm_model_buckets(x) == 2)
-            return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads both buckets: a calibrated "
-                              "auto model takes one-bucket models only", file, path);
+        if (lm_model_buckets(x) != lm_model_buckets(x0))
+            return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads %s, model '%s' %s: the "
+                              "models of a calibration read the same buckets", file, path,
+                              lm_model_buckets(x) == 2 ? "both buckets" : "bucket 1",
+                              a->models[0].path,
+                              lm_model_buckets(x0) == 2 ? "both" : "bucket 1");
         if (lm_model_frames(x) != 1)
             return lm_err_set(e, LM_ERR_ARG, "%s: model '%s' reads three frames: a calibrated "
                               "auto model takes one-frame models only", file, path);

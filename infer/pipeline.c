@@ -96,7 +96,7 @@ static lm_status attach_frames(lm_pipe *p, const lm_frame_src *src, int files, l
     if (!p->sat) return lm_err_set(e, LM_ERR_NOMEM, "out of memory");
     for (int i = 0; i < src->count; i++) p->sat[i] = -1.0;
     if (lm_raw_opts_any(&p->o.raw)) {
-        if (!p->is_auto && lm_model_buckets(p->im.model) == 2)
+        if (lm_model_buckets(p->im.model) == 2)
             return lm_err_set(e, LM_ERR_ARG, "%s (model %s reads both buckets)", files
                               ? "--bits, --black-level, --dark and --flat are for one-bucket "
                                 "frames" : "raw-camera conversion is for one-bucket frames",
@@ -121,7 +121,7 @@ static lm_status attach_frames(lm_pipe *p, const lm_frame_src *src, int files, l
 static lm_status attach_bucket0(lm_pipe *p, const lm_frame_src *src0, const char *spec,
                                 lm_err *e)
 {
-    const int two = !p->is_auto && lm_model_buckets(p->im.model) == 2;
+    const int two = lm_model_buckets(p->im.model) == 2;
     if (!two) return LM_OK;
     if (src0->count != p->src.count)
         return lm_err_set(e, LM_ERR_ARG, "%s%s: %d frames, the input has %d", spec ?
@@ -192,10 +192,11 @@ static void bucket0_beside(const char *input, char *out, size_t n)
 static lm_status files_bucket0(lm_pipe *p, const char *input, const char *spec, lm_err *e)
 {
     lm_frame_src none = {0};
-    if (p->is_auto || lm_model_buckets(p->im.model) != 2) {
+    if (lm_model_buckets(p->im.model) != 2) {
         if (spec)
             return lm_err_set(e, LM_ERR_ARG, "--bucket0: model %s reads bucket 1 only "
-                              "(two-bucket models are the \"-b2\" presets)", p->im.model->preset);
+                              "(two-bucket models are the \"-b2\" presets)",
+                              p->is_auto ? "auto (its calibration's)" : p->im.model->preset);
         return attach_bucket0(p, &none, NULL, e);
     }
     char found[1100];
@@ -264,7 +265,7 @@ lm_status lm_pipe_attach(lm_pipe *p, const lm_frame_src *src, const lm_frame_src
 {
     lm_pipe_detach(p);
     lm_frame_src none = {0};
-    const int two = !p->is_auto && lm_model_buckets(p->im.model) == 2;
+    const int two = lm_model_buckets(p->im.model) == 2;
     if (two && !src0)
         return lm_err_set(e, LM_ERR_ARG, "model %s reads both buckets: bucket 0 is missing",
                           p->im.model->preset);

@@ -196,7 +196,8 @@ static lm_status auto_frame(lm_pipe *p, const float *in, int H, int W, const lm_
                               100.0 * win[m] / n);
             p->windows[m] += win[m];
         }
-        lm_pipe_say(p, LM_PIPE_INFO, "%s of %d windows", line, n);
+        lm_pipe_say(p, LM_PIPE_INFO, "%s of %d windows (%s)", line, n,
+                    p->src0.count ? "both buckets" : "bucket 1");
     }
     return st;
 }

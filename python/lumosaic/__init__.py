@@ -398,8 +398,9 @@ class Model:
         expected PSNR is within ``tol`` dB of the best model's, and the windows are blended.
 
         Args:
-            calibration: a file written by ``lumosaic fit-auto`` (one-bucket, one-frame models
-                of one system).
+            calibration: a file written by ``lumosaic fit-auto`` (one-frame models of one
+                system that read the same buckets; for two-bucket models :attr:`buckets` is 2
+                and :meth:`reconstruct` takes ``bucket0``).
             tol: the accuracy the choice may give up per window, in dB of expected PSNR (>= 0;
                 0 = always the best model).
             threads, precision, system, clamp: as for :class:`Model` (such a model always runs

@@ -241,11 +241,23 @@ def test_auto_and_bundled_models(tmp_path):
                                                '"cost_s_per_window": 2',
                                                f'"model": "{b2}", "preset": "tn-96-nc-b2+lmmse-b2", '
                                                '"cost_s_per_window": 2'))
-    with pytest.raises(lumosaic.Error) as e:  # a two-bucket model in the calibration
+    with pytest.raises(lumosaic.Error) as e:  # a two-bucket model beside a one-bucket one
         lumosaic.Model.auto(calib, tol=0.5, threads=THREADS)
     msg = str(e.value)
-    assert e.value.status == lumosaic.Status.ARG and "takes one-bucket models only" in msg
+    assert e.value.status == lumosaic.Status.ARG and "read the same buckets" in msg
     assert "--" not in msg, msg
+    # a calibration of two-bucket models reads both buckets
+    calib.write_text(calib.read_text().replace(f'"model": "{MODEL}", "preset": "rt-16-nc+lmmse"',
+                                               f'"model": "{b2}", "preset": "tn-96-nc-b2+lmmse-b2"'))
+    with lumosaic.Model.auto(calib, tol=0.5, threads=THREADS) as m:
+        assert m.preset == "auto" and m.buckets == 2
+        f0 = np.random.default_rng(1).random((66, 64), dtype=np.float32)
+        f1 = np.random.default_rng(2).random((66, 64), dtype=np.float32)
+        cube = m.reconstruct(f1, bucket0=f0)
+        assert cube.shape == (66, 64, 31) and np.isfinite(cube).all()
+        with pytest.raises(lumosaic.Error) as e:
+            m.reconstruct(f1)
+        assert e.value.status == lumosaic.Status.ARG and "bucket0" in str(e.value)
     try:
         m = lumosaic.Model.bundled(buckets=1, threads=THREADS)
     except lumosaic.Error as e:
