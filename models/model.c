@@ -114,6 +114,7 @@ static const preset presets[] = { /* the first lmmse row also gives "lmmse-K[-rf
     {"tn-96-nc", build_tile, CL, {0, 0, 0, 0, 0}, 96, 0},
     {"tn-160-nc", build_tile, CL, {0, 0, 0, 0, 0}, 160, 0},
     {"tn-96-nc-b2", build_tile, CL | B2, {0, 0, 0, 0, 0}, 96, 0},
+    {"tn-160-nc-b2", build_tile, CL | B2, {0, 0, 0, 0, 0}, 160, 0},
     /* deeper: four residual blocks (each 3x3 layer reaches one tile further) */
     {"tn-64-d4-nc", build_tile, CL, {0, 0, 0, 0, 0}, 64, 4},
     {"tn-96-d4-nc", build_tile, CL, {0, 0, 0, 0, 0}, 96, 4},
@@ -187,6 +188,7 @@ static const struct { const char *name, *purpose; } purposes[] = {
     {"tn-96-nc", "tile-resolution residual, 96 channels, sees the noise level: best residual on lmmse"},
     {"tn-160-nc", "tile-resolution residual, 160 channels, sees the noise level (2x han-tiny's cost)"},
     {"tn-96-nc-b2", "tn-96-nc reading both buckets: the residual on lmmse-b2"},
+    {"tn-160-nc-b2", "tn-160-nc reading both buckets (2.6x tn-96-nc-b2's cost)"},
     {"tn-64-d4-nc", "tn-64-nc with four residual blocks: tn-96-nc's cost, 9 tiles' reach"},
     {"tn-96-d4-nc", "tn-96-nc with four residual blocks (1.9x its cost)"},
 };

@@ -242,7 +242,7 @@ static void test_small_frames(void)
     static const char *presets[] = {"linear",      "lmmse",     "lmmse-rf",   "han-tiny-nc",
                                     "mcan-tiny",   "srnet-tiny", "rt-16-nc",  "tn-96-nc",
                                     "lmmse-b2",    "lmmse-gri-b2", "rt-16-b2", "tn-96-nc-b2",
-                                    "rt-8-mf3"};
+                                    "tn-160-nc-b2", "rt-8-mf3"};
     static const int sizes[][2] = {{9, 12}, {30, 32}, {63, 64}, {66, 40}, {21, 200}};
     lm_ctx c;
     lm_ctx_init(&c, 2);
