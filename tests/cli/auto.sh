@@ -196,12 +196,7 @@ check "eval names the model per bin" grep -q 'the model per noise bin:.* linear,
   "$T/evlog"
 "$LM" eval --model "$T/lin" $EV --output "$T/evl" > /dev/null 2>&1
 "$LM" eval --model "$T/mc" $EV --output "$T/evm" > /dev/null 2>&1
-row() { awk -F, -v k="$2" '$1 == "mean" && $2 == k { print $3 }' "$1/eval.csv"; }
-check "eval auto clean = linear ($(row "$T/eva" 0) vs $(row "$T/evl" 0))" \
-  [ "$(row "$T/eva" 0)" = "$(row "$T/evl" 0)" -a -n "$(row "$T/evl" 0)" ]
-check "eval auto 10 % = mcan-tiny ($(row "$T/eva" 10) vs $(row "$T/evm" 10))" \
-  [ "$(row "$T/eva" 10)" = "$(row "$T/evm" 10)" -a -n "$(row "$T/evm" 10)" ]
-check_not "the two models score apart at 10 %" [ "$(row "$T/evl" 10)" = "$(row "$T/evm" 10)" ]
+check_auto_split "$T/eva" "$T/evl" linear "$T/evm" mcan-tiny
 check "eval.json records the calibration" \
   python3 -c "import json,sys; j=json.load(open(sys.argv[1])); assert j['preset']=='auto' \
 and len(j['auto_models'])==2 and j['auto_choice']==[0,1], j" "$T/eva/eval.json"

@@ -78,12 +78,7 @@ EV="$CAVE --split all --noise 0,10 --rainbow 0 --threads 1"
 check "eval --model auto (two buckets): $(cat "$T/evlog")" [ -s "$T/eva/eval.csv" ]
 "$LM" eval --model "$T/b2k3" $EV --output "$T/ev3" > /dev/null 2>&1
 "$LM" eval --model "$T/b2k5" $EV --output "$T/ev5" > /dev/null 2>&1
-row() { awk -F, -v k="$2" '$1 == "mean" && $2 == k { print $3 }' "$1/eval.csv"; }
-check "eval auto clean = lmmse-3-b2 ($(row "$T/eva" 0) vs $(row "$T/ev3" 0))" \
-  [ "$(row "$T/eva" 0)" = "$(row "$T/ev3" 0)" -a -n "$(row "$T/ev3" 0)" ]
-check "eval auto 10 % = lmmse-5-b2 ($(row "$T/eva" 10) vs $(row "$T/ev5" 10))" \
-  [ "$(row "$T/eva" 10)" = "$(row "$T/ev5" 10)" -a -n "$(row "$T/ev5" 10)" ]
-check_not "the two models score apart at 10 %" [ "$(row "$T/ev3" 10)" = "$(row "$T/ev5" 10)" ]
+check_auto_split "$T/eva" "$T/ev3" lmmse-3-b2 "$T/ev5" lmmse-5-b2
 
 # ---- bad input ---------------------------------------------------------------------------
 python3 - "$T/a.json" "$T/mixed.json" "$T/b1/model.safetensors" <<'PY'

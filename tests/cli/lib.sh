@@ -58,6 +58,22 @@ expect_error_run() {
   else echo ok > "$log"; fi
 }
 
+# eval_row DIR K: the mean PSNR row of DIR/eval.csv at noise level K (%).
+eval_row() { awk -F, -v k="$2" '$1 == "mean" && $2 == k { print $3 }' "$1/eval.csv"; }
+
+# check_auto_split AUTO A NAME_A B NAME_B: the eval folders AUTO (eval --model auto of a
+# calibration forced to model A on clean frames and B at 10 %), A and B (each model alone, the
+# same scenes and noise): AUTO's clean row is A's, its 10 % row B's, and A and B differ at 10 %.
+check_auto_split() {
+  local a=$1 m0=$2 n0=$3 m1=$4 n1=$5
+  check "eval auto clean = $n0 ($(eval_row "$a" 0) vs $(eval_row "$m0" 0))" \
+    [ "$(eval_row "$a" 0)" = "$(eval_row "$m0" 0)" -a -n "$(eval_row "$m0" 0)" ]
+  check "eval auto 10 % = $n1 ($(eval_row "$a" 10) vs $(eval_row "$m1" 10))" \
+    [ "$(eval_row "$a" 10)" = "$(eval_row "$m1" 10)" -a -n "$(eval_row "$m1" 10)" ]
+  check_not "the two models score apart at 10 %" \
+    [ "$(eval_row "$m0" 10)" = "$(eval_row "$m1" 10)" ]
+}
+
 finish() {
   wait
   local f
