@@ -167,9 +167,10 @@ LM_API lm_api_status lm_api_model_load_bundled(int buckets, const lm_api_system 
 /* Load a calibrated per-window choice, as `lumosaic infer --model auto --auto FILE
  * --auto-tol tol_db`: calibration is a file written by `lumosaic fit-auto` naming one-frame
  * models of one system that read the same buckets (all one-bucket, or all two-bucket: frames
- * then carry bucket 0, and lm_api_model_info says 2 buckets); each 66 x 64 window of a frame is reconstructed by the
- * cheapest model whose expected PSNR is within tol_db dB (>= 0; 0.5 is infer's default; 0 =
- * always the best model) of the best model's, and the windows are blended. Such a model's
+ * then carry bucket 0, and lm_api_model_info says 2 buckets); each 66 x 64 window of a frame
+ * is reconstructed by the cheapest model whose expected PSNR is within tol_db dB (>= 0; 0.5 is
+ * infer's default; 0 = always the best model) of the best model's, and the windows are
+ * blended. Such a model's
  * preset (lm_api_model_info) is "auto"; it always runs patch-wise. sys: NULL for the system
  * the models were trained with; a system of other LED gains is refused. */
 LM_API lm_api_status lm_api_model_load_auto(const char *calibration, double tol_db,
