@@ -164,8 +164,14 @@ static void print_table(const lm_auto_fit_run *r)
     for (int m = 0; m < a->nmodels; m++)
         printf("%s%s %.3g ms/window (%.3g MMAC)", m ? ", " : "", a->models[m].label,
                1e3 * a->models[m].cost, a->models[m].macs / 1e6);
+    /* each model's column as wide as its label: labels of one lineage share long prefixes */
+    int width[LM_AUTO_MAX_MODELS];
     printf("\n%-24s %8s", "difficulty bin", "windows");
-    for (int m = 0; m < a->nmodels; m++) printf(" %10.10s", a->models[m].label);
+    for (int m = 0; m < a->nmodels; m++) {
+        int len = (int)strlen(a->models[m].label);
+        width[m] = len > 10 ? len : 10;
+        printf(" %*s", width[m], a->models[m].label);
+    }
     printf("   (expected PSNR, dB)\n");
     for (int b = 0; b < a->nbins; b++) {
         char lo[16] = "-inf", hi[16] = "inf", rng[40];
@@ -173,7 +179,7 @@ static void print_table(const lm_auto_fit_run *r)
         if (b < a->nbins - 1) snprintf(hi, sizeof hi, "%.4g", a->edges[b]);
         snprintf(rng, sizeof rng, "[%s, %s)", lo, hi);
         printf("%-24s %8ld", rng, a->windows[b]);
-        for (int m = 0; m < a->nmodels; m++) printf(" %10.2f", a->models[m].psnr[b]);
+        for (int m = 0; m < a->nmodels; m++) printf(" %*.2f", width[m], a->models[m].psnr[b]);
         printf("\n");
     }
 }
