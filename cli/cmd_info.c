@@ -139,7 +139,7 @@ int lm_cmd_info(int argc, char **argv)
         printf("\nalso: lmmse-K (window K, odd 1..31), lmmse-K-b2, lmmse-K-rfD (D random "
                "features),\nlmmse-K-gG-b2 (the panchromatic guide over G x G, odd G <= K),\n"
                "lmmse-K-riN-b2 (each LED's plane guided-filtered over N x N, odd N 3..31);\n"
-               "NET+BASE (e.g. tn-96-nc+lmmse, the bundled demo model): NET trained as a "
+               "NET+BASE (e.g. tn-160-nc+lmmse, the bundled demo model): NET trained as a "
                "residual on BASE\n(train --model NET --base RUN; info --model NET+BASE "
                "describes it)\n");
         if (!a.model) return 0;

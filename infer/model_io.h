@@ -44,7 +44,7 @@ typedef struct lm_infer_model {
  * single-bucket model (buckets 1) and the two-bucket one (buckets 2), the models `infer --model
  * auto` picks from when no calibration is given. Into out (n bytes); LM_ERR_IO naming the file
  * when it is missing. */
-#define LM_BUNDLED_MODEL_1 "tn96nc-lmmse.safetensors"
+#define LM_BUNDLED_MODEL_1 "tn160nc-lmmse.safetensors"
 #define LM_BUNDLED_MODEL_2 "tn96nc-b2-lmmseb2.safetensors"
 lm_status lm_infer_bundled_model(int buckets, char *out, size_t n, lm_err *err);
 

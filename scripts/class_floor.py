@@ -12,7 +12,7 @@ them: `lumosaic eval` names them; prepared as `eval` prepares them: cropped to w
 divided by their maximum).
 
     build/venv/bin/python scripts/class_floor.py models/zoo/lmmse
-    build/venv/bin/python scripts/class_floor.py models/demo/tn96nc-lmmse.safetensors
+    build/venv/bin/python scripts/class_floor.py models/demo/tn160nc-lmmse.safetensors
     build/venv/bin/python scripts/class_floor.py models/zoo/lmmse-b2 --buckets 2
 
 Needs the Python package (scripts/test_python.sh installs it into build/venv), numpy and the

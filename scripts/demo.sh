@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 out=${1:-demo_out}
 shared=${LM_SHARED_DIR:-../shared}
 scene="$shared/data/cave-256/cd_256"
-model=models/demo/tn96nc-lmmse.safetensors
+model=models/demo/tn160nc-lmmse.safetensors
 model_b2=models/demo/tn96nc-b2-lmmseb2.safetensors
 [ -d "$scene" ] || { echo "demo: scene $scene not found (set LM_SHARED_DIR)" >&2; exit 2; }
 

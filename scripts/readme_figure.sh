@@ -9,7 +9,7 @@ cd "$(dirname "$0")/.."
 out=${1:-docs/img/lumosaic.png}
 shared=${LM_SHARED_DIR:-../shared}
 scene=$shared/data/cave-256/cd_256
-model=models/demo/tn96nc-lmmse.safetensors
+model=models/demo/tn160nc-lmmse.safetensors
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
 

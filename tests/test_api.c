@@ -370,7 +370,7 @@ static void test_average(void)
     snprintf(out, sizeof out, "%s/self.safetensors", dir);
     lm_api_error err;
     const char *same[2] = {MODEL, MODEL},
-               *other[2] = {MODEL, "models/demo/tn96nc-lmmse.safetensors"};
+               *other[2] = {MODEL, "models/demo/tn160nc-lmmse.safetensors"};
     CHECK_MSG(lm_api_model_average(same, 2, out, &err) == LM_API_OK, "%s", err.message);
     CHECK(lm_api_model_average(other, 2, out, &err) == LM_API_ERR_ARG &&
           strstr(err.message, "one preset"));

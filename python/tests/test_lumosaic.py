@@ -281,7 +281,7 @@ def test_average_of_a_model_with_itself_is_the_model(tmp_path, model, truth):
     with lumosaic.Model(out, threads=THREADS) as soup:
         np.testing.assert_array_equal(soup.reconstruct(frame), model.reconstruct(frame))
     with pytest.raises(lumosaic.Error, match="one preset"):
-        lumosaic.average([MODEL, REPO / "models/demo/tn96nc-lmmse.safetensors"], out)
+        lumosaic.average([MODEL, REPO / "models/demo/tn160nc-lmmse.safetensors"], out)
     with pytest.raises(lumosaic.Error, match="2 to 64"):
         lumosaic.average([MODEL], out)
 

@@ -20,7 +20,7 @@ check "two-bucket cube written" [ -s "$T/a2/cube_0000.exr" ]
 
 "$LM" infer --model auto --input "$T/one/frames" --output "$T/a1" --threads 1 > "$T/o1" 2>&1
 check "no bucket 0: the single-bucket model: $(head -1 "$T/o1")" \
-  grep -q "^model tn-96-nc+lmmse (.*tn96nc-lmmse.safetensors, picked by --model auto): bucket 1$" "$T/o1"
+  grep -q "^model tn-160-nc+lmmse (.*tn160nc-lmmse.safetensors, picked by --model auto): bucket 1$" "$T/o1"
 
 "$LM" infer --model auto --input "$T/one/frames" --bucket0 "$T/sim/bucket0" --output "$T/a3" \
   --threads 1 > "$T/o3" 2>&1

@@ -7,7 +7,7 @@
 source "$(dirname "$0")/lib.sh"
 DIFF=$3
 REPO=$(cd "$(dirname "$0")/../.." && pwd)
-M1=$REPO/models/demo/tn96nc-lmmse.safetensors
+M1=$REPO/models/demo/tn160nc-lmmse.safetensors
 M2=$REPO/models/demo/tn96nc-b2-lmmseb2.safetensors
 
 "$LM" average --output "$T/self.safetensors" "$M1" "$M1" > "$T/log" 2>&1
@@ -15,7 +15,7 @@ check "average a model with itself: $(cat "$T/log")" [ $? -eq 0 ]
 check "says what it wrote" grep -q "averaged 2 models into $T/self.safetensors" "$T/log"
 # each input as path@iteration (a model that is itself an average has no iteration: path)
 check "records its inputs" \
-  grep -aqE '"average_of":"[^"]*tn96nc-lmmse.safetensors(@[0-9]+)?,' "$T/self.safetensors"
+  grep -aqE '"average_of":"[^"]*tn160nc-lmmse.safetensors(@[0-9]+)?,' "$T/self.safetensors"
 "$LM" simulate --input "$CAVE" --output "$T/sim" --crop > /dev/null 2>&1
 F=$T/sim/frames/frame_0000.png
 "$LM" infer --model "$M1" --input "$F" --output "$T/a" --threads 1 > /dev/null 2>&1

@@ -169,7 +169,7 @@ check "one warning only (not the other scene)" [ "$(grep -c 'warning: scene' "$T
 "$LM" eval --model "$R" "$T/other" --split all --noise 0 --rainbow 0 > /dev/null 2> "$T/serr"
 check "no training scene scored: no warning ($(cat "$T/serr"))" bash -c "! grep -q warning '$T/serr'"
 # many training scenes scored (the bundled model on its own training split): one line names them
-BM=$(cd "$(dirname "$0")/../.." && pwd)/models/demo/tn96nc-lmmse.safetensors
+BM=$(cd "$(dirname "$0")/../.." && pwd)/models/demo/tn160nc-lmmse.safetensors
 "$LM" eval --model "$BM" "$SHARED/data/cave" "$SHARED/data/cave-256" --split train --noise 0 \
   --rainbow 0 > /dev/null 2> "$T/terr"
 check "--split train: one warning line ($(head -c 300 "$T/terr"))" \
