@@ -16,7 +16,7 @@ for n in $names; do
 done
 "$LM" info --list > "$T/list"
 check "every listed preset has a purpose" awk 'NF == 0 { exit } NF < 3 { bad = 1 } END { exit bad }' "$T/list"
-check "the list names NET+BASE" grep -q 'NET+BASE (e.g. tn-96-nc+lmmse' "$T/list"
+check "the list names NET+BASE" grep -q 'NET+BASE (e.g. tn-160-nc+lmmse' "$T/list"
 total() { "$LM" info --model "$1" | awk '/model parameters:/ {
   for (i = 2; i <= NF; i++) if ($(i - 1) == "model" && $i == "parameters:") print $(i + 1) }'; }
 net=$(total rt-16-nc)
