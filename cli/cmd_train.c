@@ -264,8 +264,18 @@ int lm_cmd_train(int argc, char **argv)
                        .progress = !a.com.quiet && rank == 0, .interrupt = lm_cli_signal_flag(),
                        .hold = lm_cli_signals_hold, .restart = restart, .data_parallel = 1};
     lm_train_result res;
+    /* a fork that fails before its first update (its checkpoint still the parent's) is removed:
+     * nothing half-made is left (an interrupted one stays, to resume) */
+    char *fork_it = NULL;
+    if (a.fork && rank == 0) fork_it = lm_safetensors_meta(ck, "iteration", &(lm_err){0});
     lm_status st = lm_train_session(&cfg, &o, &res, &e);
     int sig = atomic_load(lm_cli_signal_flag());
+    if (st && fork_it && !(st == LM_ERR_INTERRUPTED && sig)) {
+        char *now = lm_safetensors_meta(ck, "iteration", &(lm_err){0});
+        if (now && !strcmp(now, fork_it)) lm_cli_remove_tree(fork_dir);
+        free(now);
+    }
+    free(fork_it);
     if (st == LM_ERR_INTERRUPTED && sig) {
         lm_cli_error(&c, "interrupted (%s): %s", lm_cli_signal_name(sig), e.msg);
         return 128 + sig;

@@ -6,6 +6,7 @@
 #include "models/profile.h"
 #include "data/mosaic.h"
 #include "train/train.h"
+#include <math.h>
 #include <stdlib.h>
 #include <unistd.h>
 
@@ -317,6 +318,87 @@ static void test_ema_run(void)
     free(ta), free(tb);
 }
 
+/* A weight average switched on when a run is continued (--fork or --resume with --ema): it
+ * starts at the checkpoint's weights (after the run's 4th update it is d w_3 + (1 - d) w_4 with
+ * d = min(0.9, 4 / 13), the decay's ramp counting the run's updates), the weights
+ * being trained follow the plain run's path bitwise, and once on it cannot be dropped. */
+static void test_ema_switch_on(void)
+{
+    if (!g_have_mosaic) return;
+    char p[300], q[300];
+    tmpdir_path(p, sizeof p, "ema-on-plain");
+    tmpdir_path(q, sizeof q, "ema-on-later");
+    mem_src s = {&g_mosaic, 12, 12, 0, 0, 3};
+    lm_train_source src = source_of(&s);
+    lm_train_cfg cp, cq;
+    small_cfg(&cp, "han-tiny", p);
+    small_cfg(&cq, "han-tiny", q);
+    cp.iterations = cq.iterations = 4;
+    lm_err e = {0};
+    lm_train_result r;
+    lm_train_opts stop = {.stop_after = 3};
+    for (int k = 0; k < 2; k++) {
+        lm_model *m = make_model("han-tiny", 5);
+        CHECK_MSG(lm_train_run(k ? &cq : &cp, m, &src, &stop, &r, &e) == LM_OK, "%s", e.msg);
+        lm_model_free(m);
+    }
+    lm_model *m3 = NULL;
+    lm_adam o3 = {0};
+    long it3 = 0;
+    float *w3 = NULL;
+    if (load_run(&cq, q, &m3, &o3, &it3)) {
+        CHECK(it3 == 3);
+        w3 = malloc(m3->params.total * sizeof(float));
+        if (w3) memcpy(w3, m3->params.data, m3->params.total * sizeof(float));
+    }
+    lm_adam_free(&o3), lm_model_free(m3);
+    lm_model *m = make_model("han-tiny", 77);
+    lm_train_opts rp = {.resume = p}, rq = {.resume = q};
+    CHECK_MSG(lm_train_run(&cp, m, &src, &rp, &r, &e) == LM_OK, "%s", e.msg);
+    lm_model_free(m);
+    cq.ema = 0.9f;
+    m = make_model("han-tiny", 77);
+    CHECK_MSG(lm_train_run(&cq, m, &src, &rq, &r, &e) == LM_OK, "%s", e.msg);
+    CHECK(r.iterations_done == 4);
+    lm_model_free(m);
+    lm_model *mp = NULL, *mq = NULL;
+    lm_adam op = {0}, oq = {0};
+    long itp = 0, itq = 0;
+    lm_train_cfg cp0 = cp;
+    if (w3 && load_run(&cp0, p, &mp, &op, &itp) && load_run(&cq, q, &mq, &oq, &itq) && oq.ema) {
+        size_t n = mq->params.total;
+        CHECK(itp == 4 && itq == 4);
+        CHECK_MSG(!memcmp(oq.ema, mp->params.data, n * sizeof(float)),
+                  "the trained weights left the plain run's path");
+        CHECK(!memcmp(oq.m, op.m, n * sizeof(float)) && !memcmp(oq.v, op.v, n * sizeof(float)));
+        double worst = 0, moved = 0, d = fmin(0.9, 4.0 / 13.0);
+        for (size_t i = 0; i < n; i++) {
+            double want = d * w3[i] + (1 - d) * oq.ema[i];
+            double d = fabs(mq->params.data[i] - want);
+            if (d > worst) worst = d;
+            moved += fabs(oq.ema[i] - w3[i]);
+        }
+        CHECK_MSG(worst < 1e-6 && moved > 0, "average vs d w3 + (1 - d) w4: %g (moved %g)", worst,
+                  moved);
+    }
+    lm_adam_free(&op), lm_adam_free(&oq);
+    lm_model_free(mp), lm_model_free(mq);
+    free(w3);
+    /* the average exists now: dropping it is refused; keeping it resumes */
+    lm_train_cfg off = cq;
+    off.ema = 0;
+    off.iterations = 5;
+    m = make_model("han-tiny", 77);
+    lm_err e2 = {0};
+    CHECK(lm_train_run(&off, m, &src, &rq, &r, &e2) == LM_ERR_ARG && strstr(e2.msg, "ema"));
+    lm_model_free(m);
+    cq.iterations = 5;
+    m = make_model("han-tiny", 77);
+    CHECK_MSG(lm_train_run(&cq, m, &src, &rq, &r, &e) == LM_OK, "%s", e.msg);
+    CHECK(r.iterations_done == 5);
+    lm_model_free(m);
+}
+
 /* ---- NaN stop -------------------------------------------------------------------------- */
 static void test_nan_stop_keeps_checkpoint(void)
 {
@@ -579,6 +661,7 @@ int main(void)
     RUN(test_patch_not_on_tile);
     RUN(test_overfit_one_batch);
     RUN(test_resume_bitwise);
+    RUN(test_ema_switch_on);
     RUN(test_ema_run);
     RUN(test_nan_stop_keeps_checkpoint);
     RUN(test_profile_han_paper);

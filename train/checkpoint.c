@@ -153,14 +153,28 @@ static lm_status load_optimizer(const char *path, lm_model *m, lm_adam *opt, lon
     char *ema = lm_safetensors_meta(path, "ema", &e2); /* absent before weight averages */
     double was = ema ? strtod(ema, NULL) : 0.0;
     free(ema);
-    if ((float)was != opt->cfg.ema)
+    /* an average switched on at this checkpoint (a fork or resume with --ema) starts at the
+     * checkpoint's weights; one that exists cannot change its decay or be dropped */
+    int start_avg = was == 0.0 && opt->cfg.ema > 0 && opt->ema;
+    if ((float)was != opt->cfg.ema && !start_avg)
         return lm_err_set(err, LM_ERR_ARG, "%s: the run averaged its weights with ema %g, this "
                           "run asks for %g (set --ema %g)", path, was, (double)opt->cfg.ema, was);
+    float *avg = opt->ema;
+    if (start_avg) opt->ema = NULL; /* no "train_weights" in this file */
     lm_params v;
-    if (moment_views(m, opt, &v, err)) return err->status;
-    lm_status st = lm_params_load(&v, path, 0, err);
+    lm_status st = moment_views(m, opt, &v, err);
+    if (start_avg) opt->ema = avg;
+    if (st) return st;
+    st = lm_params_load(&v, path, 0, err);
     lm_params_free(&v);
     if (st) return st;
+    if (start_avg) /* the model holds the checkpoint's weights: the average starts there */
+        for (int i = 0; i < m->params.n; i++) {
+            const lm_param *e = m->params.items[i];
+            if (e->trainable)
+                memcpy(opt->ema + e->offset, e->t.data,
+                       (size_t)lm_tensor_numel(&e->t) * sizeof(float));
+        }
     opt->step = (long)step;
     if (next_batch) *next_batch = (long)nb;
     if (seed) *seed = (uint64_t)sd;

@@ -73,7 +73,8 @@ static const field fields[] = {
     FLD("step_gamma", F_FLOAT, step_gamma, "F", "step schedule: decay factor", 0, 1),
     FLD("weight_decay", F_FLOAT, weight_decay, "F", "Adam L2 weight decay", 0, 10),
     FLD("ema", F_FLOAT, ema, "D", "decay of a moving average of the weights, which validation, "
-        "snapshots and the checkpoint's model use (0 = none; e.g. 0.999)", 0, 0.999999),
+        "snapshots and the checkpoint's model use (0 = none; e.g. 0.999; switched on by --fork "
+        "or --resume it starts at the checkpoint's weights)", 0, 0.999999),
     FLD("noise", F_NOISE, noise_min, "MIN,MAX", "noise level range k (0,0.15)", 0, 1),
     FLD("val_noise", F_FLOAT, val_noise, "F", "noise level of validation samples", 0, 1),
     FLD("seed", F_U64, seed, "N", "random seed (init, data)", 0, 0),

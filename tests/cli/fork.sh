@@ -3,7 +3,7 @@
 # parent exactly (the same losses as the parent resumed, bit for bit), the flags given change
 # the fork's config.json and not the parent's, a later --resume keeps them (so does a --resume
 # given flags), a time budget stops at the iteration cap, and bad input: exit status, one-line
-# message, nothing written.
+# message, nothing written; a weight average switched on by a fork.
 # usage: fork.sh LUMOSAIC MAKE_CUBE
 source "$(dirname "$0")/lib.sh"
 TR="--model rt-8 --data $CAVE --patch 24x32 --batch 2 --val-patches 2 --val-interval 3 --threads 1 --workers 0 --seed 3 --quiet"
@@ -32,6 +32,18 @@ check "paths of the fork's config are relative to it" grep -q '"data": \[' "$T/c
 check "a resume without flags keeps the fork's schedule" grep -q '^9,' "$T/c/log.csv"
 "$LM" train --resume "$T/b" --iterations 8 --stop-after 1 --quiet > /dev/null 2>&1
 check "a resume with flags writes them to the config" grep -q '"iterations": 8' "$T/b/config.json"
+
+# a weight average switched on by a fork: the weights trained follow the plain run's path (the
+# same losses as b, resumed to the same 8 iterations), the fork's config keeps the average, and
+# it cannot be dropped again (a fork that fails so is removed)
+"$LM" train --fork "$T/a" --output "$T/avg" --ema 0.99 --iterations 8 --quiet > "$T/log" 2>&1
+check "a fork with --ema runs: $(cat "$T/log")" grep -q '^8,' "$T/avg/log.csv"
+check "its config keeps the average" grep -q '"ema": 0.99' "$T/avg/config.json"
+"$LM" train --resume "$T/b" --quiet > /dev/null 2>&1
+check "the losses with the average are the plain run's" \
+  cmp -s <(cut -d, -f1-2 "$T/b/log.csv") <(cut -d, -f1-2 "$T/avg/log.csv")
+expect_error "dropping the average" 2 "the run averaged its weights with ema 0.99" "$T/noavg" -- \
+  "$LM" train --fork "$T/avg" --output "$T/noavg" --ema 0 --iterations 9 --quiet
 
 # a time budget with an iteration cap reached first: the run ends at the cap (not one update
 # at a time at the final learning rate until the budget is spent)
