@@ -46,10 +46,10 @@ check "one-bucket pair, 10 %: the bundled network" \
   grep -q '^auto: tn-160-nc+lmmse 0% tn-96-nc+lmmse 100% of [0-9]* windows (bucket 1)$' \
   <(pair auto-noise.json "$T/n10/frames/frame_0000.png" p2)
 check "two-bucket pair, clean frame: the clean specialist" \
-  grep -q '^auto: tn-96-nc-b2+lmmse-11-ri15-b2 100% tn-96-nc-b2+lmmse-b2 0% of [0-9]* windows (both buckets)$' \
+  grep -q '^auto: tn-160-nc-b2+lmmse-11-ri15-b2 100% tn-96-nc-b2+lmmse-b2 0% of [0-9]* windows (both buckets)$' \
   <(pair auto-noise-b2.json "$T/n0/frames" p3)
 check "two-bucket pair, 10 %: the bundled network" \
-  grep -q '^auto: tn-96-nc-b2+lmmse-11-ri15-b2 0% tn-96-nc-b2+lmmse-b2 100% of [0-9]* windows (both buckets)$' \
+  grep -q '^auto: tn-160-nc-b2+lmmse-11-ri15-b2 0% tn-96-nc-b2+lmmse-b2 100% of [0-9]* windows (both buckets)$' \
   <(pair auto-noise-b2.json "$T/n10/frames" p4)
 
 expect_error "bundled model missing" 2 "the bundled single-bucket model is missing" "$T/e1" -- \
