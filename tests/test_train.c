@@ -188,17 +188,25 @@ static int load_run(const lm_train_cfg *cfg, const char *dir, lm_model **m, lm_a
     return st == LM_OK;
 }
 
+/* Two run folders a and b (300 chars each) under the test's temporary folder, each with the
+ * small han-tiny config. */
+static void two_runs(const char *na, const char *nb, char *a, char *b, lm_train_cfg *ca,
+                     lm_train_cfg *cb)
+{
+    tmpdir_path(a, 300, na);
+    tmpdir_path(b, 300, nb);
+    small_cfg(ca, "han-tiny", a);
+    small_cfg(cb, "han-tiny", b);
+}
+
 static void test_resume_bitwise(void)
 {
     if (!g_have_mosaic) return;
     char a[300], b[300], la[320], lb[320];
-    tmpdir_path(a, sizeof a, "full");
-    tmpdir_path(b, sizeof b, "interrupted");
+    lm_train_cfg ca, cb;
+    two_runs("full", "interrupted", a, b, &ca, &cb);
     mem_src s = {&g_mosaic, 12, 12, 0, 0, 3};
     lm_train_source src = source_of(&s);
-    lm_train_cfg ca, cb;
-    small_cfg(&ca, "han-tiny", a);
-    small_cfg(&cb, "han-tiny", b);
     lm_err e = {0};
     lm_train_result r;
     lm_model *m = make_model("han-tiny", 5);
@@ -318,6 +326,19 @@ static void test_ema_run(void)
     free(ta), free(tb);
 }
 
+/* A han-tiny run of cfg (init seed 77: a resumed run's weights must come from its folder) that
+ * must succeed and end at iteration `want`. */
+static void run_ok(const lm_train_cfg *cfg, const lm_train_source *src, const lm_train_opts *o,
+                   long want)
+{
+    lm_model *m = make_model("han-tiny", 77);
+    lm_train_result r;
+    lm_err e = {0};
+    CHECK_MSG(lm_train_run(cfg, m, src, o, &r, &e) == LM_OK, "%s", e.msg);
+    CHECK(r.iterations_done == want);
+    lm_model_free(m);
+}
+
 /* A weight average switched on when a run is continued (--fork or --resume with --ema): it
  * starts at the checkpoint's weights (after the run's 4th update it is d w_3 + (1 - d) w_4 with
  * d = min(0.9, 4 / 13), the decay's ramp counting the run's updates), the weights
@@ -326,13 +347,10 @@ static void test_ema_switch_on(void)
 {
     if (!g_have_mosaic) return;
     char p[300], q[300];
-    tmpdir_path(p, sizeof p, "ema-on-plain");
-    tmpdir_path(q, sizeof q, "ema-on-later");
+    lm_train_cfg cp, cq;
+    two_runs("ema-on-plain", "ema-on-later", p, q, &cp, &cq);
     mem_src s = {&g_mosaic, 12, 12, 0, 0, 3};
     lm_train_source src = source_of(&s);
-    lm_train_cfg cp, cq;
-    small_cfg(&cp, "han-tiny", p);
-    small_cfg(&cq, "han-tiny", q);
     cp.iterations = cq.iterations = 4;
     lm_err e = {0};
     lm_train_result r;
@@ -352,15 +370,10 @@ static void test_ema_switch_on(void)
         if (w3) memcpy(w3, m3->params.data, m3->params.total * sizeof(float));
     }
     lm_adam_free(&o3), lm_model_free(m3);
-    lm_model *m = make_model("han-tiny", 77);
     lm_train_opts rp = {.resume = p}, rq = {.resume = q};
-    CHECK_MSG(lm_train_run(&cp, m, &src, &rp, &r, &e) == LM_OK, "%s", e.msg);
-    lm_model_free(m);
+    run_ok(&cp, &src, &rp, 4);
     cq.ema = 0.9f;
-    m = make_model("han-tiny", 77);
-    CHECK_MSG(lm_train_run(&cq, m, &src, &rq, &r, &e) == LM_OK, "%s", e.msg);
-    CHECK(r.iterations_done == 4);
-    lm_model_free(m);
+    run_ok(&cq, &src, &rq, 4);
     lm_model *mp = NULL, *mq = NULL;
     lm_adam op = {0}, oq = {0};
     long itp = 0, itq = 0;
@@ -374,8 +387,8 @@ static void test_ema_switch_on(void)
         double worst = 0, moved = 0, d = fmin(0.9, 4.0 / 13.0);
         for (size_t i = 0; i < n; i++) {
             double want = d * w3[i] + (1 - d) * oq.ema[i];
-            double d = fabs(mq->params.data[i] - want);
-            if (d > worst) worst = d;
+            double off = fabs(mq->params.data[i] - want);
+            if (off > worst) worst = off;
             moved += fabs(oq.ema[i] - w3[i]);
         }
         CHECK_MSG(worst < 1e-6 && moved > 0, "average vs d w3 + (1 - d) w4: %g (moved %g)", worst,
@@ -388,15 +401,12 @@ static void test_ema_switch_on(void)
     lm_train_cfg off = cq;
     off.ema = 0;
     off.iterations = 5;
-    m = make_model("han-tiny", 77);
+    lm_model *m = make_model("han-tiny", 77);
     lm_err e2 = {0};
     CHECK(lm_train_run(&off, m, &src, &rq, &r, &e2) == LM_ERR_ARG && strstr(e2.msg, "ema"));
     lm_model_free(m);
     cq.iterations = 5;
-    m = make_model("han-tiny", 77);
-    CHECK_MSG(lm_train_run(&cq, m, &src, &rq, &r, &e) == LM_OK, "%s", e.msg);
-    CHECK(r.iterations_done == 5);
-    lm_model_free(m);
+    run_ok(&cq, &src, &rq, 5);
 }
 
 /* ---- NaN stop -------------------------------------------------------------------------- */
