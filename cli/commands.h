@@ -19,6 +19,7 @@ int lm_cmd_average(int argc, char **argv);
 int lm_cmd_bound(int argc, char **argv);
 int lm_cmd_calibrate(int argc, char **argv);
 int lm_cmd_coding(int argc, char **argv);
+int lm_cmd_convert(int argc, char **argv);
 int lm_cmd_eval(int argc, char **argv);
 int lm_cmd_fit_auto(int argc, char **argv);
 int lm_cmd_infer(int argc, char **argv);

@@ -14,6 +14,7 @@ static const lm_command commands[] = {
     {"bound", lm_cmd_bound, "the spectral bound: every LED at every pixel, no mosaic (oracle)"},
     {"calibrate", lm_cmd_calibrate, "LED gains from ColorChecker frames (NNLS): a new system file"},
     {"coding", lm_cmd_coding, "learn the LED allocation and tile map under shot/read noise"},
+    {"convert", lm_cmd_convert, "store a trained model as fp16 (half the file) or fp32"},
     {"eval", lm_cmd_eval, "score a trained model: PSNR/SSIM/MAE/SAM vs noise, rainbow test"},
     {"fit-auto", lm_cmd_fit_auto, "fit infer --model auto: error vs difficulty, cost per model"},
     {"infer", lm_cmd_infer, "reconstruct 31-band cubes from coded frames with a trained model"},

@@ -43,25 +43,6 @@ static int union_scenes(char **set, const char *add)
     return 0;
 }
 
-/* The first input's recorded system, as a path relative to out_path's folder ("" stays "": the
- * bundled default). An absolute or unresolvable path is kept as it is. */
-static void system_for(const char *weights, const char *recorded, const char *out_path,
-                       char *out, size_t n)
-{
-    snprintf(out, n, "%s", recorded);
-    if (!recorded[0]) return;
-    char abs[PATH_MAX + 8], odir[PATH_MAX];
-    const char *slash = strrchr(weights, '/');
-    if (recorded[0] != '/' && slash)
-        snprintf(abs, sizeof abs, "%.*s/%s", (int)(slash - weights), weights, recorded);
-    else
-        snprintf(abs, sizeof abs, "%s", recorded);
-    const char *os = strrchr(out_path, '/');
-    snprintf(odir, sizeof odir, "%.*s", os ? (int)(os - out_path) : 1, os ? out_path : ".");
-    if (os == out_path) snprintf(odir, sizeof odir, "/");
-    if (lm_path_relative(odir, abs, out, n)) snprintf(out, n, "%s", abs);
-}
-
 lm_status lm_model_average(const char *const *paths, int n, const char *out_path, lm_err *err)
 {
     if (n < 2 || n > LM_AVERAGE_MAX)
@@ -144,7 +125,7 @@ lm_status lm_model_average(const char *const *paths, int n, const char *out_path
             if (differs[j]) out[j] = (float)(sum[j] / n);
         char sys[PATH_MAX + 8], bk[8], fr[8], cnt[16], cs[32] = "";
         if (clip >= 0.0) snprintf(cs, sizeof cs, "%.6g", clip);
-        system_for(first.weights, f_sys, out_path, sys, sizeof sys);
+        lm_infer_system_relative(first.weights, f_sys, out_path, sys, sizeof sys);
         snprintf(bk, sizeof bk, "%d", lm_model_buckets(first.model));
         snprintf(fr, sizeof fr, "%d", lm_model_frames(first.model));
         snprintf(cnt, sizeof cnt, "%d", n);

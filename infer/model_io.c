@@ -3,6 +3,7 @@
 #include "infer/model_io.h"
 #include "data/noise_est.h"
 #include <inttypes.h>
+#include <limits.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -290,4 +291,22 @@ lm_status lm_infer_auto_load(const char *file, const char *system_override, lm_a
                               "system", file, a->models[0].path, path);
     }
     return LM_OK;
+}
+
+/* See model_io.h: the recorded system, rebased from the weights' folder to out_path's. */
+void lm_infer_system_relative(const char *weights, const char *recorded, const char *out_path,
+                              char *out, size_t n)
+{
+    snprintf(out, n, "%s", recorded);
+    if (!recorded[0]) return;
+    char abs[PATH_MAX + 8], odir[PATH_MAX];
+    const char *slash = strrchr(weights, '/');
+    if (recorded[0] != '/' && slash)
+        snprintf(abs, sizeof abs, "%.*s/%s", (int)(slash - weights), weights, recorded);
+    else
+        snprintf(abs, sizeof abs, "%s", recorded);
+    const char *os = strrchr(out_path, '/');
+    snprintf(odir, sizeof odir, "%.*s", os ? (int)(os - out_path) : 1, os ? out_path : ".");
+    if (os == out_path) snprintf(odir, sizeof odir, "/");
+    if (lm_path_relative(odir, abs, out, n)) snprintf(out, n, "%s", abs);
 }

@@ -63,6 +63,11 @@ lm_status lm_infer_bundled_model(int buckets, char *out, size_t n, lm_err *err);
 lm_status lm_infer_model_load(const char *path, const char *system_override, lm_infer_model *im,
                               lm_err *err);
 void lm_infer_model_free(lm_infer_model *im);
+/* A model written elsewhere keeps its system: `recorded` (a model's "system" metadata, relative
+ * to the folder of its weights file `weights`) as a path relative to out_path's folder, into out
+ * (n bytes). "" (the bundled default) stays ""; an absolute or unresolvable path is kept. */
+void lm_infer_system_relative(const char *weights, const char *recorded, const char *out_path,
+                              char *out, size_t n);
 /* The QDO baseline's camera, D65: the DOE of the run whose weights file is `weights` (its
  * folder's doe.json, written by every QDO training run, e.g. a learned height map), else (no
  * such file, or weights NULL) the bundled DOE (data/systems/qdo_default.json); *out freed

@@ -1,25 +1,66 @@
 /* safetensors.c — save/load lm_params as safetensors: an 8-byte little-endian header length,
  * a JSON header {"name": {"dtype": "F32", "shape": [...], "data_offsets": [a, b]}, ...,
- * "__metadata__": {...}}, then the raw little-endian data. Writes are atomic. */
+ * "__metadata__": {...}}, then the raw little-endian data. Writes are atomic. Tensors are
+ * written F32 (or F16 for distribution) and read as F32, F16 or BF16 (widened exactly). */
 #include "models/params.h"
 #include <errno.h>
 #include <jansson.h>
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
-static json_t *build_header(const lm_params *p, const char *const *meta, int n_meta)
+/* IEEE half from float, round to nearest even; |v| must be below 65520 (rounds to <= 65504)
+ * and finite (the caller checks). Values under 2^-14 become subnormals (or 0). */
+static uint16_t f16_from_f32(float v)
+{
+    uint32_t x;
+    memcpy(&x, &v, 4);
+    uint16_t sign = (uint16_t)((x >> 16) & 0x8000u);
+    uint32_t ax = x & 0x7fffffffu;
+    if (ax < 0x38800000u) /* below 2^-14: multiples of 2^-24, exact scaling, rint ties-to-even */
+        return (uint16_t)(sign | (uint16_t)lrintf(fabsf(v) * 16777216.0f));
+    uint32_t e = (ax >> 23) - 112, m = ax & 0x7fffffu, rest = m & 0x1fffu;
+    uint32_t h = (e << 10) | (m >> 13);
+    h += rest > 0x1000u || (rest == 0x1000u && (h & 1u)); /* a carry moves into the exponent */
+    return (uint16_t)(sign | h);
+}
+
+static float f32_from_f16(uint16_t h)
+{
+    uint32_t sign = (uint32_t)(h & 0x8000u) << 16, e = (h >> 10) & 0x1fu, m = h & 0x3ffu, x;
+    if (e == 0) {
+        float v = ldexpf((float)m, -24);
+        return sign ? -v : v;
+    }
+    x = sign | (e == 31 ? 0x7f800000u | (m << 13) : ((e + 112) << 23) | (m << 13));
+    float v;
+    memcpy(&v, &x, 4);
+    return v;
+}
+
+static float f32_from_bf16(uint16_t h)
+{
+    uint32_t x = (uint32_t)h << 16;
+    float v;
+    memcpy(&v, &x, 4);
+    return v;
+}
+
+static json_t *build_header(const lm_params *p, const char *const *meta, int n_meta,
+                            lm_store_dtype dt)
 {
     json_t *h = json_object();
-    size_t off = 0;
+    size_t off = 0, es = dt == LM_STORE_F16 ? 2 : 4;
     for (int i = 0; i < p->n; i++) {
         const lm_param *e = p->items[i];
         json_t *shape = json_array();
         for (int d = 0; d < e->t.ndim; d++) json_array_append_new(shape, json_integer(e->t.shape[d]));
-        size_t len = (size_t)lm_tensor_numel(&e->t) * 4;
-        json_t *ent = json_pack("{s:s, s:o, s:[I,I]}", "dtype", "F32", "shape", shape,
+        size_t len = (size_t)lm_tensor_numel(&e->t) * es;
+        json_t *ent = json_pack("{s:s, s:o, s:[I,I]}", "dtype",
+                                dt == LM_STORE_F16 ? "F16" : "F32", "shape", shape,
                                 "data_offsets", (json_int_t)off, (json_int_t)(off + len));
         json_object_set_new(h, e->name, ent);
         off += len;
@@ -32,10 +73,48 @@ static json_t *build_header(const lm_params *p, const char *const *meta, int n_m
     return h;
 }
 
-lm_status lm_params_save(const lm_params *p, const char *path, const char *const *meta,
-                         int n_meta, lm_err *err)
+/* F16: every value finite and within fp16's range, else LM_ERR_ARG naming the tensor; the
+ * report of what rounding changes. */
+static lm_status f16_check(const lm_params *p, const char *path, lm_store_report *rep, lm_err *err)
 {
-    json_t *h = build_header(p, meta, n_meta);
+    memset(rep, 0, sizeof *rep);
+    for (int i = 0; i < p->n; i++) {
+        const lm_param *e = p->items[i];
+        const float *d = e->t.data;
+        size_t cnt = (size_t)lm_tensor_numel(&e->t);
+        double num = 0, den = 0;
+        for (size_t j = 0; j < cnt; j++) {
+            if (!isfinite(d[j]) || fabsf(d[j]) >= 65520.0f)
+                return lm_err_set(err, LM_ERR_ARG, "%s: tensor %s holds %g, %s: store it as "
+                                  "F32", path, e->name, d[j], isfinite(d[j]) ? "beyond fp16's "
+                                  "largest value (65504)" : "not a finite number");
+            float r = f32_from_f16(f16_from_f32(d[j]));
+            num += ((double)r - d[j]) * ((double)r - d[j]);
+            den += (double)d[j] * d[j];
+            if (d[j] != 0.0f && fabsf(d[j]) < 6.103515625e-05f) {
+                if (r == 0.0f) rep->zeroed++;
+                else rep->subnormal++;
+            }
+        }
+        double rel = den > 0 ? sqrt(num / den) : 0.0;
+        if (rel > rep->max_rel) {
+            rep->max_rel = rel;
+            snprintf(rep->worst, sizeof rep->worst, "%s", e->name);
+        }
+    }
+    return LM_OK;
+}
+
+lm_status lm_params_save_as(const lm_params *p, const char *path, const char *const *meta,
+                            int n_meta, lm_store_dtype dt, lm_store_report *rep, lm_err *err)
+{
+    lm_store_report dummy;
+    if (!rep) rep = &dummy;
+    memset(rep, 0, sizeof *rep);
+    if (dt != LM_STORE_F32 && dt != LM_STORE_F16)
+        return lm_err_set(err, LM_ERR_ARG, "%s: unknown storage type %d", path, (int)dt);
+    if (dt == LM_STORE_F16 && f16_check(p, path, rep, err)) return err->status;
+    json_t *h = build_header(p, meta, n_meta, dt);
     char *js = json_dumps(h, JSON_COMPACT | JSON_PRESERVE_ORDER);
     json_decref(h);
     if (!js) return lm_err_set(err, LM_ERR_NOMEM, "%s: cannot build header", path);
@@ -52,10 +131,19 @@ lm_status lm_params_save(const lm_params *p, const char *path, const char *const
     for (int i = 0; i < 8; i++) len8[i] = (unsigned char)(n >> (8 * i));
     int ok = fwrite(len8, 1, 8, f) == 8 && fwrite(js, 1, jl, f) == jl;
     for (size_t i = jl; i < padded && ok; i++) ok = fputc(' ', f) != EOF;
-    for (int i = 0; i < p->n && ok; i++) {
+    uint16_t half[1024];
+    for (int i = 0; i < p->n && ok; i++) { /* the host is little-endian */
         const lm_param *e = p->items[i];
         size_t cnt = (size_t)lm_tensor_numel(&e->t);
-        ok = fwrite(e->t.data, sizeof(float), cnt, f) == cnt; /* host is little-endian */
+        if (dt == LM_STORE_F32) {
+            ok = fwrite(e->t.data, sizeof(float), cnt, f) == cnt;
+            continue;
+        }
+        for (size_t j = 0; j < cnt && ok; j += 1024) {
+            size_t k = cnt - j < 1024 ? cnt - j : 1024;
+            for (size_t q = 0; q < k; q++) half[q] = f16_from_f32(e->t.data[j + q]);
+            ok = fwrite(half, 2, k, f) == k;
+        }
     }
     free(js);
     if (fclose(f) != 0) ok = 0;
@@ -65,6 +153,12 @@ lm_status lm_params_save(const lm_params *p, const char *path, const char *const
         return lm_err_set(err, LM_ERR_WRITE, "%s: write failed: %s", path, strerror(e));
     }
     return LM_OK;
+}
+
+lm_status lm_params_save(const lm_params *p, const char *path, const char *const *meta,
+                         int n_meta, lm_err *err)
+{
+    return lm_params_save_as(p, path, meta, n_meta, LM_STORE_F32, NULL, err);
 }
 
 /* Read the header JSON and the data start offset. Every size and offset read from the file is
@@ -123,9 +217,12 @@ static lm_status load_one(lm_param *e, json_t *ent, FILE *f, int64_t data_start,
 {
     const char *dtype = json_string_value(json_object_get(ent, "dtype"));
     json_t *shape = json_object_get(ent, "shape"), *offs = json_object_get(ent, "data_offsets");
-    if (!dtype || strcmp(dtype, "F32") || !json_is_array(shape) || json_array_size(offs) != 2)
-        return lm_err_set(err, LM_ERR_FORMAT, "%s: tensor %s: expected dtype F32 with shape "
-                          "and data_offsets", path, e->name);
+    int f16 = dtype && !strcmp(dtype, "F16"), bf16 = dtype && !strcmp(dtype, "BF16");
+    size_t es = f16 || bf16 ? 2 : 4;
+    if (!dtype || (strcmp(dtype, "F32") && !f16 && !bf16) || !json_is_array(shape) ||
+        json_array_size(offs) != 2)
+        return lm_err_set(err, LM_ERR_FORMAT, "%s: tensor %s: expected dtype F32, F16 or BF16 "
+                          "with shape and data_offsets", path, e->name);
     int same = (int)json_array_size(shape) == e->t.ndim;
     for (int d = 0; same && d < e->t.ndim; d++)
         same = json_integer_value(json_array_get(shape, (size_t)d)) == e->t.shape[d];
@@ -141,7 +238,7 @@ static lm_status load_one(lm_param *e, json_t *ent, FILE *f, int64_t data_start,
     /* checked before any arithmetic: a, b >= 0 and a <= b, so b - a cannot overflow */
     if (!json_is_integer(ja) || !json_is_integer(jb)) why = "are not integers";
     else if (!get_offset(ja, &a) || !get_offset(jb, &b) || b < a ||
-             (uint64_t)(b - a) != (uint64_t)cnt * 4)
+             (uint64_t)(b - a) != (uint64_t)cnt * es)
         why = "do not span the tensor's bytes";
     else if (__builtin_add_overflow(data_start, b, &end))
         why = "run past any file";
@@ -156,10 +253,18 @@ static lm_status load_one(lm_param *e, json_t *ent, FILE *f, int64_t data_start,
         if (json_is_integer(jb))
             snprintf(sb, sizeof sb, "%" JSON_INTEGER_FORMAT, json_integer_value(jb));
         return lm_err_set(err, LM_ERR_FORMAT, "%s: tensor %s: data offsets [%s, %s) %s (the "
-                          "tensor has %zu bytes)", path, e->name, sa, sb, why, cnt * 4);
+                          "tensor has %zu bytes as %s)", path, e->name, sa, sb, why, cnt * es,
+                          dtype);
     }
-    if (fseek(f, (long)(data_start + a), SEEK_SET) != 0 || fread(e->t.data, 4, cnt, f) != cnt)
+    if (fseek(f, (long)(data_start + a), SEEK_SET) != 0 || fread(e->t.data, es, cnt, f) != cnt)
         return lm_err_set(err, LM_ERR_IO, "%s: tensor %s: read failed", path, e->name);
+    if (es == 2) { /* widened in place from the end: value i's 4 bytes cover halves 2i, 2i+1 */
+        const uint16_t *h = (const uint16_t *)(void *)e->t.data;
+        for (size_t j = cnt; j-- > 0;) {
+            uint16_t v = h[j];
+            e->t.data[j] = f16 ? f32_from_f16(v) : f32_from_bf16(v);
+        }
+    }
     return LM_OK;
 }
 
@@ -208,4 +313,52 @@ char *lm_safetensors_meta(const char *path, const char *key, lm_err *err)
     char *out = v ? strdup(v) : NULL;
     json_decref(h);
     return out;
+}
+
+int lm_safetensors_meta_all(const char *path, char ***kv, lm_err *err)
+{
+    *kv = NULL;
+    if (lm_file_check(path, "a .safetensors file", err)) return -1;
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        lm_err_set(err, LM_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+        return -1;
+    }
+    int64_t ds, fs;
+    json_t *h = read_header(f, path, &ds, &fs, err);
+    fclose(f);
+    if (!h) return -1;
+    json_t *m = json_object_get(h, "__metadata__");
+    size_t cap = json_is_object(m) ? json_object_size(m) : 0;
+    char **out = calloc(2 * cap + 1, sizeof *out);
+    int n = 0;
+    const char *key;
+    json_t *v;
+    if (out && cap) {
+        json_object_foreach(m, key, v) {
+            if (!json_is_string(v)) continue;
+            out[2 * n] = strdup(key);
+            out[2 * n + 1] = strdup(json_string_value(v));
+            n++;
+            if (!out[2 * n - 2] || !out[2 * n - 1]) {
+                lm_safetensors_meta_free(out, n);
+                out = NULL;
+                break;
+            }
+        }
+    }
+    json_decref(h);
+    if (!out) {
+        lm_err_set(err, LM_ERR_NOMEM, "%s: out of memory for the metadata", path);
+        return -1;
+    }
+    *kv = out;
+    return n;
+}
+
+void lm_safetensors_meta_free(char **kv, int count)
+{
+    if (!kv) return;
+    for (int i = 0; i < 2 * count; i++) free(kv[i]);
+    free(kv);
 }
