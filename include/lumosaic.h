@@ -35,7 +35,7 @@ extern "C" {
 /* The version of this header. A library with the same major version and a minor version at
  * least this one runs programs built against it (lm_api_version gives the library's). */
 #define LM_API_VERSION_MAJOR 0
-#define LM_API_VERSION_MINOR 3
+#define LM_API_VERSION_MINOR 4
 #define LM_API_VERSION_PATCH 0
 
 #if defined(__GNUC__)
@@ -184,6 +184,14 @@ LM_API void lm_api_model_free(lm_api_model *model);
  * mean (elements equal in all of them kept exactly); out_path (.safetensors) written
  * atomically. Load it with lm_api_model_load. Since API 0.3. */
 LM_API lm_api_status lm_api_model_average(const char *const *paths, int n, const char *out_path,
+                                          lm_api_error *err);
+/* Rewrite a trained model (a run folder or .safetensors file) with its weights stored as IEEE
+ * half precision (fp16 != 0: half the file; each weight rounded once, widened back exactly when
+ * read, so computation stays fp32) or as fp32 (fp16 == 0), as `lumosaic convert --output
+ * out_path [--dtype f16|f32] in_path` does; metadata kept. A weight fp16 cannot hold (beyond
+ * 65504, not finite), or out_path naming in_path's own file: LM_API_ERR_ARG, nothing written.
+ * Since API 0.4. */
+LM_API lm_api_status lm_api_model_convert(const char *in_path, const char *out_path, int fp16,
                                           lm_api_error *err);
 /* The model's preset name (e.g. "rt-16-nc+lmmse"; "auto" for a calibrated choice), the
  * buckets it reads (1 or 2) and its mosaic tile; any pointer may be NULL. */

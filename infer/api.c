@@ -13,6 +13,7 @@
 #include "data/api_internal.h"
 #include "data/limits.h"
 #include "infer/average.h"
+#include "infer/convert.h"
 #include "infer/pipeline.h"
 #include "infer/recon.h"
 
@@ -71,6 +72,19 @@ lm_api_status lm_api_model_average(const char *const *paths, int n, const char *
     lm_err e;
     lm_err_clear(&e);
     if (lm_model_average(paths, n, out_path, &e)) return lm_api_from_err(&e, err);
+    return lm_api_ok(err);
+}
+
+lm_api_status lm_api_model_convert(const char *in_path, const char *out_path, int fp16,
+                                   lm_api_error *err)
+{
+    if (!in_path || !out_path)
+        return lm_api_fail(err, LM_API_ERR_ARG, "lm_api_model_convert: in_path or out_path is "
+                           "NULL");
+    lm_err e;
+    lm_err_clear(&e);
+    if (lm_model_convert(in_path, out_path, fp16 ? LM_STORE_F16 : LM_STORE_F32, NULL, &e))
+        return lm_api_from_err(&e, err);
     return lm_api_ok(err);
 }
 

@@ -393,6 +393,61 @@ static void test_average(void)
     rmdir(dir);
 }
 
+/* lm_api_model_convert: the fp16 file is half the size and reconstructs within fp16's rounding
+ * of the model (not bit for bit); fp16 -> fp32 -> fp16 gives the same file; the model's own
+ * file and NULL arguments are refused. */
+static long file_size(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    long n = f && fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
+    if (f) fclose(f);
+    return n;
+}
+
+static void test_convert(void)
+{
+    char dir[] = "/tmp/lm_test_api_conv_XXXXXX", h[300], back[300], again[300];
+    CHECK(mkdtemp(dir) != NULL);
+    snprintf(h, sizeof h, "%s/h.safetensors", dir);
+    snprintf(back, sizeof back, "%s/back.safetensors", dir);
+    snprintf(again, sizeof again, "%s/again.safetensors", dir);
+    lm_api_error err;
+    CHECK_MSG(lm_api_model_convert(MODEL, h, 1, &err) == LM_API_OK, "%s", err.message);
+    CHECK_MSG(lm_api_model_convert(h, back, 0, &err) == LM_API_OK, "%s", err.message);
+    CHECK_MSG(lm_api_model_convert(back, again, 1, &err) == LM_API_OK, "%s", err.message);
+    long s32 = file_size(MODEL), s16 = file_size(h);
+    CHECK(s16 > 0 && 2 * s16 > s32 && 2 * s16 < s32 + 8192 && file_size(back) == s32);
+    FILE *f = fopen(h, "rb"), *g = fopen(again, "rb");
+    int same = f && g;
+    for (int a = 0, b = 0; same && (a != EOF || b != EOF);) {
+        a = fgetc(f), b = fgetc(g);
+        same = a == b;
+    }
+    if (f) fclose(f);
+    if (g) fclose(g);
+    CHECK(same);
+    CHECK(lm_api_model_convert(NULL, h, 1, &err) == LM_API_ERR_ARG);
+    CHECK(lm_api_model_convert(h, h, 1, &err) == LM_API_ERR_ARG &&
+          strstr(err.message, "being converted"));
+    lm_api_model *a = NULL, *b = NULL;
+    CHECK(lm_api_model_load(MODEL, NULL, &a, &err) == LM_API_OK);
+    CHECK_MSG(lm_api_model_load(h, NULL, &b, &err) == LM_API_OK, "%s", err.message);
+    enum { H = 66, W = 64 };
+    static float frame[H * W], ca[31 * H * W], cb[31 * H * W];
+    for (int i = 0; i < H * W; i++) frame[i] = 0.3f + 0.2f * sinf(0.37f * (float)i);
+    lm_api_frame fr = {H, W, LM_API_PIXEL_F32, frame, NULL};
+    if (a && b) {
+        CHECK(lm_api_reconstruct(a, &fr, ca, sizeof ca / sizeof *ca, NULL, &err) == LM_API_OK);
+        CHECK(lm_api_reconstruct(b, &fr, cb, sizeof cb / sizeof *cb, NULL, &err) == LM_API_OK);
+        double d = 0;
+        for (size_t i = 0; i < sizeof ca / sizeof *ca; i++) d = fmax(d, fabs(ca[i] - cb[i]));
+        CHECK_MSG(d > 0 && d < 2e-3, "largest difference %g", d);
+    }
+    lm_api_model_free(a), lm_api_model_free(b);
+    unlink(h), unlink(back), unlink(again);
+    rmdir(dir);
+}
+
 int main(void)
 {
     snprintf(scene, sizeof scene, "%s/data/cave-256/cd_256", shared_dir());
@@ -407,6 +462,7 @@ int main(void)
     RUN(test_against_eval);
     RUN(test_u16_as_infer);
     RUN(test_average);
+    RUN(test_convert);
     char cmd[1200];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
     if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmpdir);

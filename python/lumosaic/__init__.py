@@ -43,7 +43,7 @@ from . import _capi
 from ._capi import Error, Status
 
 __all__ = ["Error", "Status", "Noise", "Metrics", "System", "Model", "simulate", "read_cube",
-           "write_cube", "srgb", "metrics", "average", "__version__"]
+           "write_cube", "srgb", "metrics", "average", "convert", "__version__"]
 
 #: The library's API version ("MAJOR.MINOR.PATCH", from ``lm_api_version``).
 __version__: str = _capi.version()
@@ -306,6 +306,26 @@ def average(models: Sequence[PathLike], output: PathLike) -> None:
     paths = [_path(m) for m in models]
     arr = (ctypes.c_char_p * max(len(paths), 1))(*paths)
     _capi.call("model_average", arr, len(paths), _path(output))
+
+
+def convert(model: PathLike, output: PathLike, dtype: str = "f16") -> None:
+    """Rewrite a trained model with its weights stored as IEEE half precision (``"f16"``: half
+    the file; each weight rounded once and widened back exactly when read, so reconstruction
+    still computes in fp32) or as fp32 (``"f32"``), as ``lumosaic convert --output OUTPUT
+    --dtype DTYPE MODEL`` does. The metadata is kept. Score the result against the model.
+
+    Args:
+        model: a run folder or ``.safetensors`` file written by ``lumosaic train``.
+        output: the ``.safetensors`` file to write (atomically); not the model's own file.
+        dtype: ``"f16"`` (default) or ``"f32"``.
+
+    Raises:
+        ValueError: another dtype.
+        Error: a weight fp16 cannot hold, unreadable files, an unwritable output.
+    """
+    if dtype not in ("f16", "f32"):
+        raise ValueError(f"dtype {dtype!r}: 'f16' or 'f32'")
+    _capi.call("model_convert", _path(model), _path(output), 1 if dtype == "f16" else 0)
 
 
 def _shape(handle) -> Tuple[int, int, int]:

@@ -103,6 +103,7 @@ _SIGNATURES = {
     "lm_api_model_load_auto": (c_int, [c_char_p, c_double, _VP, POINTER(_VP), _E]),
     "lm_api_model_free": (None, [_VP]),
     "lm_api_model_average": (c_int, [POINTER(c_char_p), c_int, c_char_p, _E]),
+    "lm_api_model_convert": (c_int, [c_char_p, c_char_p, c_int, _E]),
     "lm_api_model_info": (c_int, [_VP, POINTER(c_char_p), POINTER(c_int), POINTER(c_int),
                                   POINTER(c_int), _E]),
     "lm_api_model_set_threads": (c_int, [_VP, c_int, _E]),

@@ -286,6 +286,23 @@ def test_average_of_a_model_with_itself_is_the_model(tmp_path, model, truth):
         lumosaic.average([MODEL], out)
 
 
+def test_convert_to_fp16_halves_the_file(tmp_path, model, truth):
+    out = tmp_path / "h.safetensors"
+    lumosaic.convert(MODEL, out)
+    assert 2 * out.stat().st_size < MODEL.stat().st_size + 8192
+    frame = lumosaic.simulate(truth, noise=0.0)
+    with lumosaic.Model(out, threads=THREADS) as half:
+        got, want = half.reconstruct(frame), model.reconstruct(frame)
+    assert 0 < np.abs(got - want).max() < 2e-3
+    back = tmp_path / "back.safetensors"
+    lumosaic.convert(out, back, dtype="f32")
+    assert back.stat().st_size == MODEL.stat().st_size
+    with pytest.raises(ValueError, match="bf16"):
+        lumosaic.convert(MODEL, out, dtype="bf16")
+    with pytest.raises(lumosaic.Error, match="being converted"):
+        lumosaic.convert(out, out)
+
+
 def test_metrics_as_defined(model, truth):
     """The library's metrics (the code `lumosaic eval` scores with) against their definitions
     in numpy: the binding hands over the bands in the right order, whatever the layout."""
