@@ -3,6 +3,7 @@
  * "__metadata__": {...}}, then the raw little-endian data. Writes are atomic. Tensors are
  * written F32 (or F16 for distribution) and read as F32, F16 or BF16 (widened exactly). */
 #include "models/params.h"
+#include "tensor/ops/gemm_bf16.h"
 #include <errno.h>
 #include <jansson.h>
 #include <math.h>
@@ -36,14 +37,6 @@ static float f32_from_f16(uint16_t h)
         return sign ? -v : v;
     }
     x = sign | (e == 31 ? 0x7f800000u | (m << 13) : ((e + 112) << 23) | (m << 13));
-    float v;
-    memcpy(&v, &x, 4);
-    return v;
-}
-
-static float f32_from_bf16(uint16_t h)
-{
-    uint32_t x = (uint32_t)h << 16;
     float v;
     memcpy(&v, &x, 4);
     return v;
@@ -262,7 +255,7 @@ static lm_status load_one(lm_param *e, json_t *ent, FILE *f, int64_t data_start,
         const uint16_t *h = (const uint16_t *)(void *)e->t.data;
         for (size_t j = cnt; j-- > 0;) {
             uint16_t v = h[j];
-            e->t.data[j] = f16 ? f32_from_f16(v) : f32_from_bf16(v);
+            e->t.data[j] = f16 ? f32_from_f16(v) : lm_bf16_to_f32(v);
         }
     }
     return LM_OK;
